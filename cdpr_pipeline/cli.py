@@ -1,0 +1,42 @@
+"""The ``cdpr`` console command: ``cdpr <subcommand> [key=value ...] [-m]``.
+
+Every subcommand is a Hydra app (overrides, ``-m`` multirun, ``--cfg job``, ``--help``)
+whose work is a plain function in :mod:`cdpr_pipeline.stages`.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+#: subcommand -> module with a Hydra ``main``; later issues add train, identify, ...
+SUBCOMMANDS = {
+    "simulate": "cdpr_pipeline.stages.simulate",
+    "validate": "cdpr_pipeline.stages.validate",
+}
+
+USAGE = """usage: cdpr <subcommand> [key=value ...] [-m] [--cfg job] [--help]
+
+subcommands:
+  simulate   run the virtual lab and write a cdpr-measured/1 dataset (+ truth beside it)
+  validate   check a dataset against cdpr-measured/1 (data.path=DIR); non-zero exit on errors
+"""
+
+
+def main(argv: list[str] | None = None) -> None:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help", "help"):
+        sys.stdout.write(USAGE)
+        return
+    sub = argv[0]
+    if sub not in SUBCOMMANDS:
+        sys.stderr.write(f"cdpr: unknown subcommand {sub!r}\n\n{USAGE}")
+        raise SystemExit(2)
+    module = importlib.import_module(SUBCOMMANDS[sub])
+    # Hydra reads its overrides from sys.argv; present the rest as the app's own argv
+    sys.argv = [f"cdpr {sub}", *argv[1:]]
+    module.main()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,18 @@
+"""Where the Hydra configs live and how to compose them without the CLI."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from hydra import compose, initialize_config_dir
+from omegaconf import DictConfig
+
+#: ``conf/`` at the project root (the package is installed editable, as ``make`` does).
+CONFIG_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+
+
+def compose_config(name: str, overrides: Sequence[str] = ()) -> DictConfig:
+    """Compose ``conf/<name>.yaml`` with ``key=value`` overrides, as the CLI would."""
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        return compose(config_name=name, overrides=list(overrides), return_hydra_config=False)

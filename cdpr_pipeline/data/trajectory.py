@@ -1,0 +1,47 @@
+"""One recorded run of a ``cdpr-measured/1`` dataset, as arrays."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+def family_of(name: str) -> str:
+    """Trajectory family from a file stem: the part after the first ``_``."""
+    _, sep, rest = name.partition("_")
+    return rest if sep and rest else name
+
+
+@dataclass
+class Trajectory:
+    """Arrays of one run. Shapes: ``N`` samples, ``n`` cables or axes.
+
+    For ``kind: cdpr``: ``position``/``desired`` are ``(N, 3)`` platform positions,
+    ``lengths`` ``(N, n)`` encoder (reeled-out) cable lengths, ``torques`` ``(N, n)``.
+    For ``kind: axes``: ``position`` is ``(N, n)`` (``q1..qn``), ``desired`` the reference
+    ``qd1..qdn`` or ``None``, ``lengths`` is ``None``, ``torques`` the applied ``u1..un``.
+    ``extra`` keeps every other numeric column of the file by its header name.
+    """
+
+    name: str
+    t: np.ndarray
+    position: np.ndarray
+    torques: np.ndarray
+    desired: np.ndarray | None = None
+    lengths: np.ndarray | None = None
+    velocity: np.ndarray | None = None
+    acceleration: np.ndarray | None = None
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def family(self) -> str:
+        return family_of(self.name)
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])

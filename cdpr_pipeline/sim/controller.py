@@ -1,0 +1,81 @@
+"""Computed-torque PD control of the platform, built on the *nominal* model.
+
+The controller believes rig.yaml. When the true plant differs (a hidden effect), the
+mismatch shows up in tracking error and in the torques it commands, as on a real rig.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cdpr_pipeline.data.rig import ControllerSpec
+from cdpr_pipeline.sim.plant import Plant, cable_geometry, winch_rates
+
+
+def distribute_tensions(units: np.ndarray, force: np.ndarray, min_tension: float) -> np.ndarray:
+    """Cable tensions ``t`` with ``K^T t = force`` and ``t >= min_tension`` where possible.
+
+    For ``n = 3`` the solution is unique (then clipped at ``min_tension``). For redundant
+    rigs the least-norm solution is shifted along the null-space direction closest to
+    "all cables equally" until the slackest cable reaches ``min_tension``.
+
+    Parameters
+    ----------
+    units : (B, n, 3) unit vectors platform -> anchor
+    force : (B, 3) force the cables must exert on the platform
+    min_tension : float
+    """
+    kt = np.swapaxes(units, 1, 2)                          # (B, 3, n)
+    pinv = np.linalg.pinv(kt)                              # (B, n, 3)
+    t0 = np.einsum("bni,bi->bn", pinv, force)
+    ones = np.ones(units.shape[:2])
+    null_dir = ones - np.einsum("bni,bi->bn", pinv, np.einsum("bin,bn->bi", kt, ones))
+    pushing = null_dir > 1e-9
+    with np.errstate(divide="ignore", invalid="ignore"):
+        need = np.where(pushing, (min_tension - t0) / np.where(pushing, null_dir, 1.0), -np.inf)
+    shift = np.maximum(need.max(axis=1), 0.0)
+    shift = np.where(np.isfinite(shift), shift, 0.0)
+    return np.maximum(t0 + shift[:, None] * null_dir, min_tension)
+
+
+@dataclass
+class ComputedTorquePD:
+    """``a_cmd = xd'' + kd (xd' - v) + kp (xd - x)``; tensions from ``m (a_cmd - g)``;
+    motor torques ``u = R t + I theta''_cmd + F_v theta' + F_c s(theta') + d``, all with the
+    nominal parameters.
+
+    Parameters
+    ----------
+    nominal : Plant
+        The model the controller believes (rig.yaml).
+    spec : ControllerSpec
+        Gains, minimum tension and rate.
+    """
+
+    nominal: Plant
+    spec: ControllerSpec
+
+    def __call__(
+        self,
+        position: np.ndarray,
+        velocity: np.ndarray,
+        desired: np.ndarray,
+        desired_velocity: np.ndarray,
+        desired_acceleration: np.ndarray,
+    ) -> np.ndarray:
+        """Motor torques (B, n) for measured state and desired motion, all (B, 3)."""
+        plant = self.nominal
+        a_cmd = (
+            desired_acceleration
+            + self.spec.kd * (desired_velocity - velocity)
+            + self.spec.kp * (desired - position)
+        )
+        g, units = cable_geometry(plant.anchors, position)
+        force = plant.mass * (a_cmd - plant.gravity_vector)
+        tension = distribute_tensions(units, force, self.spec.min_tension_n)
+        R = plant.drum_radius
+        omega, alpha, _ = winch_rates(units, g, velocity, a_cmd, R)
+        theta = plant.winch_angle_from_length(g)
+        return R * tension + plant.winch.inertia * alpha + plant.friction_torque(theta, omega)

@@ -1,0 +1,187 @@
+"""The virtual lab: draw trajectories, hide effects, simulate, write a measured dataset.
+
+The dataset (``rig.yaml`` + ``trajectories/*.csv``) holds only what a real rig would
+record and the *nominal* rig. The truth (effects and their parameters, the true plant,
+the trajectory parameters) is written beside it as ``<dataset>.truth.yaml`` so diagnosis
+can be graded without ever seeing it.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from cdpr_pipeline.data.io import write_dataset
+from cdpr_pipeline.data.rig import CdprRig
+from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.sim.effects import Effect
+from cdpr_pipeline.sim.plant import SIGN_SHARPNESS, Plant
+from cdpr_pipeline.sim.sensors import Sensors
+from cdpr_pipeline.sim.simulator import BatchSimulator, SimulationResult
+from cdpr_pipeline.sim.trajectories import FAMILIES, TrajectoryRanges, draw_trajectories
+
+log = logging.getLogger(__name__)
+
+TRUTH_FORMAT = "cdpr-truth/1"
+
+
+def truth_path_for(dataset_dir: str | Path) -> Path:
+    """Where the truth of a simulated dataset lives: beside it, never inside."""
+    dataset_dir = Path(dataset_dir)
+    return dataset_dir.parent / f"{dataset_dir.name}.truth.yaml"
+
+
+@dataclass
+class LabRun:
+    """Outcome of :func:`generate_dataset`."""
+
+    dataset_dir: Path | None
+    truth_path: Path | None
+    trajectories: list[Trajectory]
+    results: list[SimulationResult]
+    plant: Plant
+    nominal: Plant
+    effects: list[Effect]
+    truth: dict[str, Any]
+
+
+def family_list(counts: Mapping[str, int]) -> list[str]:
+    """Expand ``{family: count}`` into one entry per run, in the paper's family order."""
+    order = [f for f in FAMILIES if f in counts] + [f for f in counts if f not in FAMILIES]
+    return [f for f in order for _ in range(int(counts[f]))]
+
+
+def simulate_lab(
+    rig: CdprRig,
+    counts: Mapping[str, int],
+    *,
+    effects: Sequence[Effect] = (),
+    duration_s: float = 10.0,
+    ramp_s: float = 1.0,
+    centre_m: Sequence[float] | None = None,
+    ranges: TrajectoryRanges | None = None,
+    sensors: Sensors | None = None,
+    seed: int = 0,
+    home_m: Sequence[float] | None = None,
+    sign_sharpness: float = SIGN_SHARPNESS,
+    substeps: int | None = None,
+    batch_size: int = 256,
+    show_progress: bool = False,
+) -> LabRun:
+    """Simulate runs of the given families on ``rig`` with ``effects`` hidden.
+
+    Parameters
+    ----------
+    rig : CdprRig
+        The nominal rig (what rig.yaml will say); it must have a controller.
+    counts : mapping family -> number of runs
+    effects : effects that make the true plant differ from the nominal one
+    centre_m : workspace centre the trajectories are drawn around; by default the
+        encoder home pose.
+    seed : seeds trajectory draws and sensor noise.
+
+    Returns
+    -------
+    LabRun
+        Trajectories as recorded, the simulation results with the true signals, both
+        plants and the truth record. Nothing is written (see :func:`generate_dataset`).
+    """
+    if rig.controller is None:
+        raise ValueError("the virtual lab needs a controller in the rig description")
+    rng = np.random.default_rng(seed)
+    nominal = Plant.from_rig(rig, home=home_m, sign_sharpness=sign_sharpness)
+    plant = nominal.with_effects(effects)
+    centre = nominal.home if centre_m is None else np.asarray(centre_m, float)
+    families = family_list(counts)
+    desired = draw_trajectories(families, rng, centre, duration_s, ranges, ramp_s)
+    sim = BatchSimulator(plant, nominal, rig.controller, sensors or Sensors(),
+                         rig.sample_rate_hz, substeps)
+    results, trajectories = [], []
+    for start in range(0, len(families), batch_size):
+        chunk = desired.take(slice(start, start + batch_size))
+        log.info("simulating runs %d-%d of %d", start, start + len(chunk) - 1, len(families))
+        result = sim.run(chunk, rng, show_progress=show_progress)
+        results.append(result)
+        trajectories.extend(result.trajectories(first_index=start))
+    truth = _truth_record(plant, nominal, effects, desired, sensors or Sensors(), seed,
+                          sign_sharpness, results[0].substeps if results else None)
+    return LabRun(None, None, trajectories, results, plant, nominal, list(effects), truth)
+
+
+def generate_dataset(
+    out_dir: str | Path, rig: CdprRig, counts: Mapping[str, int], *, overwrite: bool = False,
+    **kwargs: Any,
+) -> LabRun:
+    """:func:`simulate_lab`, then write the ``cdpr-measured/1`` dataset to ``out_dir`` and
+    the truth beside it (:func:`truth_path_for`). Both are written atomically."""
+    run = simulate_lab(rig, counts, **kwargs)
+    out_dir = Path(out_dir)
+    write_dataset(out_dir, rig, run.trajectories, overwrite=overwrite)
+    truth_path = truth_path_for(out_dir)
+    truth = dict(run.truth, dataset=out_dir.name)
+    _atomic_write_text(truth_path, yaml.safe_dump(truth, sort_keys=False))
+    run.dataset_dir, run.truth_path, run.truth = out_dir, truth_path, truth
+    log.info("wrote %d runs to %s (truth: %s)", len(run.trajectories), out_dir, truth_path)
+    return run
+
+
+def plant_record(plant: Plant) -> dict[str, Any]:
+    """A plant as plain YAML-able data (the extended-model format builds on it)."""
+    return {
+        "anchors_m": plant.anchors.tolist(),
+        "drum_radius_m": plant.drum_radius.tolist(),
+        "platform_mass_kg": float(plant.mass),
+        "gravity": float(plant.gravity),
+        "winch": plant.winch.as_dict(),
+        "home_m": plant.home.tolist(),
+        "cable_stiffness_n": None if plant.cable_stiffness is None
+        else plant.cable_stiffness.tolist(),
+        "cable_damping_time_s": float(plant.cable_damping_time),
+        "actuator_time_constant_s": float(plant.actuator_time_constant),
+        "sign_sharpness": float(plant.sign_sharpness),
+    }
+
+
+def _truth_record(plant, nominal, effects, desired, sensors, seed, sharpness, substeps):
+    return {
+        "format": TRUTH_FORMAT,
+        "seed": int(seed),
+        "effects": [{"effect": e.name, "label": e.label, "params": e.params(),
+                     "description": e.describe(),
+                     "class": f"{type(e).__module__}.{type(e).__qualname__}"} for e in effects],
+        "verdict": effects[0].label if len(effects) == 1 else
+        ("none" if not effects else [e.label for e in effects]),
+        "true_plant": plant_record(plant),
+        "nominal_plant": plant_record(nominal),
+        "sensors": {"mocap_noise_m": sensors.mocap_noise_m,
+                    "encoder_counts_per_rev": sensors.encoder_counts_per_rev,
+                    "torque_noise_nm": sensors.torque_noise_nm},
+        "simulator": {"sign_sharpness": float(sharpness), "substeps": substeps},
+        "trajectories": [
+            {"family": fam, "centre_m": desired.centre[i].round(6).tolist(),
+             "radius_m": round(float(desired.radius[i]), 6),
+             "angular_speed": round(float(desired.angular_speed[i]), 6),
+             "tilt_deg": round(float(np.rad2deg(desired.tilt[i])), 4)}
+            for i, fam in enumerate(desired.family)
+        ],
+    }
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

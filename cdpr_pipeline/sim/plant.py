@@ -1,0 +1,347 @@
+"""The true plant of the virtual lab: point-mass CDPR with winch dynamics.
+
+Sign conventions follow ``spec/measured-data.md``: the motor angle ``theta`` grows when
+the winch reels cable in, torque ``u`` is positive when it pulls, tension ``t >= 0``.
+Winch ``i`` obeys ``I theta'' + F_v theta' + F_c s(theta') + d = u - R t`` (``s`` the
+smooth sign ``tanh(k theta')`` of the paper's si-tanh) and the platform obeys
+``m p'' = sum_i t_i k_i + m g`` with ``k_i = (A_i - p) / |A_i - p|``.
+
+The paper applies the sign to the *platform* velocity (eq. 4); physically Coulomb
+friction opposes the *winch* speed, which is what we simulate and what the regression
+uses.
+
+Two cable models share one set of equations:
+
+* ``rigid``: the reeled-out length equals the geometric length, the winch states are
+  eliminated and the platform obeys the reduced equation (1) of the paper,
+  ``(m I + K^T diag(I/R^2) K) p'' = K^T (u - F(theta') - I c / R) / R + m g``;
+* ``elastic``: every winch keeps its own angle and speed, and the cable is a
+  Kelvin-Voigt spring-damper of axial stiffness ``EA`` along its reeled-out length, which
+  only pulls. The encoder then measures the reeled-out length, not ``|A - p|``.
+
+Every hidden effect of the lab is a parameter of this one plant (via
+:meth:`cdpr_pipeline.sim.effects.Effect.apply`) or an extra winch torque computed by the
+effect itself, so generation, diagnosis and model extension share the physics.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from cdpr_pipeline.data.rig import CdprRig, WinchParams
+
+if TYPE_CHECKING:  # pragma: no cover
+    from cdpr_pipeline.sim.effects import Effect
+
+#: Default sharpness ``k`` of the smooth sign ``tanh(k x)`` (s/rad).
+SIGN_SHARPNESS = 20.0
+
+
+def smooth_sign(x: np.ndarray, sharpness: float = SIGN_SHARPNESS) -> np.ndarray:
+    """The paper's si-tanh, ``tanh(k x)``: a differentiable sign for Coulomb friction."""
+    return np.tanh(sharpness * np.asarray(x))
+
+
+def cable_geometry(anchors: np.ndarray, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Geometric cable lengths and unit vectors from platform to anchors.
+
+    Parameters
+    ----------
+    anchors : (n, 3) array
+    position : (..., 3) array
+
+    Returns
+    -------
+    lengths : (..., n) array, ``|A_i - p|``
+    units : (..., n, 3) array, ``k_i = (A_i - p) / |A_i - p|``
+    """
+    diff = anchors - position[..., None, :]
+    lengths = np.linalg.norm(diff, axis=-1)
+    return lengths, diff / lengths[..., None]
+
+
+@dataclass(frozen=True)
+class Plant:
+    """Physical parameters of the true (or nominal) rig.
+
+    Attributes
+    ----------
+    anchors, drum_radius, mass, gravity, winch
+        Geometry, transmission, platform mass and winch model.
+    cable_stiffness : (n,) array or None
+        Axial stiffness ``EA`` in N; ``None`` means rigid cables.
+    cable_damping_time : float
+        Kelvin-Voigt time constant of the cable material, s (``t = EA (eps + tau eps')``).
+    actuator_time_constant : float
+        First-order lag between commanded and delivered drum torque, s (0: none).
+    home : (3,) array
+        Platform position at which the encoders were zeroed (``theta = 0``, encoder length
+        equals the geometric length there).
+    sign_sharpness : float
+        ``k`` of the smooth sign.
+    effects : tuple of Effect
+        Effects that add winch torques (friction-like terms); parameter-changing effects
+        have already been folded into the fields above.
+    """
+
+    anchors: np.ndarray
+    drum_radius: np.ndarray
+    mass: float
+    winch: WinchParams
+    gravity: float = 9.81
+    home: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    cable_stiffness: np.ndarray | None = None
+    cable_damping_time: float = 2e-3
+    actuator_time_constant: float = 0.0
+    sign_sharpness: float = SIGN_SHARPNESS
+    effects: tuple[Effect, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "anchors", np.asarray(self.anchors, dtype=float).reshape(-1, 3))
+        object.__setattr__(
+            self, "drum_radius", np.broadcast_to(
+                np.asarray(self.drum_radius, dtype=float), (self.n,)).copy()
+        )
+        object.__setattr__(self, "home", np.asarray(self.home, dtype=float).reshape(3))
+        if self.cable_stiffness is not None:
+            object.__setattr__(
+                self, "cable_stiffness",
+                np.broadcast_to(np.asarray(self.cable_stiffness, dtype=float), (self.n,)).copy(),
+            )
+        if self.winch.n != self.n:
+            raise ValueError(f"{self.winch.n} winch parameter sets for {self.n} cables")
+        if self.n < 3:
+            raise ValueError("a point-mass CDPR needs at least 3 cables")
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_rig(
+        cls,
+        rig: CdprRig,
+        home: Sequence[float] | None = None,
+        sign_sharpness: float = SIGN_SHARPNESS,
+    ) -> Plant:
+        """The plant exactly as the rig file states it (the user's nominal model)."""
+        if home is None:
+            home = default_home(rig.anchors_m)
+        return cls(
+            anchors=rig.anchors_m.copy(),
+            drum_radius=rig.drum_radius_m.copy(),
+            mass=float(rig.platform_mass_kg),
+            winch=rig.winch_nominal,
+            gravity=float(rig.gravity),
+            home=np.asarray(home, dtype=float),
+            sign_sharpness=sign_sharpness,
+        )
+
+    def with_effects(self, effects: Sequence[Effect]) -> Plant:
+        """The true plant: this one altered by each effect in turn."""
+        plant = self
+        for effect in effects:
+            plant = effect.apply(plant)
+        return plant
+
+    def replace(self, **changes: Any) -> Plant:
+        return replace(self, **changes)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def n(self) -> int:
+        return int(self.anchors.shape[0])
+
+    @property
+    def elastic(self) -> bool:
+        return self.cable_stiffness is not None
+
+    @property
+    def lagged(self) -> bool:
+        return self.actuator_time_constant > 0.0
+
+    @property
+    def gravity_vector(self) -> np.ndarray:
+        return np.array([0.0, 0.0, -self.gravity])
+
+    @property
+    def home_lengths(self) -> np.ndarray:
+        return cable_geometry(self.anchors, self.home)[0]
+
+    # ------------------------------------------------------------------ winch side
+    def friction_torque(self, theta: np.ndarray, omega: np.ndarray) -> np.ndarray:
+        """Everything that resists the winch besides inertia and tension:
+        ``F_v omega + F_c s(omega) + d`` plus the effects' extra torques."""
+        w = self.winch
+        torque = w.viscous * omega + w.coulomb * smooth_sign(omega, self.sign_sharpness) + w.offset
+        for effect in self.effects:
+            extra = effect.winch_torque(theta, omega, self)
+            if extra is not None:
+                torque = torque + extra
+        return torque
+
+    def winch_angle_from_length(self, reeled_length: np.ndarray) -> np.ndarray:
+        """Motor angle from the reeled-out length (0 at home, positive reeling in)."""
+        return (self.home_lengths - reeled_length) / self.drum_radius
+
+    # ------------------------------------------------------------------ state layout
+    def state_size(self) -> int:
+        size = 6
+        if self.elastic:
+            size += 2 * self.n
+        if self.lagged:
+            size += self.n
+        return size
+
+    def split_state(self, state: np.ndarray) -> dict[str, np.ndarray]:
+        """Named views into a ``(B, state_size)`` state array."""
+        n = self.n
+        out = {"p": state[:, 0:3], "v": state[:, 3:6]}
+        i = 6
+        if self.elastic:
+            out["theta"] = state[:, i:i + n]
+            out["omega"] = state[:, i + n:i + 2 * n]
+            i += 2 * n
+        if self.lagged:
+            out["u_drum"] = state[:, i:i + n]
+        return out
+
+    def initial_state(self, position: np.ndarray, u0: np.ndarray | None = None) -> np.ndarray:
+        """Platform at rest at ``position`` (B, 3), cables in static equilibrium."""
+        position = np.atleast_2d(position)
+        batch = position.shape[0]
+        state = np.zeros((batch, self.state_size()))
+        state[:, 0:3] = position
+        i = 6
+        if self.elastic:
+            g, units = cable_geometry(self.anchors, position)
+            tension = static_tensions(units, self.mass, self.gravity_vector)
+            # unstretched (reeled-out) length that gives that tension at rest
+            reeled = g / (1.0 + tension / self.cable_stiffness)
+            state[:, i:i + self.n] = self.winch_angle_from_length(reeled)
+            i += 2 * self.n
+        if self.lagged:
+            state[:, i:i + self.n] = 0.0 if u0 is None else u0
+        return state
+
+    # ------------------------------------------------------------------ dynamics
+    def tensions(self, s: dict[str, np.ndarray], g: np.ndarray, units: np.ndarray) -> np.ndarray:
+        """Elastic cable tensions (B, n) from state views; only valid when elastic."""
+        reeled = self.home_lengths - self.drum_radius * s["theta"]
+        reeled_rate = -self.drum_radius * s["omega"]
+        g_rate = -np.einsum("bnk,bk->bn", units, s["v"])
+        strain = (g - reeled) / reeled
+        strain_rate = (g_rate - reeled_rate) / reeled
+        return np.maximum(self.cable_stiffness * (strain + self.cable_damping_time * strain_rate), 0.0)
+
+    def derivative(self, state: np.ndarray, u_cmd: np.ndarray) -> np.ndarray:
+        """Time derivative of a ``(B, state_size)`` state under commanded torque ``u_cmd``.
+
+        The drum receives ``u_cmd`` directly or, with an actuator lag, the lagged torque
+        held in the state.
+        """
+        s = self.split_state(state)
+        p, v = s["p"], s["v"]
+        u = s["u_drum"] if self.lagged else u_cmd
+        g, units = cable_geometry(self.anchors, p)
+        R = self.drum_radius
+        I_m = self.winch.inertia
+        out = np.empty_like(state)
+        out[:, 0:3] = v
+        if self.elastic:
+            tension = self.tensions(s, g, units)
+            out[:, 3:6] = np.einsum("bnk,bn->bk", units, tension) / self.mass + self.gravity_vector
+            n = self.n
+            out[:, 6:6 + n] = s["omega"]
+            resist = self.friction_torque(s["theta"], s["omega"])
+            out[:, 6 + n:6 + 2 * n] = (u - R * tension - resist) / I_m
+        else:
+            out[:, 3:6] = self.rigid_acceleration(p, v, u, g, units)
+        if self.lagged:
+            out[:, -self.n:] = (u_cmd - s["u_drum"]) / self.actuator_time_constant
+        return out
+
+    def rigid_acceleration(
+        self, p: np.ndarray, v: np.ndarray, u: np.ndarray, g: np.ndarray, units: np.ndarray
+    ) -> np.ndarray:
+        """Platform acceleration of the reduced rigid model (equation (1) of the paper)."""
+        R = self.drum_radius
+        I_m = self.winch.inertia
+        omega, _, curvature = winch_rates(units, g, v, None, R)
+        theta = self.winch_angle_from_length(g)
+        resist = self.friction_torque(theta, omega)
+        rhs_t = (u - resist - I_m * curvature / R) / R    # tension part independent of a
+        weight = I_m / R**2
+        mass_matrix = self.mass * np.eye(3) + np.einsum("bni,n,bnj->bij", units, weight, units)
+        force = np.einsum("bnk,bn->bk", units, rhs_t) + self.mass * self.gravity_vector
+        return np.linalg.solve(mass_matrix, force[..., None])[..., 0]
+
+    def internals(self, state: np.ndarray, u_cmd: np.ndarray) -> dict[str, np.ndarray]:
+        """Physical signals at a state: tensions, winch angle/speed/acceleration, drum
+        torque, platform acceleration, reeled-out length. Used for recording the truth."""
+        s = self.split_state(state)
+        p, v = s["p"], s["v"]
+        u = s["u_drum"] if self.lagged else u_cmd
+        g, units = cable_geometry(self.anchors, p)
+        deriv = self.derivative(state, u_cmd)
+        acc = deriv[:, 3:6]
+        R = self.drum_radius
+        if self.elastic:
+            tension = self.tensions(s, g, units)
+            theta, omega = s["theta"], s["omega"]
+            alpha = deriv[:, 6 + self.n:6 + 2 * self.n]
+            reeled = self.home_lengths - R * theta
+        else:
+            omega, alpha, _ = winch_rates(units, g, v, acc, R)
+            theta = self.winch_angle_from_length(g)
+            resist = self.friction_torque(theta, omega)
+            tension = (u - resist - self.winch.inertia * alpha) / R
+            reeled = g
+        return {
+            "tension": tension, "theta": theta, "omega": omega, "alpha": alpha,
+            "u_drum": np.broadcast_to(u, tension.shape).copy(), "acceleration": acc,
+            "reeled_length": reeled, "geometric_length": g,
+        }
+
+
+def winch_rates(
+    units: np.ndarray,
+    lengths: np.ndarray,
+    velocity: np.ndarray,
+    acceleration: np.ndarray | None,
+    radius: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Rigid-cable winch speed and acceleration from platform motion.
+
+    ``theta' = k.v / R`` and ``theta'' = (k.a + k'.v) / R`` with
+    ``k'.v = ((k.v)^2 - |v|^2) / l``.
+
+    Returns
+    -------
+    omega : (B, n), alpha : (B, n) or None (when ``acceleration`` is None), curvature :
+    (B, n) the ``k'.v`` term.
+    """
+    kv = np.einsum("bnk,bk->bn", units, velocity)
+    curvature = (kv**2 - np.sum(velocity * velocity, axis=-1, keepdims=True)) / lengths
+    alpha = None
+    if acceleration is not None:
+        alpha = (np.einsum("bnk,bk->bn", units, acceleration) + curvature) / radius
+    return kv / radius, alpha, curvature
+
+
+def default_home(anchors: np.ndarray) -> np.ndarray:
+    """Encoder zero pose: below the anchors' centroid, 40 % of the way down to the floor
+    (or 1 m below the anchors when they sit at or below z = 0)."""
+    anchors = np.asarray(anchors, dtype=float)
+    centre = anchors.mean(axis=0)
+    top = anchors[:, 2].max()
+    drop = 0.6 * top if top > 0 else 1.0
+    return np.array([centre[0], centre[1], top - drop])
+
+
+def static_tensions(units: np.ndarray, mass: float, gravity_vector: np.ndarray) -> np.ndarray:
+    """Tensions holding the platform at rest, ``K^T t = -m g`` (least-norm for n > 3)."""
+    rhs = np.broadcast_to(-mass * gravity_vector, units.shape[:-2] + (3,))
+    kt = np.swapaxes(units, -1, -2)                        # (..., 3, n)
+    return np.einsum("...ni,...i->...n", np.linalg.pinv(kt), rhs)
