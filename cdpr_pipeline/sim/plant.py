@@ -340,8 +340,18 @@ def default_home(anchors: np.ndarray) -> np.ndarray:
     return np.array([centre[0], centre[1], top - drop])
 
 
-def static_tensions(units: np.ndarray, mass: float, gravity_vector: np.ndarray) -> np.ndarray:
-    """Tensions holding the platform at rest, ``K^T t = -m g`` (least-norm for n > 3)."""
-    rhs = np.broadcast_to(-mass * gravity_vector, units.shape[:-2] + (3,))
+def tensions_for_force(units: np.ndarray, force: np.ndarray) -> np.ndarray:
+    """Cable tensions ``t`` with ``K^T t = force`` (least-norm for n > 3, unique for 3).
+
+    ``units`` (..., n, 3), ``force`` (..., 3) -> (..., n). No sign constraint: this is the
+    analysis direction (what tensions the measured motion implies), not the controller's
+    tension distribution.
+    """
     kt = np.swapaxes(units, -1, -2)                        # (..., 3, n)
-    return np.einsum("...ni,...i->...n", np.linalg.pinv(kt), rhs)
+    force = np.broadcast_to(force, units.shape[:-2] + (3,))
+    return np.einsum("...ni,...i->...n", np.linalg.pinv(kt), force)
+
+
+def static_tensions(units: np.ndarray, mass: float, gravity_vector: np.ndarray) -> np.ndarray:
+    """Tensions holding the platform at rest, ``K^T t = -m g``."""
+    return tensions_for_force(units, -mass * np.asarray(gravity_vector))

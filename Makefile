@@ -1,0 +1,41 @@
+# Two entry points do all set-up on a fresh machine: `make run` and `make test`.
+# torch is installed first, pinned to a CPU build; use another with
+#   make run TORCH_SPEC="torch==2.13.0 --index-url https://download.pytorch.org/whl/cu124"
+PYTHON ?= python3
+VENV ?= .venv
+TORCH_SPEC ?= torch==2.13.0
+PYTEST_ARGS ?=
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.cdpr-installed
+
+.PHONY: run test test-slow bench lint clean
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet $(TORCH_SPEC)
+	$(BIN)/python -m pip install --quiet -e '.[dev,pipeline]'
+	touch $(STAMP)
+
+## run: the main job on the built-in default data (the virtual lab, then validation)
+run: $(STAMP)
+	$(BIN)/cdpr simulate out_dir=data/generated/lab
+	$(BIN)/cdpr validate data.path=data/generated/lab
+
+## test: the fast test suite (what CI runs)
+test: $(STAMP)
+	$(BIN)/python -m pytest $(PYTEST_ARGS)
+
+## test-slow: the slow end-to-end tests
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -m slow $(PYTEST_ARGS)
+
+## bench: benchmark scripts (figures quoted in the README)
+bench: $(STAMP)
+	$(BIN)/python benchmarks/bench_simulator.py
+
+lint: $(STAMP)
+	$(BIN)/ruff check cdpr_pipeline tests benchmarks
+
+clean:
+	rm -rf $(VENV) outputs multirun .pytest_cache

@@ -1,0 +1,1 @@
+"""Gray-box identification of the winch (or axis) model from measured data."""
