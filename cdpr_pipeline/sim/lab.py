@@ -74,6 +74,7 @@ def simulate_lab(
     sign_sharpness: float = SIGN_SHARPNESS,
     substeps: int | None = None,
     batch_size: int = 256,
+    feedback: str = "encoders",
     show_progress: bool = False,
 ) -> LabRun:
     """Simulate runs of the given families on ``rig`` with ``effects`` hidden.
@@ -86,6 +87,7 @@ def simulate_lab(
     effects : effects that make the true plant differ from the nominal one
     centre_m : workspace centre the trajectories are drawn around; by default the
         encoder home pose.
+    feedback : the controller's state estimate (see :class:`BatchSimulator`).
     seed : seeds trajectory draws and sensor noise.
 
     Returns
@@ -103,7 +105,7 @@ def simulate_lab(
     families = family_list(counts)
     desired = draw_trajectories(families, rng, centre, duration_s, ranges, ramp_s)
     sim = BatchSimulator(plant, nominal, rig.controller, sensors or Sensors(),
-                         rig.sample_rate_hz, substeps)
+                         rig.sample_rate_hz, substeps, feedback)
     results, trajectories = [], []
     for start in range(0, len(families), batch_size):
         chunk = desired.take(slice(start, start + batch_size))
@@ -112,7 +114,7 @@ def simulate_lab(
         results.append(result)
         trajectories.extend(result.trajectories(first_index=start))
     truth = _truth_record(plant, nominal, effects, desired, sensors or Sensors(), seed,
-                          sign_sharpness, results[0].substeps if results else None)
+                          sign_sharpness, results[0].substeps if results else None, feedback)
     return LabRun(None, None, trajectories, results, plant, nominal, list(effects), truth)
 
 
@@ -150,7 +152,8 @@ def plant_record(plant: Plant) -> dict[str, Any]:
     }
 
 
-def _truth_record(plant, nominal, effects, desired, sensors, seed, sharpness, substeps):
+def _truth_record(plant, nominal, effects, desired, sensors, seed, sharpness, substeps,
+                  feedback):
     return {
         "format": TRUTH_FORMAT,
         "seed": int(seed),
@@ -164,7 +167,8 @@ def _truth_record(plant, nominal, effects, desired, sensors, seed, sharpness, su
         "sensors": {"mocap_noise_m": sensors.mocap_noise_m,
                     "encoder_counts_per_rev": sensors.encoder_counts_per_rev,
                     "torque_noise_nm": sensors.torque_noise_nm},
-        "simulator": {"sign_sharpness": float(sharpness), "substeps": substeps},
+        "simulator": {"sign_sharpness": float(sharpness), "substeps": substeps,
+                      "feedback": feedback},
         "trajectories": [
             {"family": fam, "centre_m": desired.centre[i].round(6).tolist(),
              "radius_m": round(float(desired.radius[i]), 6),

@@ -277,6 +277,15 @@ class Plant:
         force = np.einsum("bnk,bn->bk", units, rhs_t) + self.mass * self.gravity_vector
         return np.linalg.solve(mass_matrix, force[..., None])[..., 0]
 
+    def winch_state(self, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """True motor angles and speeds (B, n) at a state (what the encoders see)."""
+        s = self.split_state(state)
+        if self.elastic:
+            return s["theta"], s["omega"]
+        g, units = cable_geometry(self.anchors, s["p"])
+        omega = np.einsum("bnk,bk->bn", units, s["v"]) / self.drum_radius
+        return self.winch_angle_from_length(g), omega
+
     def internals(self, state: np.ndarray, u_cmd: np.ndarray) -> dict[str, np.ndarray]:
         """Physical signals at a state: tensions, winch angle/speed/acceleration, drum
         torque, platform acceleration, reeled-out length. Used for recording the truth."""
@@ -328,6 +337,23 @@ def winch_rates(
     if acceleration is not None:
         alpha = (np.einsum("bnk,bk->bn", units, acceleration) + curvature) / radius
     return kv / radius, alpha, curvature
+
+
+def forward_kinematics(
+    anchors: np.ndarray, lengths: np.ndarray, guess: np.ndarray, iterations: int = 4
+) -> np.ndarray:
+    """Platform position whose cable lengths best match ``lengths`` (B, n), by Gauss-Newton
+    from ``guess`` (B, 3). Converges quadratically from a nearby guess (the last tick)."""
+    p = np.array(guess, dtype=float, copy=True)
+    for _ in range(iterations):
+        g, units = cable_geometry(anchors, p)
+        # d|A - p|/dp = -k^T
+        jac = -units
+        resid = g - lengths
+        jtj = np.einsum("bni,bnj->bij", jac, jac)
+        jtr = np.einsum("bni,bn->bi", jac, resid)
+        p -= np.linalg.solve(jtj, jtr[..., None])[..., 0]
+    return p
 
 
 def default_home(anchors: np.ndarray) -> np.ndarray:

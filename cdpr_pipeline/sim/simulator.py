@@ -20,7 +20,7 @@ from cdpr_pipeline.data.rig import ControllerSpec
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.progress import progress
 from cdpr_pipeline.sim.controller import ComputedTorquePD
-from cdpr_pipeline.sim.plant import Plant, cable_geometry
+from cdpr_pipeline.sim.plant import Plant, cable_geometry, forward_kinematics
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.trajectories import DesiredTrajectories
 
@@ -104,6 +104,12 @@ class BatchSimulator:
         Recording rate; the controller rate must be an integer multiple of it.
     substeps : int or None
         RK4 steps per control tick; None picks them from the plant's time scales.
+    feedback : {"encoders", "mocap"}
+        Where the controller's state estimate comes from. ``encoders`` (default, as on a
+        real CDPR at control rate): position by forward kinematics of the encoder lengths
+        on the *nominal* geometry, velocity from the winch speeds (an ideal tachometer);
+        so geometric errors and cable stretch move the platform away from the desired
+        path, as they would on the rig. ``mocap``: measured position, true velocity.
     """
 
     plant: Plant
@@ -112,6 +118,25 @@ class BatchSimulator:
     sensors: Sensors
     sample_rate_hz: float
     substeps: int | None = None
+    feedback: str = "encoders"
+
+    def __post_init__(self) -> None:
+        if self.feedback not in ("encoders", "mocap"):
+            raise ValueError(f"feedback must be 'encoders' or 'mocap', not {self.feedback!r}")
+
+    def estimate(self, state: np.ndarray, pos_meas: np.ndarray, guess: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """The controller's estimate of platform position and velocity."""
+        if self.feedback == "mocap":
+            return pos_meas, self.plant.split_state(state)["v"]
+        theta, omega = self.plant.winch_state(state)
+        lengths = self.sensors.encoder_lengths(theta, self.nominal)
+        position = forward_kinematics(self.nominal.anchors, lengths, guess)
+        _, units = cable_geometry(self.nominal.anchors, position)
+        # l' = -R theta' = -K v  ->  v = pinv(K) R theta'
+        velocity = np.einsum("bin,bn->bi", np.linalg.pinv(units),
+                             self.nominal.drum_radius * omega)
+        return position, velocity
 
     def run(
         self,
@@ -148,11 +173,12 @@ class BatchSimulator:
                                                             "acceleration") else n))
                  for k in TRUTH_KEYS}
         ticks = progress(range(n_ticks), total=n_ticks, desc="simulate", enabled=show_progress)
+        estimate = xd[:, 0].copy()
         for k in ticks:
             s = self.plant.split_state(state)
             pos_meas = self.sensors.position(rng, s["p"])
-            # the state estimate feeds back measured position and the platform velocity
-            u = law(pos_meas, s["v"], xd[:, k], vd[:, k], ad[:, k])
+            estimate, vel_est = self.estimate(state, pos_meas, estimate)
+            u = law(estimate, vel_est, xd[:, k], vd[:, k], ad[:, k])
             if k % decimation == 0:
                 j = k // decimation
                 internals = self.plant.internals(state, u)
@@ -206,9 +232,10 @@ def simulate_reference(
         if plant.lagged:
             y[-plant.n:] = law(xd[b:b + 1, 0], np.zeros((1, 3)), xd[b:b + 1, 0],
                                vd[b:b + 1, 0], ad[b:b + 1, 0])[0]
+        estimate = xd[b:b + 1, 0].copy()
         for k in range(n_ticks):
-            p, v = y[None, 0:3], y[None, 3:6]
-            u = law(p, v, xd[b:b + 1, k], vd[b:b + 1, k], ad[b:b + 1, k])
+            estimate, vel_est = sim.estimate(y[None], y[None, 0:3], estimate)
+            u = law(estimate, vel_est, xd[b:b + 1, k], vd[b:b + 1, k], ad[b:b + 1, k])
             if k % decimation == 0:
                 out[b, k // decimation] = y[0:3]
             if k == n_ticks - 1:

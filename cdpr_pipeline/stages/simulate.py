@@ -75,6 +75,7 @@ def simulate(cfg: DictConfig) -> LabRun:
         sign_sharpness=float(sim.sign_sharpness),
         substeps=sim.substeps,
         batch_size=int(sim.batch_size),
+        feedback=str(sim.feedback),
         show_progress=not cfg.quiet,
     )
 
