@@ -97,7 +97,9 @@ class CdprRig:
         object.__setattr__(
             self, "drum_radius_m", np.asarray(self.drum_radius_m, dtype=float).reshape(-1)
         )
-        object.__setattr__(self, "anchors_m", np.asarray(self.anchors_m, dtype=float).reshape(-1, 3))
+        object.__setattr__(
+            self, "anchors_m", np.asarray(self.anchors_m, dtype=float).reshape(-1, 3)
+        )
 
     @property
     def n(self) -> int:

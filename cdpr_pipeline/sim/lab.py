@@ -26,7 +26,12 @@ from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.plant import SIGN_SHARPNESS, Plant
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import BatchSimulator, SimulationResult
-from cdpr_pipeline.sim.trajectories import FAMILIES, TrajectoryRanges, draw_trajectories
+from cdpr_pipeline.sim.trajectories import (
+    FAMILIES,
+    DesiredTrajectories,
+    TrajectoryRanges,
+    draw_trajectories,
+)
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +56,8 @@ class LabRun:
     nominal: Plant
     effects: list[Effect]
     truth: dict[str, Any]
+    desired: DesiredTrajectories
+    simulator: BatchSimulator
 
 
 def family_list(counts: Mapping[str, int]) -> list[str]:
@@ -115,7 +122,8 @@ def simulate_lab(
         trajectories.extend(result.trajectories(first_index=start))
     truth = _truth_record(plant, nominal, effects, desired, sensors or Sensors(), seed,
                           sign_sharpness, results[0].substeps if results else None, feedback)
-    return LabRun(None, None, trajectories, results, plant, nominal, list(effects), truth)
+    return LabRun(None, None, trajectories, results, plant, nominal, list(effects), truth,
+                  desired, sim)
 
 
 def generate_dataset(

@@ -233,7 +233,9 @@ class Plant:
         g_rate = -np.einsum("bnk,bk->bn", units, s["v"])
         strain = (g - reeled) / reeled
         strain_rate = (g_rate - reeled_rate) / reeled
-        return np.maximum(self.cable_stiffness * (strain + self.cable_damping_time * strain_rate), 0.0)
+        # cables only pull: a slack cable carries no tension
+        pull = self.cable_stiffness * (strain + self.cable_damping_time * strain_rate)
+        return np.maximum(pull, 0.0)
 
     def derivative(self, state: np.ndarray, u_cmd: np.ndarray) -> np.ndarray:
         """Time derivative of a ``(B, state_size)`` state under commanded torque ``u_cmd``.

@@ -204,7 +204,8 @@ class BatchSimulator:
                         "motion leaves the wrench-feasible workspace", 100 * slack)
         return SimulationResult(
             t=t_ticks[::decimation].copy(), families=list(desired.family), measured=measured,
-            truth=truth, desired_velocity=vd[:, ::decimation], desired_acceleration=ad[:, ::decimation],
+            truth=truth, desired_velocity=vd[:, ::decimation],
+            desired_acceleration=ad[:, ::decimation],
             substeps=substeps, info={"slack_fraction": slack},
         )
 

@@ -51,13 +51,17 @@ class DesiredTrajectories:
     def __len__(self) -> int:
         return len(self.family)
 
-    def take(self, index: slice) -> DesiredTrajectories:
-        """The sub-batch ``index``."""
+    def take(self, index: slice | Sequence[int]) -> DesiredTrajectories:
+        """The sub-batch ``index`` (a slice or a list of positions)."""
+        if not isinstance(index, slice):
+            index = np.asarray(index, dtype=int)
         changes = {}
         for f in fields(self):
             value = getattr(self, f.name)
-            if isinstance(value, (np.ndarray, list)):
+            if isinstance(value, np.ndarray):
                 changes[f.name] = value[index]
+            elif isinstance(value, list):
+                changes[f.name] = list(np.asarray(value, dtype=object)[index])
         return replace(self, **changes)
 
     def _path_parameter(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,0 +1,689 @@
+"""Checks of a dataset against the ``cdpr-measured/1`` spec (``measured-data.md``).
+
+The validator is also the parser: :func:`cdpr_pipeline.data.io.load_dataset` reuses the
+arrays it reads, so a dataset is read once and can never load without being checked.
+Every problem is collected (not raised on the first one) and reported with the file, the
+column and the file line of the first affected row, plus how many rows are affected.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+import math
+import re
+from collections import Counter
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from .errors import ROW_NOTE, DataValidationError, Problem, Severity
+from .rig import FORMAT, WINCH_KEYS, AxesRig, CdprRig, ControllerSpec, Rig, WinchParams
+
+log = logging.getLogger(__name__)
+
+RIG_FILE = "rig.yaml"
+TRAJ_DIR = "trajectories"
+DEFAULT_MIN_SAMPLES = 50
+DEFAULT_RATE_TOLERANCE = 0.05
+GAP_FACTOR = 1.5  # an interval above 1.5 nominal periods means at least one lost sample
+FRAME_TOLERANCE_M = 0.01  # motion-capture noise may put a point at the frame edge just outside
+NAME_RE = re.compile(r"^(\d+)_([A-Za-z0-9][A-Za-z0-9_-]*)\.csv$")
+NAN_WORDS = frozenset({"nan", "-nan", "+nan"})
+FIRST_DATA_LINE = 2  # header is line 1
+
+_CDPR_KEYS = frozenset(
+    {"format", "kind", "sample_rate_hz", "gravity", "platform_mass_kg", "drum_radius_m",
+     "anchors_m", "winch_nominal", "controller", "virtual"}
+)
+_AXES_KEYS = frozenset({"format", "kind", "sample_rate_hz", "axes", "nominal", "controller",
+                        "virtual"})
+
+
+@dataclass
+class ValidationReport:
+    """Outcome of :func:`validate_dataset`.
+
+    Attributes
+    ----------
+    root : Path
+        The dataset directory.
+    errors, warnings : list of Problem
+        Findings by severity.
+    """
+
+    root: Path
+    errors: list[Problem] = field(default_factory=list)
+    warnings: list[Problem] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """True when there is no error (warnings allowed)."""
+        return not self.errors
+
+    @property
+    def problems(self) -> list[Problem]:
+        return [*self.errors, *self.warnings]
+
+    def add(self, problem: Problem) -> None:
+        (self.errors if problem.severity == "error" else self.warnings).append(problem)
+
+    def raise_for_errors(self) -> None:
+        """Raise :class:`DataValidationError` listing every problem if there is an error."""
+        if self.errors:
+            raise DataValidationError(self.problems)
+
+    def __str__(self) -> str:
+        head = (f"{self.root}: {len(self.errors)} error(s), {len(self.warnings)} warning(s)"
+                f" ({ROW_NOTE})")
+        return "\n".join([head, *(f"  {p.severity}: {p}" for p in self.problems)])
+
+
+# --------------------------------------------------------------------------- rig.yaml
+
+
+class _RigChecker:
+    """Collects problems while turning a ``rig.yaml`` mapping into a rig object."""
+
+    def __init__(self, raw: Mapping[str, Any], file: str) -> None:
+        self.raw = raw
+        self.file = file
+        self.problems: list[Problem] = []
+
+    def error(self, key: str | None, message: str, kind: str = "rig") -> None:
+        self.problems.append(Problem(self.file, key, None, message, "error", kind))
+
+    def number(self, key: str, value: Any, *, positive: bool = False,
+               non_negative: bool = False) -> float | None:
+        # bool is an int subclass; `true` in YAML is never a meaningful number here
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.error(key, f"must be a number, got {value!r}", "rig_type")
+            return None
+        value = float(value)
+        if not math.isfinite(value):
+            self.error(key, f"must be finite, got {value}", "rig_value")
+        elif positive and value <= 0:
+            self.error(key, f"must be positive, got {value:g}", "rig_value")
+        elif non_negative and value < 0:
+            self.error(key, f"must not be negative, got {value:g}", "rig_value")
+        else:
+            return value
+        return None
+
+    def required(self, key: str, mapping: Mapping[str, Any] | None = None,
+                 prefix: str = "") -> Any:
+        mapping = self.raw if mapping is None else mapping
+        if key not in mapping or mapping[key] is None:
+            self.error(prefix + key, "required key missing", "rig_missing")
+            return None
+        return mapping[key]
+
+    def vector(self, key: str, value: Any, n: int | None, what: str, *, positive: bool = False,
+               non_negative: bool = False) -> np.ndarray | None:
+        if not isinstance(value, (list, tuple)):
+            self.error(key, f"must be a list of numbers, got {value!r}", "rig_shape")
+            return None
+        if n is not None and len(value) != n:
+            self.error(key, f"has {len(value)} entries but {what}", "rig_count")
+            return None
+        items = [self.number(f"{key}[{i}]", v, positive=positive, non_negative=non_negative)
+                 for i, v in enumerate(value)]
+        return None if any(v is None for v in items) else np.asarray(items, dtype=float)
+
+    def winch(self, key: str, n: int | None, what: str) -> WinchParams | None:
+        block = self.required(key)
+        if block is None:
+            return None
+        if not isinstance(block, Mapping):
+            self.error(key, f"must be a mapping with keys {', '.join(WINCH_KEYS)}", "rig_shape")
+            return None
+        # inertia is a mass (kg or kg m^2); friction coefficients cannot be negative
+        signs = {"inertia": {"positive": True}, "viscous": {"non_negative": True},
+                 "coulomb": {"non_negative": True}, "offset": {}}
+        values = {}
+        for sub in WINCH_KEYS:
+            raw = self.required(sub, block, prefix=f"{key}.")
+            if raw is not None:
+                values[sub] = self.vector(f"{key}.{sub}", raw, n, what, **signs[sub])
+        if len(values) < len(WINCH_KEYS) or any(v is None for v in values.values()):
+            return None
+        if n is None and len({v.size for v in values.values()}) != 1:
+            self.error(key, "parameter lists differ in length", "rig_count")
+            return None
+        return WinchParams(**values)
+
+    def header(self) -> str | None:
+        """Check ``format`` and ``kind``; return the kind, or None if unusable."""
+        fmt = self.raw.get("format")
+        if fmt is None:
+            self.error("format", f"required key missing (expected '{FORMAT}')", "format")
+            return None
+        if fmt != FORMAT:
+            self.error("format", f"unknown format {fmt!r} (expected '{FORMAT}')", "format")
+            return None
+        kind = self.raw.get("kind", "cdpr")
+        if kind not in ("cdpr", "axes"):
+            self.error("kind", f"unknown kind {kind!r} (expected 'cdpr' or 'axes')", "kind")
+            return None
+        return kind
+
+    def cdpr(self, rate: float | None) -> CdprRig | None:
+        raw = self.raw
+        gravity = self.number("gravity", raw.get("gravity", 9.81), non_negative=True)
+        mass = self.required("platform_mass_kg")
+        mass = None if mass is None else self.number("platform_mass_kg", mass, positive=True)
+        anchors = self._anchors()
+        n = None if anchors is None else len(anchors)
+        what = f"anchors_m has {n} anchors" if n is not None else ""
+        radius = self.required("drum_radius_m")
+        if radius is not None:
+            radius = self.vector("drum_radius_m", radius, n, what, positive=True)
+        winch = self.winch("winch_nominal", n, what)
+        controller = self._controller(rate)
+        extra = {k: v for k, v in raw.items() if k not in _CDPR_KEYS}
+        self._frame(extra)
+        virtual = self._virtual()
+        parts = (rate, gravity, mass, anchors, radius, winch)
+        if self.problems or any(p is None for p in parts):
+            return None
+        return CdprRig(sample_rate_hz=rate, platform_mass_kg=mass, drum_radius_m=radius,
+                       anchors_m=anchors, winch_nominal=winch, gravity=gravity,
+                       controller=controller, virtual=virtual, extra=extra)
+
+    def axes(self, rate: float | None) -> AxesRig | None:
+        names = self.required("axes")
+        if names is not None:
+            if (not isinstance(names, (list, tuple)) or not names
+                    or not all(isinstance(a, str) and a for a in names)):
+                self.error("axes", f"must be a non-empty list of axis names, got {names!r}",
+                           "rig_shape")
+                names = None
+            elif len(set(names)) != len(names):
+                self.error("axes", f"axis names must be unique, got {names!r}", "rig_shape")
+                names = None
+        n = None if names is None else len(names)
+        nominal = self.winch("nominal", n, f"axes lists {n} " + ("axis" if n == 1 else "axes"))
+        controller = self.raw.get("controller")
+        if controller is not None and not isinstance(controller, Mapping):
+            self.error("controller", "must be a mapping", "rig_shape")
+        extra = {k: v for k, v in self.raw.items() if k not in _AXES_KEYS}
+        virtual = self._virtual()
+        if self.problems or rate is None or names is None or nominal is None:
+            return None
+        return AxesRig(sample_rate_hz=rate, axes=tuple(names), nominal=nominal,
+                       controller=None if controller is None else dict(controller),
+                       virtual=virtual, extra=extra)
+
+    def _anchors(self) -> np.ndarray | None:
+        raw = self.required("anchors_m")
+        if raw is None:
+            return None
+        if not isinstance(raw, (list, tuple)):
+            self.error("anchors_m", "must be a list of [x, y, z] points", "rig_shape")
+            return None
+        points = []
+        for i, point in enumerate(raw):
+            if not isinstance(point, (list, tuple)) or len(point) != 3:
+                self.error(f"anchors_m[{i}]", f"must be an [x, y, z] point, got {point!r}",
+                           "rig_shape")
+                points.append(None)
+            else:
+                points.append(self.vector(f"anchors_m[{i}]", point, 3, "a point has 3"))
+        if any(p is None for p in points):
+            return None
+        if len(points) < 3:
+            self.error("anchors_m", f"needs at least 3 anchors (cables), got {len(points)}",
+                       "rig_count")
+            return None
+        return np.asarray(points, dtype=float)
+
+    def _controller(self, rate: float | None) -> ControllerSpec | None:
+        raw = self.raw.get("controller")
+        if raw is None:
+            return None
+        if not isinstance(raw, Mapping):
+            self.error("controller", "must be a mapping", "rig_shape")
+            return None
+        spec = ControllerSpec()
+        values: dict[str, Any] = {"rate_hz": rate if rate is not None else spec.rate_hz}
+        for key, value in raw.items():
+            if key in ("type", "feedforward"):
+                if not isinstance(value, str):
+                    self.error(f"controller.{key}", f"must be a string, got {value!r}",
+                               "rig_type")
+                values[key] = value
+            elif key in ("kp", "kd", "rate_hz", "min_tension_n"):
+                values[key] = self.number(f"controller.{key}", value,
+                                          positive=key != "min_tension_n", non_negative=True)
+            else:
+                self.error(f"controller.{key}", "unknown controller key", "rig_key")
+        if any(v is None for v in values.values()):
+            return None
+        return ControllerSpec(**values)
+
+    def _frame(self, extra: Mapping[str, Any]) -> None:
+        if "frame_m" not in extra:
+            return
+        raw = extra["frame_m"]
+        try:
+            box = np.asarray(raw, dtype=float)
+        except (TypeError, ValueError):
+            box = np.empty(0)
+        if box.shape != (2, 3) or not np.all(np.isfinite(box)) or np.any(box[0] >= box[1]):
+            self.error("frame_m", f"must be [[xmin, ymin, zmin], [xmax, ymax, zmax]] with "
+                       f"min < max, got {raw!r}", "rig_shape")
+
+    def _virtual(self) -> bool:
+        value = self.raw.get("virtual", False)
+        if not isinstance(value, bool):
+            self.error("virtual", f"must be true or false, got {value!r}", "rig_type")
+            return False
+        return value
+
+
+def parse_rig(raw: Any, file: str = RIG_FILE) -> tuple[Rig | None, list[Problem]]:
+    """Check a loaded ``rig.yaml`` mapping and build the rig.
+
+    Parameters
+    ----------
+    raw : Any
+        The YAML document as loaded by :func:`yaml.safe_load`.
+    file : str
+        Name used in the problems.
+
+    Returns
+    -------
+    rig : CdprRig, AxesRig or None
+        None when there is any error.
+    problems : list of Problem
+    """
+    if not isinstance(raw, Mapping):
+        return None, [Problem(file, None, None, "must be a YAML mapping of keys", "error", "rig")]
+    checker = _RigChecker(raw, file)
+    kind = checker.header()
+    if kind is None:
+        return None, checker.problems
+    rate = checker.required("sample_rate_hz")
+    rate = None if rate is None else checker.number("sample_rate_hz", rate, positive=True)
+    rig = checker.cdpr(rate) if kind == "cdpr" else checker.axes(rate)
+    return rig, checker.problems
+
+
+def read_rig_file(path: Path, file: str = RIG_FILE) -> tuple[Rig | None, list[Problem]]:
+    """Read and check a ``rig.yaml`` file; see :func:`parse_rig`."""
+    if not path.is_file():
+        return None, [Problem(file, None, None, "missing rig.yaml (the rig description)",
+                              "error", "missing_rig")]
+    try:
+        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        mark = getattr(exc, "problem_mark", None)
+        row = mark.line + 1 if mark is not None else None
+        # the one-line reason; the full PyYAML text repeats the source over several lines
+        reason = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        return None, [Problem(file, None, row, f"not valid YAML: {reason}", "error", "yaml")]
+    return parse_rig(raw, file)
+
+
+# --------------------------------------------------------------------------- CSV
+
+
+def _layout(rig: Rig) -> tuple[list[str], list[list[str]], re.Pattern[str], str]:
+    """Required columns, optional all-or-none column groups, the channel pattern and what
+    n counts (for messages)."""
+    idx = range(1, rig.n + 1)
+    if isinstance(rig, CdprRig):
+        required = ["t", "x", "y", "z", "xd", "yd", "zd", *(f"l{i}" for i in idx),
+                    *(f"u{i}" for i in idx)]
+        optional = [["vx", "vy", "vz"], ["ax", "ay", "az"]]
+        return required, optional, re.compile(r"^([lu])(\d+)$"), f"{rig.n} anchors"
+    required = ["t", *(f"q{i}" for i in idx), *(f"u{i}" for i in idx)]
+    optional = [[f"qd{i}" for i in idx]]
+    counted = f"{rig.n} axis" if rig.n == 1 else f"{rig.n} axes"
+    return required, optional, re.compile(r"^(qd|q|u)(\d+)$"), counted
+
+
+def _read_header(path: Path) -> list[str] | None:
+    with path.open(newline="", encoding="utf-8-sig") as fh:
+        first = next(csv.reader(fh), None)
+    return None if first is None else [name.strip() for name in first]
+
+
+def _is_number(dtype: Any) -> bool:
+    return pd.api.types.is_numeric_dtype(dtype) and not pd.api.types.is_bool_dtype(dtype)
+
+
+def _unique(names: list[str]) -> tuple[list[str], set[str]]:
+    """Names pandas accepts (the first occurrence keeps its name) and the renamed repeats."""
+    seen: Counter[str] = Counter()
+    out, repeats = [], set()
+    for name in names:
+        seen[name] += 1
+        if seen[name] > 1:
+            name = f"{name}#{seen[name]}"
+            repeats.add(name)
+        out.append(name)
+    return out, repeats
+
+
+class _FileChecker:
+    """Checks one trajectory CSV; collects problems into the report."""
+
+    def __init__(self, path: Path, rel: str, rig: Rig, report: ValidationReport, *,
+                 min_samples: int, allow_gaps: bool, rate_tolerance: float) -> None:
+        self.path, self.rel, self.rig, self.report = path, rel, rig, report
+        self.min_samples, self.allow_gaps, self.rate_tolerance = (
+            min_samples, allow_gaps, rate_tolerance)
+        self.failed = False
+        self.repeats: set[str] = set()
+        self.lines = np.empty(0, dtype=int)  # file line of each sample
+
+    def add(self, column: str | None, row: int | None, message: str, kind: str,
+            severity: Severity = "error", count: int = 1) -> None:
+        self.failed |= severity == "error"
+        self.report.add(Problem(self.rel, column, row, message, severity, kind, count))
+
+    def flag(self, column: str, mask: np.ndarray, kind: str,
+             message: Callable[[int], str], severity: Severity = "error",
+             offset: int = 0) -> None:
+        """One problem for all rows in ``mask``: the first row is named, the rest counted.
+        ``offset`` shifts mask positions to sample indices (1 for interval masks)."""
+        hits = np.flatnonzero(mask)
+        if hits.size:
+            first = int(hits[0]) + offset
+            self.add(column, int(self.lines[first]), message(first), kind, severity,
+                     int(hits.size))
+
+    def run(self) -> dict[str, np.ndarray] | None:
+        """Check the file; return its numeric columns if it has no error."""
+        try:
+            names = _read_header(self.path)
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            self.add(None, None, f"cannot read the file: {exc}", "unreadable")
+            return None
+        if not names or names == [""]:
+            self.add(None, 1, "empty file: a header row is required", "no_header")
+            return None
+        required, optional, channel_re, _ = self._check_header(names)
+        frame = self._read(names)
+        if frame is None:
+            return None
+        frame = self._drop_blank_lines(frame)
+        known = set(required).union(*optional)
+        columns: dict[str, np.ndarray] = {}
+        # one conversion of the whole table when every column parsed as numbers (the usual
+        # case): per-column pandas overhead would otherwise dominate on large datasets
+        block = (frame.to_numpy(dtype=float).T
+                 if all(_is_number(dtype) for dtype in frame.dtypes) else None)
+        for j, name in enumerate(frame.columns):
+            raw = frame.iloc[:, j] if block is None else block[j]
+            if name in known:
+                columns[name] = self._numeric(name, raw)
+            elif channel_re.match(name) or name in self.repeats:
+                continue  # out-of-range channel or duplicate: already reported
+            elif not name:
+                self.add(None, 1, f"column {j + 1} has no name; it is not loaded",
+                         "unnamed_column", "warning")
+            elif isinstance(raw, np.ndarray):
+                columns[name] = raw
+            else:
+                extra = pd.to_numeric(raw, errors="coerce")
+                if extra.isna().sum() > raw.isna().sum():
+                    self.add(name, None, "extra column is not numeric; it is not loaded",
+                             "extra_not_numeric", "warning")
+                else:
+                    columns[name] = extra.to_numpy(dtype=float)
+        n_rows = len(frame)
+        if n_rows < self.min_samples:
+            self.add("t", None, f"only {n_rows} samples; the analysis needs at least "
+                     f"{self.min_samples}", "too_few_samples")
+        if "t" in columns:
+            self._check_time(columns["t"])
+        if isinstance(self.rig, CdprRig):
+            self._check_cdpr(columns)
+        if self.failed:
+            return None
+        return self._fill_gaps(columns, known)
+
+    def _check_header(self, names: list[str]):
+        required, optional, channel_re, counted = _layout(self.rig)
+        for name, count in Counter(names).items():
+            if count > 1:
+                self.add(name, 1, f"column name appears {count} times in the header",
+                         "duplicate_column")
+        present = set(names)
+        for name in names:
+            match = channel_re.match(name)
+            if match and not 1 <= int(match.group(2)) <= self.rig.n:
+                self.add(name, 1, f"column does not match the rig: it has {counted}, so "
+                         f"channels run 1..{self.rig.n}", "column_count")
+        for name in required:
+            if name not in present:
+                why = f" (the rig has {counted})" if channel_re.match(name) else ""
+                self.add(name, 1, f"required column missing{why}", "missing_column")
+        for group in optional:
+            given = [c for c in group if c in present]
+            for name in group:
+                if given and name not in present:
+                    self.add(name, 1, f"column missing: {', '.join(given)} given, the group "
+                             f"{', '.join(group)} must be complete", "missing_column")
+        return required, optional, channel_re, counted
+
+    def _read(self, names: list[str]) -> pd.DataFrame | None:
+        try:
+            # keep_default_na=False: only an empty cell is a gap; a literal 'nan' is a value
+            # the writer put there on purpose and is reported as such. Blank lines are kept
+            # (as empty rows) so that row index + 2 is always the file line.
+            unique, self.repeats = _unique(names)
+            return pd.read_csv(self.path, header=0, names=unique, encoding="utf-8-sig",
+                               skipinitialspace=True, keep_default_na=False, na_values=[""],
+                               skip_blank_lines=False, index_col=False)
+        except pd.errors.ParserError as exc:
+            match = re.search(r"line (\d+)", str(exc))
+            reason = str(exc).strip().removeprefix("Error tokenizing data. C error: ")
+            self.add(None, int(match.group(1)) if match else None, f"malformed CSV: {reason}",
+                     "malformed")
+        except (OSError, UnicodeDecodeError, ValueError) as exc:
+            self.add(None, None, f"cannot read the file: {exc}", "unreadable")
+        return None
+
+    def _drop_blank_lines(self, frame: pd.DataFrame) -> pd.DataFrame:
+        """Drop blank lines (one warning, not a problem per column); trailing ones are
+        just the end of the file."""
+        blank = frame.isna().all(axis=1).to_numpy()
+        self.lines = np.flatnonzero(~blank) + FIRST_DATA_LINE
+        if not blank.any():
+            return frame
+        interior = blank.copy()
+        interior[self.lines[-1] - FIRST_DATA_LINE if self.lines.size else 0:] = False
+        hits = np.flatnonzero(interior)
+        if hits.size:
+            self.add(None, int(hits[0]) + FIRST_DATA_LINE, "blank line ignored", "blank_line",
+                     "warning", int(hits.size))
+        return frame[~blank]
+
+    def _numeric(self, name: str, raw: np.ndarray | pd.Series) -> np.ndarray:
+        """Float values of a required/optional column, reporting bad cells."""
+        if isinstance(raw, pd.Series) and pd.api.types.is_bool_dtype(raw.dtype):
+            # pandas reads True/False as booleans; they are not measurements
+            raw = raw.astype(object).astype(str)
+        if isinstance(raw, np.ndarray) or _is_number(raw.dtype):
+            values = np.asarray(raw, dtype=float)
+            # with keep_default_na=False a float NaN can only come from an empty cell
+            empty = np.isnan(values)
+        else:
+            series = raw
+            empty = series.isna().to_numpy()
+            coerced = pd.to_numeric(series, errors="coerce")
+            values = coerced.to_numpy(dtype=float)
+            bad = np.isnan(values) & ~empty
+            if bad.any():
+                text = series.to_numpy(dtype=object)
+                is_nan = bad & np.array([str(v).strip().lower() in NAN_WORDS for v in text])
+                self.flag(name, is_nan, "not_finite", lambda i: "NaN value")
+                self.flag(name, bad & ~is_nan, "non_numeric",
+                          lambda i: f"non-numeric value {text[i]!r}")
+        self.flag(name, np.isinf(values), "not_finite",
+                  lambda i: f"infinite value {values[i]}")
+        if empty.all() and empty.size:
+            self.add(name, None, "column is empty", "empty_column")
+        elif name == "t":
+            self.flag(name, empty, "missing_time", lambda i: "empty time cell")
+        elif self.allow_gaps:
+            self.flag(name, empty, "gap", lambda i: "empty cell, filled by linear "
+                      "interpolation in time (allow_gaps=True)", "warning")
+        else:
+            self.flag(name, empty, "gap", lambda i: "empty cell (a gap in the record); pass "
+                      "allow_gaps=True to fill it by interpolation")
+        return values
+
+    def _check_time(self, t: np.ndarray) -> None:
+        dt = np.diff(t)
+        self.flag("t", dt <= 0, "time_order",
+                  lambda i: f"time not strictly increasing: t = {t[i]:.9g} after "
+                  f"{t[i - 1]:.9g}", offset=1)
+        period = 1.0 / self.rig.sample_rate_hz
+        steps = dt[dt > 0]
+        if steps.size == 0:
+            return
+        median = float(np.median(steps))
+        tol = self.rate_tolerance * period
+        if abs(median - period) > tol:
+            self.flag("t", np.abs(dt - period) > tol, "sample_rate",
+                      lambda i: f"median sample interval {median:.6g} s ({1 / median:.6g} "
+                      f"Hz) is more than {self.rate_tolerance:.0%} off 1/sample_rate_hz = "
+                      f"{period:.6g} s; first off interval ends here", offset=1)
+            return  # with a wrong rate every interval would also look like a gap
+        # the interval after a time step backwards or repeated is not a separate gap
+        gap = (dt > GAP_FACTOR * period) & ~np.r_[False, dt[:-1] <= 0]
+        hint = "accepted (allow_gaps=True)" if self.allow_gaps else "pass allow_gaps=True to accept"
+        self.flag("t", gap, "gap",
+                  lambda i: f"gap of {dt[i - 1]:.6g} s (about {round(dt[i - 1] / period) - 1} "
+                  f"sample(s) missing) before this row; {hint}",
+                  "warning" if self.allow_gaps else "error", offset=1)
+
+    def _check_cdpr(self, columns: dict[str, np.ndarray]) -> None:
+        lo, hi = self.rig.frame_bounds()
+        lo, hi = lo - FRAME_TOLERANCE_M, hi + FRAME_TOLERANCE_M
+        for axis, names in enumerate((("x", "xd"), ("y", "yd"), ("z", "zd"))):
+            for name in names:
+                if name in columns:
+                    v = columns[name]
+                    self.flag(name, (v < lo[axis]) | (v > hi[axis]), "outside_frame",
+                              lambda i, v=v, a=axis: f"position {v[i]:.6g} m is outside the "
+                              f"anchor frame [{lo[a]:.6g}, {hi[a]:.6g}] m")
+        for i in range(1, self.rig.n + 1):
+            name = f"l{i}"
+            if name in columns:
+                v = columns[name]
+                self.flag(name, v <= 0, "non_positive_length",
+                          lambda j, v=v: f"cable length {v[j]:.6g} m is not positive")
+
+    def _fill_gaps(self, columns: dict[str, np.ndarray], known: set[str]) -> dict[str, np.ndarray]:
+        # only reached without errors, so empty cells were accepted with allow_gaps=True
+        t = columns["t"]
+        for name in known & columns.keys():
+            v = columns[name]
+            missing = np.isnan(v)
+            if missing.any():
+                columns[name] = v.copy()
+                columns[name][missing] = np.interp(t[missing], t[~missing], v[~missing])
+        return columns
+
+
+# --------------------------------------------------------------------------- dataset
+
+
+def check_dataset(
+    path: str | Path, *, min_samples: int = DEFAULT_MIN_SAMPLES, allow_gaps: bool = False,
+    rate_tolerance: float = DEFAULT_RATE_TOLERANCE,
+) -> tuple[ValidationReport, Rig | None, dict[str, dict[str, np.ndarray]]]:
+    """Validate a dataset and return what was read.
+
+    Same parameters as :func:`validate_dataset`. Returns the report, the rig (None if
+    ``rig.yaml`` has errors) and, per trajectory name (file stem) in file-name order, the
+    numeric columns of every file that has no error.
+    """
+    root = Path(path)
+    report = ValidationReport(root)
+    columns: dict[str, dict[str, np.ndarray]] = {}
+    if not root.is_dir():
+        report.add(Problem(str(root), None, None, "dataset directory does not exist",
+                           "error", "missing_dataset"))
+        return report, None, columns
+    rig, problems = read_rig_file(root / RIG_FILE)
+    for problem in problems:
+        report.add(problem)
+    traj_dir = root / TRAJ_DIR
+    if not traj_dir.is_dir():
+        report.add(Problem(f"{TRAJ_DIR}/", None, None, "missing trajectories directory",
+                           "error", "missing_trajectories"))
+        return report, rig, columns
+    files = sorted(p for p in traj_dir.iterdir() if p.is_file() and not p.name.startswith("."))
+    csvs = [p for p in files if p.suffix.lower() == ".csv"]
+    for other in set(files) - set(csvs):
+        report.add(Problem(f"{TRAJ_DIR}/{other.name}", None, None,
+                           "not a .csv file; ignored", "warning", "ignored_file"))
+    if not csvs:
+        report.add(Problem(f"{TRAJ_DIR}/", None, None, "no trajectory .csv files",
+                           "error", "no_trajectories"))
+    indices: Counter[int] = Counter()
+    for csv_path in csvs:
+        rel = f"{TRAJ_DIR}/{csv_path.name}"
+        match = NAME_RE.match(csv_path.name)
+        if match is None:
+            report.add(Problem(rel, None, None, "bad file name: must be <index>_<family>.csv, "
+                               "e.g. 000_flat_circle.csv", "error", "file_name"))
+        else:
+            indices[int(match.group(1))] += 1
+        if rig is None:
+            continue  # without a valid rig the channel count is unknown
+        checker = _FileChecker(csv_path, rel, rig, report, min_samples=min_samples,
+                               allow_gaps=allow_gaps, rate_tolerance=rate_tolerance)
+        data = checker.run()
+        if data is not None and match is not None:
+            columns[csv_path.stem] = data
+    for index, count in indices.items():
+        if count > 1:
+            report.add(Problem(f"{TRAJ_DIR}/", None, None, f"index {index} is used by {count} "
+                               "files; their order is by file name", "warning",
+                               "duplicate_index"))
+    if not report.ok:
+        columns = {}
+    log.debug("validated %s: %d errors, %d warnings", root, len(report.errors),
+              len(report.warnings))
+    return report, rig, columns
+
+
+def validate_dataset(
+    path: str | Path, *, min_samples: int = DEFAULT_MIN_SAMPLES, allow_gaps: bool = False,
+    rate_tolerance: float = DEFAULT_RATE_TOLERANCE,
+) -> ValidationReport:
+    """Check a ``cdpr-measured/1`` dataset directory without loading it.
+
+    Parameters
+    ----------
+    path : str or Path
+        Dataset directory holding ``rig.yaml`` and ``trajectories/``.
+    min_samples : int
+        Fewest samples a trajectory may have.
+    allow_gaps : bool
+        Accept gaps (time intervals above 1.5 sample periods, empty cells) as warnings;
+        otherwise they are errors. Empty cells are then filled by linear interpolation
+        when loading.
+    rate_tolerance : float
+        Largest relative deviation of the median sample interval from
+        ``1 / sample_rate_hz``.
+
+    Returns
+    -------
+    ValidationReport
+        Errors and warnings; ``report.ok`` is True when there is no error.
+    """
+    return check_dataset(path, min_samples=min_samples, allow_gaps=allow_gaps,
+                         rate_tolerance=rate_tolerance)[0]
