@@ -63,6 +63,37 @@ class SimulationResult:
         return out
 
 
+@dataclass
+class TickGrid:
+    """Control ticks of a run: ``settle_ticks`` of holding the start point (not recorded,
+    so every run starts settled under closed-loop control, whatever the hidden effects),
+    then the recorded run, every ``decimation``-th tick a sample."""
+
+    dt: float
+    decimation: int
+    settle_ticks: int
+    n_samples: int
+    desired: tuple[np.ndarray, np.ndarray, np.ndarray]
+
+    @property
+    def n_ticks(self) -> int:
+        return self.settle_ticks + (self.n_samples - 1) * self.decimation + 1
+
+    @property
+    def record_slice(self) -> slice:
+        return slice(self.settle_ticks, None, self.decimation)
+
+    def recorded(self, k: int) -> bool:
+        return k >= self.settle_ticks and (k - self.settle_ticks) % self.decimation == 0
+
+    def time(self, k: int) -> float:
+        """Time of tick ``k``; the recording starts at 0, settling runs at negative times."""
+        return (k - self.settle_ticks) * self.dt
+
+    def sample_times(self) -> np.ndarray:
+        return np.arange(self.n_samples) * self.dt * self.decimation
+
+
 def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5) -> int:
     """RK4 sub-steps per control tick so that ``dt * fastest_rate <= accuracy``."""
     mass_eq = plant.mass
@@ -110,6 +141,10 @@ class BatchSimulator:
         on the *nominal* geometry, velocity from the winch speeds (an ideal tachometer);
         so geometric errors and cable stretch move the platform away from the desired
         path, as they would on the rig. ``mocap``: measured position, true velocity.
+    settle_s : float
+        Seconds of closed-loop holding at the start point before recording, so runs start
+        at rest in the equilibrium the controller reaches (a sagging elastic cable, an
+        offset anchor), not in an unphysical jolt.
     """
 
     plant: Plant
@@ -119,10 +154,30 @@ class BatchSimulator:
     sample_rate_hz: float
     substeps: int | None = None
     feedback: str = "encoders"
+    settle_s: float = 1.0
 
     def __post_init__(self) -> None:
         if self.feedback not in ("encoders", "mocap"):
             raise ValueError(f"feedback must be 'encoders' or 'mocap', not {self.feedback!r}")
+
+    def tick_grid(self, desired: DesiredTrajectories) -> TickGrid:
+        """Control-tick grid and desired motion (B, ticks, 3) of a batch."""
+        ratio = self.controller.rate_hz / self.sample_rate_hz
+        decimation = round(ratio)
+        if decimation < 1 or abs(ratio - decimation) > 1e-9:
+            raise ValueError(
+                f"controller rate {self.controller.rate_hz} Hz must be an integer multiple of "
+                f"the sample rate {self.sample_rate_hz} Hz")
+        dt = 1.0 / self.controller.rate_hz
+        n_samples = int(round(desired.duration_s * self.sample_rate_hz)) + 1
+        settle = int(round(self.settle_s / dt))
+        t_run = np.arange((n_samples - 1) * decimation + 1) * dt
+        xd, vd, ad = desired.evaluate(t_run)
+        hold = np.repeat(xd[:, :1], settle, axis=1)
+        still = np.zeros_like(hold)
+        return TickGrid(dt, decimation, settle, n_samples,
+                        (np.concatenate([hold, xd], axis=1), np.concatenate([still, vd], axis=1),
+                         np.concatenate([still, ad], axis=1)))
 
     def estimate(self, state: np.ndarray, pos_meas: np.ndarray, guess: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray]:
@@ -144,34 +199,25 @@ class BatchSimulator:
         rng: np.random.Generator,
         show_progress: bool = False,
     ) -> SimulationResult:
-        ratio = self.controller.rate_hz / self.sample_rate_hz
-        decimation = round(ratio)
-        if decimation < 1 or abs(ratio - decimation) > 1e-9:
-            raise ValueError(
-                f"controller rate {self.controller.rate_hz} Hz must be an integer multiple of "
-                f"the sample rate {self.sample_rate_hz} Hz")
-        ctrl_dt = 1.0 / self.controller.rate_hz
-        n_samples = int(round(desired.duration_s * self.sample_rate_hz)) + 1
-        n_ticks = (n_samples - 1) * decimation + 1
-        t_ticks = np.arange(n_ticks) * ctrl_dt
-        substeps = self.substeps or auto_substeps(self.plant, ctrl_dt)
-        dt = ctrl_dt / substeps
+        grid = self.tick_grid(desired)
+        substeps = self.substeps or auto_substeps(self.plant, grid.dt)
+        dt = grid.dt / substeps
         law = ComputedTorquePD(self.nominal, self.controller)
-
-        xd, vd, ad = desired.evaluate(t_ticks)                          # (B, T, 3)
+        xd, vd, ad = grid.desired
+        decimation, n_samples = grid.decimation, grid.n_samples
         batch, n = len(desired), self.plant.n
         state = self.plant.initial_state(xd[:, 0])
         if self.plant.lagged:          # the drive starts holding the platform at rest
-            u0 = law(xd[:, 0], np.zeros((batch, 3)), xd[:, 0], vd[:, 0], ad[:, 0])
-            state[:, -n:] = u0
+            state[:, -n:] = law(xd[:, 0], np.zeros((batch, 3)), xd[:, 0], vd[:, 0], ad[:, 0])
 
         measured = {"position": np.empty((batch, n_samples, 3)),
-                    "desired": xd[:, ::decimation].copy(),
+                    "desired": xd[:, grid.record_slice].copy(),
                     "lengths": np.empty((batch, n_samples, n)),
                     "torques": np.empty((batch, n_samples, n))}
         truth = {k: np.empty((batch, n_samples, 3 if k in ("position", "velocity",
                                                             "acceleration") else n))
                  for k in TRUTH_KEYS}
+        n_ticks = grid.n_ticks
         ticks = progress(range(n_ticks), total=n_ticks, desc="simulate", enabled=show_progress)
         estimate = xd[:, 0].copy()
         for k in ticks:
@@ -179,8 +225,8 @@ class BatchSimulator:
             pos_meas = self.sensors.position(rng, s["p"])
             estimate, vel_est = self.estimate(state, pos_meas, estimate)
             u = law(estimate, vel_est, xd[:, k], vd[:, k], ad[:, k])
-            if k % decimation == 0:
-                j = k // decimation
+            if grid.recorded(k):
+                j = (k - grid.settle_ticks) // decimation
                 internals = self.plant.internals(state, u)
                 measured["position"][:, j] = pos_meas
                 measured["lengths"][:, j] = self.sensors.encoder_lengths(internals["theta"],
@@ -197,15 +243,15 @@ class BatchSimulator:
             for _ in range(substeps):
                 state = rk4_step(self.plant, state, u, dt)
             if not np.all(np.isfinite(state)):
-                raise FloatingPointError(f"simulation diverged at t = {t_ticks[k]:.3f} s")
+                raise FloatingPointError(f"simulation diverged at t = {grid.time(k):.3f} s")
         slack = float(np.mean(truth["tension"] < 0.0))
         if slack > 0:
             log.warning("%.2f %% of samples have negative rigid-cable tension: the desired "
                         "motion leaves the wrench-feasible workspace", 100 * slack)
         return SimulationResult(
-            t=t_ticks[::decimation].copy(), families=list(desired.family), measured=measured,
-            truth=truth, desired_velocity=vd[:, ::decimation],
-            desired_acceleration=ad[:, ::decimation],
+            t=grid.sample_times(), families=list(desired.family), measured=measured,
+            truth=truth, desired_velocity=vd[:, grid.record_slice],
+            desired_acceleration=ad[:, grid.record_slice],
             substeps=substeps, info={"slack_fraction": slack},
         )
 
@@ -219,30 +265,27 @@ def simulate_reference(
     a time, noise-free sensors. Returns true platform positions (B, N, 3) on the sample
     grid. Used by the benchmark and the tests as the reference for the batched RK4.
     """
-    decimation = round(sim.controller.rate_hz / sim.sample_rate_hz)
-    ctrl_dt = 1.0 / sim.controller.rate_hz
-    n_samples = int(round(desired.duration_s * sim.sample_rate_hz)) + 1
-    n_ticks = (n_samples - 1) * decimation + 1
-    t_ticks = np.arange(n_ticks) * ctrl_dt
-    xd, vd, ad = desired.evaluate(t_ticks)
+    grid = sim.tick_grid(desired)
+    xd, vd, ad = grid.desired
     law = ComputedTorquePD(sim.nominal, sim.controller)
     plant = sim.plant
-    out = np.empty((len(desired), n_samples, 3))
+    out = np.empty((len(desired), grid.n_samples, 3))
     for b in range(len(desired)):
         y = plant.initial_state(xd[b:b + 1, 0])[0]
         if plant.lagged:
             y[-plant.n:] = law(xd[b:b + 1, 0], np.zeros((1, 3)), xd[b:b + 1, 0],
                                vd[b:b + 1, 0], ad[b:b + 1, 0])[0]
         estimate = xd[b:b + 1, 0].copy()
-        for k in range(n_ticks):
+        for k in range(grid.n_ticks):
             estimate, vel_est = sim.estimate(y[None], y[None, 0:3], estimate)
             u = law(estimate, vel_est, xd[b:b + 1, k], vd[b:b + 1, k], ad[b:b + 1, k])
-            if k % decimation == 0:
-                out[b, k // decimation] = y[0:3]
-            if k == n_ticks - 1:
+            if grid.recorded(k):
+                out[b, (k - grid.settle_ticks) // grid.decimation] = y[0:3]
+            if k == grid.n_ticks - 1:
                 break
             sol = solve_ivp(lambda _t, yy, u=u: plant.derivative(yy[None], u)[0],
-                            (t_ticks[k], t_ticks[k + 1]), y, method="RK45", rtol=rtol, atol=atol)
+                            (grid.time(k), grid.time(k + 1)), y, method="RK45", rtol=rtol,
+                            atol=atol)
             y = sol.y[:, -1]
     return out
 
