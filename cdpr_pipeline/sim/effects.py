@@ -53,6 +53,8 @@ class Effect:
     name: ClassVar[str] = ""
     in_vocabulary: ClassVar[bool] = True
     ranges: ClassVar[dict[str, tuple[float, float]]] = {}
+    signed: ClassVar[frozenset[str]] = frozenset()
+    log_uniform: ClassVar[frozenset[str]] = frozenset()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -93,7 +95,26 @@ class Effect:
     @classmethod
     def sample(cls, rng: np.random.Generator, n_cables: int, **fixed: Any) -> Effect:
         """An instance with magnitudes drawn from ``ranges``; ``fixed`` values win."""
-        raise NotImplementedError
+        return cls(**{**cls.draw(rng, n_cables), **fixed})
+
+    @classmethod
+    def draw(cls, rng: np.random.Generator, n_cables: int) -> dict[str, Any]:
+        """Random parameters: every field named in ``ranges`` uniformly (log-uniformly if
+        in ``log_uniform``, with a random sign if in ``signed``). Effects with other random
+        choices (which cable, a direction) extend this."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        out: dict[str, Any] = {}
+        for key, (lo, hi) in cls.ranges.items():
+            if key not in names:
+                continue
+            if key in cls.log_uniform:
+                value = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+            else:
+                value = float(rng.uniform(lo, hi))
+            if key in cls.signed:
+                value *= float(rng.choice([-1.0, 1.0]))
+            out[key] = value
+        return out
 
 
 def make_effect(name: str, rng: np.random.Generator, n_cables: int, **fixed: Any) -> Effect:
@@ -130,12 +151,10 @@ class WinchParameterError(Effect):
         ))
 
     @classmethod
-    def sample(cls, rng, n_cables, **fixed):
-        kw: dict[str, Any] = {"cable": int(rng.integers(1, n_cables + 1))}
-        which = rng.choice(["inertia_scale", "viscous_scale", "coulomb_scale"])
-        kw[str(which)] = 1.0 + _signed(rng, *cls.ranges["relative_error"])
-        kw.update(fixed)
-        return cls(**kw)
+    def draw(cls, rng, n_cables):
+        which = str(rng.choice(["inertia_scale", "viscous_scale", "coulomb_scale"]))
+        return {"cable": int(rng.integers(1, n_cables + 1)),
+                which: 1.0 + _signed(rng, *cls.ranges["relative_error"])}
 
     def describe(self) -> str:
         parts = [f"{k.split('_')[0]} x{v:.3f}" for k, v in self.params().items()
@@ -164,11 +183,6 @@ class StribeckFriction(Effect):
             -(omega / self.stribeck_velocity) ** 2)
         return np.where(mask, bump * smooth_sign(omega, plant.sign_sharpness), 0.0)
 
-    @classmethod
-    def sample(cls, rng, n_cables, **fixed):
-        kw = {k: float(rng.uniform(*r)) for k, r in cls.ranges.items()}
-        kw.update(fixed)
-        return cls(**kw)
 
 
 @dataclass
@@ -189,11 +203,8 @@ class AsymmetricViscousFriction(Effect):
         return np.where(mask, self.ratio * plant.winch.viscous * one_side, 0.0)
 
     @classmethod
-    def sample(cls, rng, n_cables, **fixed):
-        kw: dict[str, Any] = {"ratio": float(rng.uniform(*cls.ranges["ratio"])),
-                              "direction": int(rng.choice([-1, 1]))}
-        kw.update(fixed)
-        return cls(**kw)
+    def draw(cls, rng, n_cables):
+        return {**super().draw(rng, n_cables), "direction": int(rng.choice([-1, 1]))}
 
 
 @dataclass
@@ -203,6 +214,7 @@ class CableElasticity(Effect):
 
     name: ClassVar[str] = "cable_elasticity"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"ea_n": (1.0e4, 5.0e4)}
+    log_uniform: ClassVar[frozenset[str]] = frozenset({"ea_n"})
 
     ea_n: float = 2.0e4
     damping_time_s: float = 2e-3
@@ -211,12 +223,6 @@ class CableElasticity(Effect):
         return plant.replace(cable_stiffness=np.full(plant.n, float(self.ea_n)),
                              cable_damping_time=float(self.damping_time_s))
 
-    @classmethod
-    def sample(cls, rng, n_cables, **fixed):
-        lo, hi = cls.ranges["ea_n"]
-        kw: dict[str, Any] = {"ea_n": float(np.exp(rng.uniform(np.log(lo), np.log(hi))))}
-        kw.update(fixed)
-        return cls(**kw)
 
     def describe(self):
         return f"cables stretch with EA = {self.ea_n:.0f} N"
@@ -238,14 +244,12 @@ class AnchorOffset(Effect):
         return plant.replace(anchors=anchors)
 
     @classmethod
-    def sample(cls, rng, n_cables, **fixed):
+    def draw(cls, rng, n_cables):
         direction = rng.normal(size=3)
         direction /= np.linalg.norm(direction)
         dist = rng.uniform(*cls.ranges["distance_m"])
-        kw: dict[str, Any] = {"cable": int(rng.integers(1, n_cables + 1)),
-                              "offset_m": [float(x) for x in dist * direction]}
-        kw.update(fixed)
-        return cls(**kw)
+        return {"cable": int(rng.integers(1, n_cables + 1)),
+                "offset_m": [float(x) for x in dist * direction]}
 
     def describe(self):
         axis = "xyz"[int(np.argmax(np.abs(self.offset_m)))]
@@ -262,6 +266,7 @@ class DrumRadiusError(Effect):
 
     name: ClassVar[str] = "drum_radius_error"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative": (0.01, 0.03)}
+    signed: ClassVar[frozenset[str]] = frozenset({"relative"})
 
     relative: float = 0.02
     cables: list[int] | None = None
@@ -271,11 +276,6 @@ class DrumRadiusError(Effect):
         return plant.replace(drum_radius=np.where(mask, plant.drum_radius * (1 + self.relative),
                                                   plant.drum_radius))
 
-    @classmethod
-    def sample(cls, rng, n_cables, **fixed):
-        kw: dict[str, Any] = {"relative": _signed(rng, *cls.ranges["relative"])}
-        kw.update(fixed)
-        return cls(**kw)
 
 
 @dataclass
@@ -284,17 +284,13 @@ class PayloadMassError(Effect):
 
     name: ClassVar[str] = "payload_mass_error"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative": (0.1, 0.3)}
+    signed: ClassVar[frozenset[str]] = frozenset({"relative"})
 
     relative: float = 0.2
 
     def apply(self, plant):
         return plant.replace(mass=plant.mass * (1.0 + self.relative))
 
-    @classmethod
-    def sample(cls, rng, n_cables, **fixed):
-        kw: dict[str, Any] = {"relative": _signed(rng, *cls.ranges["relative"])}
-        kw.update(fixed)
-        return cls(**kw)
 
 
 @dataclass
@@ -309,11 +305,6 @@ class ActuatorLag(Effect):
     def apply(self, plant):
         return plant.replace(actuator_time_constant=float(self.time_constant_s))
 
-    @classmethod
-    def sample(cls, rng, n_cables, **fixed):
-        kw: dict[str, Any] = {"time_constant_s": float(rng.uniform(*cls.ranges["time_constant_s"]))}
-        kw.update(fixed)
-        return cls(**kw)
 
 
 # ---------------------------------------------------------------- outside the vocabulary
@@ -334,11 +325,6 @@ class QuadraticDamping(Effect):
         coefficient = self.ratio * plant.winch.viscous / 5.0
         return np.where(mask, coefficient * omega * np.abs(omega), 0.0)
 
-    @classmethod
-    def sample(cls, rng, n_cables, **fixed):
-        kw: dict[str, Any] = {"ratio": float(rng.uniform(*cls.ranges["ratio"]))}
-        kw.update(fixed)
-        return cls(**kw)
 
 
 @dataclass
@@ -360,9 +346,6 @@ class CoggingTorque(Effect):
                                                           + self.phase_rad), 0.0)
 
     @classmethod
-    def sample(cls, rng, n_cables, **fixed):
-        kw: dict[str, Any] = {"amplitude_nm": float(rng.uniform(*cls.ranges["amplitude_nm"])),
-                              "periods_per_rev": int(rng.integers(4, 13)),
-                              "phase_rad": float(rng.uniform(0, 2 * np.pi))}
-        kw.update(fixed)
-        return cls(**kw)
+    def draw(cls, rng, n_cables):
+        return {**super().draw(rng, n_cables), "periods_per_rev": int(rng.integers(4, 13)),
+                "phase_rad": float(rng.uniform(0, 2 * np.pi))}
