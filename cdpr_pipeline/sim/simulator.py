@@ -96,9 +96,10 @@ class TickGrid:
 
 def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5) -> int:
     """RK4 sub-steps per control tick so that ``dt * fastest_rate <= accuracy``."""
-    mass_eq = plant.mass
+    # the smooth Coulomb sign acts like a damper of slope k F_c on the winch inertia plus
+    # the platform mass seen through the drum
     rates = [plant.sign_sharpness * plant.winch.coulomb.max()
-             / (plant.drum_radius.min() ** 2 * mass_eq + plant.winch.inertia.min()) * 1.0]
+             / (plant.drum_radius.min() ** 2 * plant.mass + plant.winch.inertia.min())]
     if plant.elastic:
         shortest = 0.5 * plant.home_lengths.min()
         k = plant.cable_stiffness.max() / shortest
@@ -289,7 +290,3 @@ def simulate_reference(
             y = sol.y[:, -1]
     return out
 
-
-def geometric_lengths(plant: Plant, positions: np.ndarray) -> np.ndarray:
-    """``|A_i - p|`` for positions (..., 3) on the plant's anchors."""
-    return cable_geometry(plant.anchors, positions)[0]
