@@ -2,7 +2,8 @@
 
 From a ``cdpr`` trajectory: winch angle from the encoder lengths (``theta = (l_home -
 l) / R``, positive reeling in), its speed ``b`` and acceleration ``a`` by zero-phase
-Butterworth filtering and central differences, ``c`` the smooth sign of ``b``, tensions
+Butterworth filtering and central differences, ``c`` the smooth sign of ``b`` (given the
+same low-pass as the torque), tensions
 from the platform dynamics ``K^T t = m (p'' - g)`` with the *nominal* geometry, and
 ``U* = u - R t`` (equation (6) of the paper, written per winch as in the data spec).
 """
@@ -17,8 +18,6 @@ from scipy.signal import butter, sosfiltfilt
 from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.sim.plant import SIGN_SHARPNESS, cable_geometry, smooth_sign, tensions_for_force
-
-REGRESSOR_NAMES = ("inertia", "viscous", "coulomb", "offset")
 
 
 @dataclass(frozen=True)
@@ -65,7 +64,7 @@ class WinchRegression:
 
     def least_squares(self) -> np.ndarray:
         """Ordinary least squares per winch; returns ``(n, 4)`` parameters in
-        ``REGRESSOR_NAMES`` order."""
+        ``WinchParams`` order (``WINCH_KEYS``: inertia, viscous, coulomb, offset)."""
         n = self.target.shape[1]
         return np.stack([np.linalg.lstsq(self.phi[:, i], self.target[:, i], rcond=None)[0]
                          for i in range(n)])

@@ -111,7 +111,8 @@ def simulate_lab(
     centre = nominal.home if centre_m is None else np.asarray(centre_m, float)
     families = family_list(counts)
     desired = draw_trajectories(families, rng, centre, duration_s, ranges, ramp_s)
-    sim = BatchSimulator(plant, nominal, rig.controller, sensors or Sensors(),
+    sensors = sensors or Sensors()
+    sim = BatchSimulator(plant, nominal, rig.controller, sensors,
                          rig.sample_rate_hz, substeps, feedback)
     results, trajectories = [], []
     for start in range(0, len(families), batch_size):
@@ -120,7 +121,7 @@ def simulate_lab(
         result = sim.run(chunk, rng, show_progress=show_progress)
         results.append(result)
         trajectories.extend(result.trajectories(first_index=start))
-    truth = _truth_record(plant, nominal, effects, desired, sensors or Sensors(), seed,
+    truth = _truth_record(plant, nominal, effects, desired, sensors, seed,
                           sign_sharpness, results[0].substeps if results else None, feedback)
     return LabRun(None, None, trajectories, results, plant, nominal, list(effects), truth,
                   desired, sim)

@@ -288,14 +288,18 @@ class Plant:
         omega = np.einsum("bnk,bk->bn", units, s["v"]) / self.drum_radius
         return self.winch_angle_from_length(g), omega
 
-    def internals(self, state: np.ndarray, u_cmd: np.ndarray) -> dict[str, np.ndarray]:
+    def internals(
+        self, state: np.ndarray, u_cmd: np.ndarray, deriv: np.ndarray | None = None
+    ) -> dict[str, np.ndarray]:
         """Physical signals at a state: tensions, winch angle/speed/acceleration, drum
-        torque, platform acceleration, reeled-out length. Used for recording the truth."""
+        torque, platform acceleration, reeled-out length. Used for recording the truth.
+        ``deriv`` is :meth:`derivative` at this state, if the caller already has it."""
         s = self.split_state(state)
         p, v = s["p"], s["v"]
         u = s["u_drum"] if self.lagged else u_cmd
         g, units = cable_geometry(self.anchors, p)
-        deriv = self.derivative(state, u_cmd)
+        if deriv is None:
+            deriv = self.derivative(state, u_cmd)
         acc = deriv[:, 3:6]
         R = self.drum_radius
         if self.elastic:

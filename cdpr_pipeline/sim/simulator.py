@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -43,10 +43,7 @@ class SimulationResult:
     families: list[str]
     measured: dict[str, np.ndarray]
     truth: dict[str, np.ndarray]
-    desired_velocity: np.ndarray
-    desired_acceleration: np.ndarray
     substeps: int = 1
-    info: dict[str, float] = field(default_factory=dict)
 
     def trajectories(self, first_index: int = 0) -> list[Trajectory]:
         """The recorded runs as :class:`Trajectory` objects named ``<index>_<family>``."""
@@ -112,8 +109,13 @@ def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5) -> int
     return max(1, math.ceil(max(rates) * control_dt / accuracy))
 
 
-def rk4_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
-    k1 = plant.derivative(state, u)
+def rk4_step(
+    plant: Plant, state: np.ndarray, u: np.ndarray, dt: float, k1: np.ndarray | None = None
+) -> np.ndarray:
+    """One classical RK4 step under constant ``u``; ``k1`` (the derivative at ``state``)
+    may be passed when the caller already has it."""
+    if k1 is None:
+        k1 = plant.derivative(state, u)
     k2 = plant.derivative(state + 0.5 * dt * k1, u)
     k3 = plant.derivative(state + 0.5 * dt * k2, u)
     k4 = plant.derivative(state + dt * k3, u)
@@ -226,9 +228,12 @@ class BatchSimulator:
             pos_meas = self.sensors.position(rng, s["p"])
             estimate, vel_est = self.estimate(state, pos_meas, estimate)
             u = law(estimate, vel_est, xd[:, k], vd[:, k], ad[:, k])
+            deriv = None
             if grid.recorded(k):
                 j = (k - grid.settle_ticks) // decimation
-                internals = self.plant.internals(state, u)
+                # the derivative serves both the record and the first RK4 stage
+                deriv = self.plant.derivative(state, u)
+                internals = self.plant.internals(state, u, deriv)
                 measured["position"][:, j] = pos_meas
                 measured["lengths"][:, j] = self.sensors.encoder_lengths(internals["theta"],
                                                                          self.nominal)
@@ -242,7 +247,8 @@ class BatchSimulator:
             if k == n_ticks - 1:
                 break
             for _ in range(substeps):
-                state = rk4_step(self.plant, state, u, dt)
+                state = rk4_step(self.plant, state, u, dt, deriv)
+                deriv = None
             if not np.all(np.isfinite(state)):
                 raise FloatingPointError(f"simulation diverged at t = {grid.time(k):.3f} s")
         slack = float(np.mean(truth["tension"] < 0.0))
@@ -251,9 +257,7 @@ class BatchSimulator:
                         "motion leaves the wrench-feasible workspace", 100 * slack)
         return SimulationResult(
             t=grid.sample_times(), families=list(desired.family), measured=measured,
-            truth=truth, desired_velocity=vd[:, grid.record_slice],
-            desired_acceleration=ad[:, grid.record_slice],
-            substeps=substeps, info={"slack_fraction": slack},
+            truth=truth, substeps=substeps,
         )
 
 
