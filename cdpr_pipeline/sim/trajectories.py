@@ -178,7 +178,7 @@ def hold(points: np.ndarray, duration_s: float) -> DesiredTrajectories:
     b = points.shape[0]
     zeros = np.zeros(b)
     return DesiredTrajectories(
-        family=["flat_circle"] * b, centre=points.copy(),
+        family=["hold"] * b, centre=points.copy(),  # a zero-radius circle
         radius=zeros, end_radius=zeros, rise=zeros, angular_speed=zeros, phase=zeros,
         tilt=zeros, tilt_axis=zeros, duration_s=duration_s,
     )
