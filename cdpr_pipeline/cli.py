@@ -13,6 +13,8 @@ import sys
 SUBCOMMANDS = {
     "simulate": "cdpr_pipeline.stages.simulate",
     "validate": "cdpr_pipeline.stages.validate",
+    "train": "cdpr_pipeline.stages.train",
+    "compare": "cdpr_pipeline.stages.compare",
 }
 
 USAGE = """usage: cdpr <subcommand> [key=value ...] [-m] [--cfg job] [--help]
@@ -20,6 +22,9 @@ USAGE = """usage: cdpr <subcommand> [key=value ...] [-m] [--cfg job] [--help]
 subcommands:
   simulate   run the virtual lab and write a cdpr-measured/1 dataset (+ truth beside it)
   validate   check a dataset against cdpr-measured/1 (data.path=DIR); non-zero exit on errors
+  train      train one trajectory predictor (model=NAME data.path=DIR), logged to MLflow;
+             -m model=tcn_transformer,tcn,transformer,bilstm is the paper's comparison
+  compare    the paper's Tables I and II from the MLflow runs (CSV, markdown, figure)
 """
 
 

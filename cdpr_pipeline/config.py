@@ -8,8 +8,10 @@ from pathlib import Path
 from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
-#: ``conf/`` at the project root (the package is installed editable, as ``make`` does).
-CONFIG_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+#: the project root (the package is installed editable, as ``make`` does)
+PROJECT_ROOT = Path(__file__).resolve().parents[1]
+#: ``conf/`` at the project root
+CONFIG_DIR = str(PROJECT_ROOT / "conf")
 
 
 def compose_config(name: str, overrides: Sequence[str] = ()) -> DictConfig:

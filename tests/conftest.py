@@ -24,3 +24,19 @@ def nominal_plant(paper_rig) -> Plant:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+
+
+#: a small virtual-lab dataset: 3 runs of each training family, 1 spiral, 2 s each
+SMALL_LAB = ["trajectory=tiny", "trajectory.duration_s=2.0", "quiet=true",
+             "trajectory.counts.flat_circle=3", "trajectory.counts.oblique_circle=3",
+             "trajectory.counts.flat_eight=3", "trajectory.counts.oblique_eight=3"]
+
+
+@pytest.fixture(scope="session")
+def small_lab(tmp_path_factory):
+    """Path of a small simulated dataset (no hidden effect), shared by the model tests."""
+    from cdpr_pipeline.stages.simulate import simulate
+
+    out = tmp_path_factory.mktemp("small_lab") / "lab"
+    simulate(compose_config("simulate", [*SMALL_LAB, f"out_dir={out}"]))
+    return out

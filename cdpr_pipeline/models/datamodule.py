@@ -1,0 +1,209 @@
+"""Windows of recorded runs for the sequence models, split by whole trajectory."""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import lightning as L
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, Dataset, RandomSampler
+
+from cdpr_pipeline.data.io import Dataset as MeasuredDataset
+from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.models.features import (
+    FeatureLayout,
+    RunArrays,
+    Standardizer,
+    run_arrays,
+    run_features,
+    run_targets,
+)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class RunSplit:
+    """Run names per split; ``test`` holds held-out runs of the training families and
+    every run of the test-only families (the unseen spiral)."""
+
+    train: list[str]
+    val: list[str]
+    test: list[str]
+
+    def as_dict(self) -> dict[str, list[str]]:
+        return {"train": self.train, "val": self.val, "test": self.test}
+
+
+def split_runs(names: Sequence[str], families: Sequence[str], val_fraction: float,
+               test_fraction: float, test_families: Sequence[str], seed: int) -> RunSplit:
+    """Split whole runs (never samples within a run), stratified by family.
+
+    Each training family gives ``round(n * fraction)`` runs to validation and to test,
+    chosen by a seeded shuffle; at least one validation run is kept when any family has
+    two or more runs, so early stopping always has data it did not train on.
+    """
+    rng = np.random.default_rng(seed)
+    groups: dict[str, list[str]] = {}
+    for name, fam in zip(names, families, strict=True):
+        groups.setdefault(fam, []).append(name)
+    split = RunSplit([], [], [])
+    for fam, members in groups.items():
+        if fam in test_families:
+            split.test.extend(members)
+            continue
+        order = [members[i] for i in rng.permutation(len(members))]
+        n_test = int(round(len(order) * test_fraction))
+        n_val = int(round(len(order) * val_fraction))
+        n_test = min(n_test, max(0, len(order) - 1))
+        n_val = min(n_val, max(0, len(order) - 1 - n_test))
+        split.test.extend(order[:n_test])
+        split.val.extend(order[n_test:n_test + n_val])
+        split.train.extend(order[n_test + n_val:])
+    if not split.val:
+        family_of = dict(zip(names, families, strict=True))
+        count = Counter(family_of[n] for n in split.train)
+        donors = [n for n in split.train if count[family_of[n]] > 1]
+        if donors:
+            pick = donors[int(rng.integers(len(donors)))]
+            split.train.remove(pick)
+            split.val.append(pick)
+    if not split.train:
+        raise ValueError("no training runs left after the split; lower val/test fractions")
+    order = {n: i for i, n in enumerate(names)}
+    for part in (split.train, split.val, split.test):
+        part.sort(key=order.__getitem__)
+    return split
+
+
+class WindowDataset(Dataset):
+    """``(inputs[e-W+1 : e+1], target[e])`` for every valid window end ``e`` of every run.
+
+    Inputs and targets are scaled. Ends run from ``W+1`` (the first input row with two
+    steps of history is row 2) to ``N-2`` (the last sample with a successor).
+    """
+
+    def __init__(self, inputs: list[np.ndarray], targets: list[np.ndarray], window: int):
+        self.window = int(window)
+        self.inputs = [torch.as_tensor(x, dtype=torch.float32) for x in inputs]
+        self.targets = [torch.as_tensor(y, dtype=torch.float32) for y in targets]
+        ends = []
+        for i, x in enumerate(inputs):
+            e = np.arange(self.window + 1, x.shape[0] - 1)
+            ends.append(np.stack([np.full_like(e, i), e], axis=1))
+        self.ends = np.concatenate(ends) if ends else np.zeros((0, 2), int)
+
+    def __len__(self) -> int:
+        return int(self.ends.shape[0])
+
+    def __getitem__(self, i: int) -> tuple[torch.Tensor, torch.Tensor]:
+        r, e = self.ends[i]
+        return self.inputs[r][e - self.window + 1:e + 1], self.targets[r][e]
+
+
+class TrajectoryDataModule(L.LightningDataModule):
+    """Sequence windows over a ``cdpr-measured/1`` dataset.
+
+    Parameters
+    ----------
+    path : str
+        Dataset directory.
+    window : int
+        Samples per input window.
+    batch_size : int
+        Windows per batch.
+    train_windows, val_windows : int
+        Windows drawn per training epoch (a fresh random subset each epoch) and the
+        fixed, evenly spaced validation subset; ``0`` means all.
+    val_fraction, test_fraction : float
+        Share of each training family's runs held out, by whole run.
+    test_families : sequence of str
+        Families used for testing only (the paper's unseen spiral).
+    split_seed : int
+        Seed of the run split.
+    allow_gaps, min_samples : bool, int
+        Passed to the loader.
+
+    Examples
+    --------
+    >>> dm = TrajectoryDataModule("data/generated/lab", window=64)   # doctest: +SKIP
+    >>> dm.setup(); x, y = next(iter(dm.train_dataloader()))         # doctest: +SKIP
+    """
+
+    def __init__(self, path: str, window: int = 64, batch_size: int = 256,
+                 train_windows: int = 16384, val_windows: int = 4096,
+                 val_fraction: float = 0.1, test_fraction: float = 0.1,
+                 test_families: Sequence[str] = ("spiral",), split_seed: int = 0,
+                 num_workers: int = 0, allow_gaps: bool = False, min_samples: int = 50):
+        super().__init__()
+        self.save_hyperparameters(logger=False)
+        self.path = Path(path)
+        self.window = int(window)
+        self._ready = False
+
+    # -- data -------------------------------------------------------------------------
+    def setup(self, stage: str | None = None) -> None:
+        if self._ready:
+            return
+        hp = self.hparams
+        self.dataset: MeasuredDataset = load_dataset(
+            self.path, allow_gaps=hp.allow_gaps, min_samples=hp.min_samples)
+        self.layout = FeatureLayout.for_rig(self.dataset.rig)
+        names = self.dataset.names
+        families = [tr.family for tr in self.dataset]
+        self.split = split_runs(names, families, hp.val_fraction, hp.test_fraction,
+                                list(hp.test_families), hp.split_seed)
+        self.runs = {tr.name: run_arrays(tr, self.layout) for tr in self.dataset}
+        short = [n for n, r in self.runs.items() if r.n_samples < self.window + 3]
+        if short:
+            raise ValueError(f"{self.path}: runs {short} are shorter than window+3 = "
+                             f"{self.window + 3} samples; lower data.window")
+        # scaling from training runs only: nothing of validation or test leaks into it
+        self.scaler = Standardizer.fit([self.runs[n] for n in self.split.train], self.layout)
+        self.data_digest = dataset_digest(self.path)
+        log.info("runs: %d train, %d val, %d test; %d inputs, %d outputs per step",
+                 len(self.split.train), len(self.split.val), len(self.split.test),
+                 self.layout.n_inputs, self.layout.n_outputs)
+        self._ready = True
+
+    def runs_of(self, split: str) -> list[RunArrays]:
+        return [self.runs[n] for n in getattr(self.split, split)]
+
+    def windows(self, split: str) -> WindowDataset:
+        runs = self.runs_of(split)
+        inputs = [self.scaler.inputs(run_features(r, self.layout)) for r in runs]
+        targets = [self.scaler.targets(run_targets(r)) for r in runs]
+        return WindowDataset(inputs, targets, self.window)
+
+    # -- loaders ----------------------------------------------------------------------
+    def train_dataloader(self) -> DataLoader:
+        ds = self.windows("train")
+        n = self.hparams.train_windows
+        sampler = RandomSampler(ds, num_samples=min(n, len(ds)) if n else None)
+        return DataLoader(ds, batch_size=self.hparams.batch_size, sampler=sampler,
+                          num_workers=self.hparams.num_workers, drop_last=False)
+
+    def val_dataloader(self) -> DataLoader:
+        ds = self.windows("val")
+        n = self.hparams.val_windows
+        if n and len(ds) > n:
+            ds = torch.utils.data.Subset(ds, np.linspace(0, len(ds) - 1, n).astype(int).tolist())
+        return DataLoader(ds, batch_size=self.hparams.batch_size * 4, shuffle=False,
+                          num_workers=self.hparams.num_workers)
+
+
+def dataset_digest(path: str | Path) -> str:
+    """Short content digest of a dataset (rig.yaml and every trajectory file), so runs
+    trained on the same data can be found and compared."""
+    root = Path(path)
+    h = hashlib.sha256()
+    for f in [root / "rig.yaml", *sorted((root / "trajectories").glob("*.csv"))]:
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]

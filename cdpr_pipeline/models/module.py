@@ -1,0 +1,56 @@
+"""Lightning module that trains any of the sequence networks on window -> next increment."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import lightning as L
+import torch
+from torch import nn
+
+
+class ForecastModule(L.LightningModule):
+    """Mean squared error on the scaled increment predicted at each window's last step.
+
+    Parameters
+    ----------
+    net : nn.Module
+        A network from :mod:`cdpr_pipeline.models.nets`.
+    optimizer : callable
+        Partial optimizer, called with the parameters (``conf/model/*.yaml``).
+    scheduler : callable, optional
+        Partial ``ReduceLROnPlateau`` (or any scheduler) called with the optimizer;
+        it monitors ``val/loss``.
+    """
+
+    def __init__(self, net: nn.Module, optimizer: Callable[..., torch.optim.Optimizer],
+                 scheduler: Callable[..., object] | None = None):
+        super().__init__()
+        # the network's own config is logged by the task; keep the checkpoint small
+        self.save_hyperparameters(logger=False, ignore=["net"])
+        self.net = net
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)
+
+    def _loss(self, batch: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
+        x, y = batch
+        return nn.functional.mse_loss(self.net(x)[:, -1], y)
+
+    def training_step(self, batch, batch_idx: int) -> torch.Tensor:
+        loss = self._loss(batch)
+        self.log("train/loss", loss, on_step=False, on_epoch=True, prog_bar=True,
+                 batch_size=batch[0].shape[0])
+        return loss
+
+    def validation_step(self, batch, batch_idx: int) -> None:
+        self.log("val/loss", self._loss(batch), on_step=False, on_epoch=True, prog_bar=True,
+                 batch_size=batch[0].shape[0])
+
+    def configure_optimizers(self):
+        opt = self.hparams.optimizer(params=self.parameters())
+        if self.hparams.scheduler is None:
+            return opt
+        sched = self.hparams.scheduler(optimizer=opt)
+        return {"optimizer": opt,
+                "lr_scheduler": {"scheduler": sched, "monitor": "val/loss", "interval": "epoch"}}

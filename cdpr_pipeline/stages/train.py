@@ -1,0 +1,150 @@
+"""``cdpr train``: train one trajectory predictor, score it, log everything to MLflow.
+
+The MLflow run holds the config as params, ``train/loss`` and ``val/loss`` per epoch, the
+final scores per axis and family (:mod:`cdpr_pipeline.models.evaluation`), the training
+time, and as artifacts the forecaster (``forecaster.pt``, what virtual-data generation
+loads), the best Lightning checkpoint, ``metrics.json`` and the prediction plots.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import hydra
+import lightning as L
+import numpy as np
+import torch
+import yaml
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.models.datamodule import TrajectoryDataModule
+from cdpr_pipeline.models.evaluation import evaluate, plot_predictions
+from cdpr_pipeline.models.forecast import Forecaster
+from cdpr_pipeline.models.module import ForecastModule
+from cdpr_pipeline.tracking import flatten_params, log_metrics, make_logger
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class TrainResult:
+    """What a training run left behind."""
+
+    run_id: str
+    metrics: dict[str, float]
+    forecaster_path: Path
+    out_dir: Path
+
+
+def _fit_closed_form(net: torch.nn.Module, dm: TrajectoryDataModule, max_windows: int,
+                     seed: int) -> float:
+    """Fit a reference predictor on training windows; return its validation loss."""
+    ds = dm.windows("train")
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(len(ds), size=min(max_windows, len(ds)), replace=False)
+    x = torch.stack([ds[i][0] for i in pick])
+    y = torch.stack([ds[i][1] for i in pick])
+    net.fit_windows(x, y)
+    val = dm.windows("val")
+    if len(val) == 0:
+        return float("nan")
+    vx, vy = zip(*(val[i] for i in range(0, len(val), max(1, len(val) // 4096))),
+                 strict=True)
+    with torch.no_grad():
+        pred = net(torch.stack(vx))[:, -1]
+    return float(torch.nn.functional.mse_loss(pred, torch.stack(vy)))
+
+
+def _train_network(cfg: DictConfig, net: torch.nn.Module, dm: TrajectoryDataModule,
+                   logger, out_dir: Path) -> tuple[int, Path | None, float | None]:
+    """Lightning training with early stopping; loads the best weights into ``net``."""
+    scheduler = instantiate(cfg.scheduler) if cfg.get("scheduler") else None
+    module = ForecastModule(net, instantiate(cfg.optimizer), scheduler)
+    callbacks = [instantiate(c) for c in cfg.callbacks.values()] if cfg.get("callbacks") else []
+    trainer: L.Trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks,
+                                     default_root_dir=str(out_dir),
+                                     enable_progress_bar=not cfg.quiet)
+    last = out_dir / "checkpoints" / "last.ckpt"
+    ckpt = str(last) if cfg.resume and last.exists() else None
+    if ckpt:
+        log.info("resuming from %s", ckpt)
+    trainer.fit(module, datamodule=dm, ckpt_path=ckpt)
+    best = Path(trainer.checkpoint_callback.best_model_path) \
+        if trainer.checkpoint_callback and trainer.checkpoint_callback.best_model_path else None
+    if best and best.exists():
+        state = torch.load(best, map_location="cpu", weights_only=False)["state_dict"]
+        module.load_state_dict(state)
+    score = trainer.checkpoint_callback.best_model_score if trainer.checkpoint_callback else None
+    return int(trainer.current_epoch), best, (float(score) if score is not None else None)
+
+
+def train(cfg: DictConfig) -> TrainResult:
+    """Train (or fit) ``cfg.model`` on ``cfg.data``, evaluate it, log it to MLflow."""
+    L.seed_everything(int(cfg.seed), workers=True, verbose=False)
+    out_dir = Path(cfg.out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    dm: TrajectoryDataModule = instantiate(cfg.data)
+    dm.setup()
+    net_config = OmegaConf.to_container(cfg.model.net, resolve=True)
+    net = instantiate(cfg.model.net)(layout=dm.layout)
+    name = str(cfg.model.name)
+    logger = make_logger(cfg.tracking.experiment, run_name=name, uri=cfg.tracking.uri,
+                         tags={"cdpr_task": "train", "model": name,
+                               "data_digest": dm.data_digest,
+                               "data_path": str(Path(cfg.data.path).resolve())})
+    logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
+    client, run_id = logger.experiment, logger.run_id
+    try:
+        start = time.perf_counter()
+        best = None
+        if getattr(net, "trainable", True):
+            epochs, best, val_loss = _train_network(cfg, net, dm, logger, out_dir)
+            summary = {"epochs": float(epochs), "val/best_loss": val_loss or float("nan")}
+        else:
+            val_loss = _fit_closed_form(net, dm, int(cfg.model.get("fit_windows", 65536)),
+                                        int(cfg.seed))
+            summary = {"epochs": 0.0, "val/best_loss": val_loss}
+        summary["time/train_s"] = time.perf_counter() - start
+        summary["params/count"] = float(sum(p.numel() for p in net.parameters()))
+
+        fc = Forecaster(net, dm.layout, dm.scaler, dm.window, net_config)
+        start = time.perf_counter()
+        metrics = evaluate(fc, dm.runs_of("train"), dm.runs_of("test"),
+                           instantiate(cfg.evaluation))
+        summary["time/eval_s"] = time.perf_counter() - start
+        metrics |= summary
+        log_metrics(client, run_id, metrics)
+
+        fc_path = fc.save(out_dir / "forecaster.pt")
+        (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=1, sort_keys=True))
+        (out_dir / "split.json").write_text(json.dumps(dm.split.as_dict(), indent=1))
+        (out_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
+        (out_dir / "layout.yaml").write_text(yaml.safe_dump(dm.layout.as_dict()))
+        artifacts = [fc_path, out_dir / "metrics.json", out_dir / "split.json",
+                     out_dir / "config.yaml"]
+        if dm.runs_of("test"):
+            artifacts.append(plot_predictions(fc, dm.runs_of("test"),
+                                              out_dir / "predictions.png"))
+        if best is not None and best.exists():
+            artifacts.append(best)
+        for path in artifacts:
+            client.log_artifact(run_id, str(path))
+        client.set_terminated(run_id, "FINISHED")
+    except BaseException:
+        client.set_terminated(run_id, "FAILED")
+        raise
+    log.info("%s: one-step test RMSE %.3e m, 1 s free-run RMSE %.3e m (run %s)", name,
+             metrics.get("onestep/test/all/overall/rmse", float("nan")),
+             metrics.get("freerun_1s/test/all/overall/rmse", float("nan")), run_id)
+    return TrainResult(run_id, metrics, fc_path, out_dir)
+
+
+@hydra.main(config_path=CONFIG_DIR, config_name="train", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    train(cfg)

@@ -1,0 +1,81 @@
+"""Input rows, targets and their scaling."""
+
+import numpy as np
+import pytest
+
+from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.models.features import (
+    FeatureLayout,
+    Standardizer,
+    run_arrays,
+    run_features,
+    run_targets,
+)
+
+LAYOUT = FeatureLayout(("x", "y", "z"), 3, 3, True, 100.0)
+
+
+def _traj(n=50, seed=0, name="000_flat_circle"):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / 100.0
+    pos = rng.normal(size=(n, 3)).cumsum(axis=0)
+    return Trajectory(name, t, pos, rng.normal(size=(n, 3)), desired=pos + 0.1,
+                      lengths=rng.normal(size=(n, 3)))
+
+
+def test_layout_columns():
+    assert LAYOUT.n_inputs == 1 + 3 + 9 + 9 + 3 == len(LAYOUT.input_names)
+    assert LAYOUT.input_names[LAYOUT.delta_slice][0] == "d_x"
+    assert LAYOUT.input_names[LAYOUT.state_slice] == LAYOUT.state_names
+    axes = FeatureLayout(("q1",), 0, 1, True, 1000.0)
+    assert axes.state_names == ["q1", "u1"] and axes.n_inputs == 1 + 1 + 4 + 1
+
+
+def test_rows_hold_state_increment_acceleration_and_next_desired():
+    tr = _traj()
+    run = run_arrays(tr, LAYOUT)
+    x = run_features(run, LAYOUT)
+    k = 10
+    assert np.isnan(x[:2]).all() and not np.isnan(x[2:]).any()
+    np.testing.assert_allclose(x[k, 0], tr.t[k] - tr.t[0])
+    np.testing.assert_allclose(x[k, 1:4], tr.desired[k + 1])
+    np.testing.assert_allclose(x[k, LAYOUT.state_slice],
+                               np.r_[tr.position[k], tr.lengths[k], tr.torques[k]])
+    s = run.state
+    np.testing.assert_allclose(x[k, LAYOUT.delta_slice], s[k] - s[k - 1])
+    np.testing.assert_allclose(x[k, -3:], tr.position[k] - 2 * tr.position[k - 1]
+                               + tr.position[k - 2])
+    y = run_targets(run)
+    np.testing.assert_allclose(y[k], s[k + 1] - s[k])
+    assert np.isnan(y[-1]).all()
+
+
+def test_scaling_uses_training_runs_only_and_shares_increment_scale():
+    runs = [run_arrays(_traj(seed=i), LAYOUT) for i in range(3)]
+    sc = Standardizer.fit(runs[:2], LAYOUT)
+    feats = np.concatenate([run_features(r, LAYOUT)[2:] for r in runs[:2]])
+    np.testing.assert_allclose(sc.input_std[:4], feats[:, :4].std(axis=0))
+    np.testing.assert_allclose(sc.input_mean[LAYOUT.delta_slice], sc.target_mean)
+    np.testing.assert_allclose(sc.input_std[LAYOUT.delta_slice], sc.target_std)
+    # the third run plays no part
+    runs[2].state[:] += 100.0
+    again = Standardizer.fit(runs[:2], LAYOUT)
+    np.testing.assert_array_equal(again.input_mean, sc.input_mean)
+    rt = Standardizer.from_dict(sc.as_dict())
+    np.testing.assert_array_equal(rt.target_std, sc.target_std)
+    z = sc.targets(run_targets(runs[0])[:-1])
+    np.testing.assert_allclose(sc.increments(z), run_targets(runs[0])[:-1])
+
+
+def test_constant_column_does_not_blow_up():
+    tr = _traj()
+    tr.desired[:, 2] = 0.7                    # a flat path: desired z never moves
+    run = run_arrays(tr, LAYOUT)
+    sc = Standardizer.fit([run], LAYOUT)
+    assert sc.input_std[3] == 1.0
+    assert np.isfinite(sc.inputs(run_features(run, LAYOUT)[2:])).all()
+
+
+def test_no_training_runs_is_an_error():
+    with pytest.raises(ValueError, match="zero training runs"):
+        Standardizer.fit([], LAYOUT)
