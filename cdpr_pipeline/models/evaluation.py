@@ -46,76 +46,97 @@ def _flatten(prefix: str, table: dict[str, dict[str, float]]) -> dict[str, float
     return {f"{prefix}/{col}/{m}": v for col, row in table.items() for m, v in row.items()}
 
 
-def _groups(runs: list[RunArrays]) -> dict[str, list[RunArrays]]:
-    out: dict[str, list[RunArrays]] = {"all": list(runs)}
-    for r in runs:
-        out.setdefault(r.family, []).append(r)
+def _by_group(runs: list[RunArrays], values: list) -> dict[str, list]:
+    """``values[i]`` belongs to ``runs[i]``: grouped as ``all`` and per family."""
+    out: dict[str, list] = {"all": list(values)}
+    for r, v in zip(runs, values, strict=True):
+        out.setdefault(r.family, []).append(v)
     return out
 
 
-def one_step_scores(fc: Forecaster, runs: list[RunArrays], prefix: str,
-                    stride: int = 1) -> dict[str, float]:
-    """One-step metrics of the position over the given runs."""
+def _scores(prefix: str, pairs: list[tuple[np.ndarray, np.ndarray]],
+            names: tuple[str, ...]) -> dict[str, float]:
+    true = np.concatenate([t.reshape(-1, len(names)) for t, _ in pairs])
+    pred = np.concatenate([p.reshape(-1, len(names)) for _, p in pairs])
+    return _flatten(prefix, metric_table(true, pred, names))
+
+
+def one_step_pairs(fc: Forecaster, runs: list[RunArrays], stride: int = 1
+                   ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(measured, one-step predicted) positions per run."""
     npos = fc.layout.n_position
-    pred, true = [], []
+    out = []
     for r in runs:
         _, p, t = fc.one_step(r, stride=stride)
-        pred.append(p[:, :npos])
-        true.append(t[:, :npos])
-    table = metric_table(np.concatenate(true), np.concatenate(pred), fc.layout.position_names)
-    return _flatten(prefix, table)
+        out.append((t[:, :npos], p[:, :npos]))
+    return out
 
 
-def free_run_scores(fc: Forecaster, runs: list[RunArrays], prefix: str, horizon: int,
-                    every: int | None) -> dict[str, float]:
-    """RMSE (and the rest) of the position over free runs of ``horizon`` samples.
+def free_run_pairs(fc: Forecaster, runs: list[RunArrays], horizon: int | None,
+                   every: int | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(measured, free-run) positions per run, all rollouts batched together.
 
-    ``every``: spacing of starts within each run; ``None`` = one rollout per run from its
-    first full window to its end (``horizon`` is then ignored).
+    ``horizon=None``: one rollout per run from its first full window to its end;
+    otherwise rollouts of ``horizon`` samples started every ``every`` samples.
     """
-    npos = fc.layout.n_position
-    first = fc.window + 1
-    if every is None:
-        n = min(r.n_samples for r in runs)
-        sel, starts, horizon = runs, [first] * len(runs), n - first - 1
+    npos, first = fc.layout.n_position, fc.window + 1
+    owner, sel, starts = [], [], []
+    if horizon is None:
+        horizon = min(r.n_samples for r in runs) - first - 1
+        owner, sel, starts = list(range(len(runs))), list(runs), [first] * len(runs)
     else:
-        sel, starts = [], []
-        for r in runs:
-            for e in range(first, r.n_samples - horizon - 1, every):
+        for i, r in enumerate(runs):
+            for e in range(first, r.n_samples - horizon - 1, every or horizon):
+                owner.append(i)
                 sel.append(r)
                 starts.append(e)
     if not sel or horizon < 1:
-        return {}
+        return []
     pred = fc.free_run(sel, starts, horizon)[..., :npos]
-    true = np.stack([r.state[e + 1:e + 1 + horizon, :npos] for r, e in zip(sel, starts,
-                                                                            strict=True)])
-    table = metric_table(true.reshape(-1, npos), pred.reshape(-1, npos), fc.layout.position_names)
-    return _flatten(prefix, table)
+    out = []
+    for i in range(len(runs)):
+        rows = [j for j, o in enumerate(owner) if o == i]
+        if rows:
+            true = np.stack([sel[j].state[starts[j] + 1:starts[j] + 1 + horizon, :npos]
+                             for j in rows])
+            out.append((true, pred[rows]))
+        else:
+            out.append((np.zeros((0, npos)), np.zeros((0, npos))))
+    return out
 
 
 def evaluate(fc: Forecaster, train_runs: list[RunArrays], test_runs: list[RunArrays],
              settings: EvaluationSettings) -> dict[str, float]:
-    """Table I (training runs, one-step) and Table II (test runs per family, one-step and
-    free run) scores as flat metric keys."""
+    """Table I (training runs, one-step) and Table II (test runs, all and per family,
+    one-step and free run) scores as flat metric keys."""
     out: dict[str, float] = {}
+    names = fc.layout.position_names
     if settings.max_train_runs and len(train_runs) > settings.max_train_runs:
         pick = np.linspace(0, len(train_runs) - 1, settings.max_train_runs).astype(int)
         train_runs = [train_runs[i] for i in pick]
     if train_runs:
-        out |= one_step_scores(fc, train_runs, "onestep/train", settings.onestep_stride)
+        out |= _scores("onestep/train", one_step_pairs(fc, train_runs,
+                                                       settings.onestep_stride), names)
+    if not test_runs:
+        return out
     rate = fc.layout.sample_rate_hz
     horizon = max(1, int(round(settings.freerun_horizon_s * rate)))
     every = max(1, int(round(settings.freerun_every_s * rate)))
-    for group, runs in _groups(test_runs).items() if test_runs else []:
-        out |= one_step_scores(fc, runs, f"onestep/test/{group}", settings.onestep_stride)
-        out |= free_run_scores(fc, runs, f"freerun_1s/test/{group}", horizon, every)
-        if settings.whole_run:
-            out |= free_run_scores(fc, runs, f"freerun_run/test/{group}", horizon, None)
+    modes = {"onestep": one_step_pairs(fc, test_runs, settings.onestep_stride),
+             "freerun_1s": free_run_pairs(fc, test_runs, horizon, every)}
+    if settings.whole_run:
+        modes["freerun_run"] = free_run_pairs(fc, test_runs, None)
+    for mode, pairs in modes.items():
+        if not pairs:
+            continue
+        for group, members in _by_group(test_runs, pairs).items():
+            members = [m for m in members if m[0].size]
+            if members:
+                out |= _scores(f"{mode}/test/{group}", members, names)
     return out
 
 
-def plot_predictions(fc: Forecaster, runs: list[RunArrays], path: str | Path,
-                     horizon_s: float = 1.0) -> Path:
+def plot_predictions(fc: Forecaster, runs: list[RunArrays], path: str | Path) -> Path:
     """Measured vs one-step vs whole-run free-run position, one test run per family."""
     import matplotlib
 
@@ -129,15 +150,17 @@ def plot_predictions(fc: Forecaster, runs: list[RunArrays], path: str | Path,
     npos = fc.layout.n_position
     fig, axes = plt.subplots(len(picks), npos, figsize=(4 * npos, 2.4 * len(picks)),
                              squeeze=False, sharex="row")
-    for i, r in enumerate(picks):
+    rolled = free_run_pairs(fc, picks, None)          # one batched rollout for all
+    for i, (r, (_, sim)) in enumerate(zip(picks, rolled, strict=True)):
         ends, one, _ = fc.one_step(r)
-        sim = fc.simulate(r)
+        t_sim = r.t[fc.window + 2:fc.window + 2 + sim.shape[1]]
         for j, name in enumerate(fc.layout.position_names):
             ax = axes[i, j]
             ax.plot(r.t, r.state[:, j], "k", lw=1.2, label="measured")
             ax.plot(r.t[ends + 1], one[:, j], "C0--", lw=1, label="one-step")
-            ax.plot(r.t, sim[:, j], "C3", lw=1, label="free run")
-            err = float(rmse(r.state[:, j], sim[:, j]))
+            ax.plot(t_sim, sim[0, :, j], "C3", lw=1, label="free run")
+            err = float(rmse(r.state[fc.window + 2:fc.window + 2 + sim.shape[1], j],
+                             sim[0, :, j]))
             ax.set_title(f"{r.name} {name}  (free-run RMSE {err:.2e})", fontsize=8)
             ax.tick_params(labelsize=7)
     axes[0, 0].legend(fontsize=7)

@@ -73,7 +73,7 @@ def paper_multirun(small_lab, tracking, tmp_path_factory):
     args = [sys.executable, "-m", "cdpr_pipeline.cli", "train", "-m",
             f"model={','.join(PAPER_MODELS)}", *TINY_TRAIN, f"data.path={small_lab}",
             f"tracking.uri={tracking}", "tracking.experiment=paper",
-            f"hydra.sweep.dir={sweep}"]
+            "model.net.layers=1", f"hydra.sweep.dir={sweep}"]     # every paper model has it
     proc = subprocess.run(args, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return sweep
