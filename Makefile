@@ -8,7 +8,7 @@ PYTEST_ARGS ?=
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.cdpr-installed
 
-.PHONY: run test test-slow bench lint clean
+.PHONY: run test test-slow bench bench-models lint clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -33,6 +33,11 @@ test-slow: $(STAMP)
 ## bench: benchmark scripts (figures quoted in the README)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_simulator.py
+
+## bench-models: train every trajectory predictor on the default dataset (about an hour
+## on 2 cores) and print the table quoted in the README
+bench-models: $(STAMP)
+	$(BIN)/python benchmarks/bench_models.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check cdpr_pipeline tests benchmarks

@@ -54,3 +54,31 @@ class ForecastModule(L.LightningModule):
         sched = self.hparams.scheduler(optimizer=opt)
         return {"optimizer": opt,
                 "lr_scheduler": {"scheduler": sched, "monitor": "val/loss", "interval": "epoch"}}
+
+
+class TimeToBest(L.Callback):
+    """Wall time from the start of fitting to the epoch with the best validation loss
+    (what "time to train" means when early stopping runs a few epochs past it)."""
+
+    def __init__(self, monitor: str = "val/loss"):
+        self.monitor = monitor
+        self.best = float("inf")
+        self.seconds = float("nan")
+        self.epoch = -1
+        self._start = 0.0
+
+    def on_fit_start(self, trainer, pl_module) -> None:
+        import time
+
+        self._start = time.perf_counter()
+
+    def on_validation_epoch_end(self, trainer, pl_module) -> None:
+        import time
+
+        if trainer.sanity_checking:
+            return
+        value = trainer.callback_metrics.get(self.monitor)
+        if value is not None and float(value) < self.best:
+            self.best = float(value)
+            self.seconds = time.perf_counter() - self._start
+            self.epoch = int(trainer.current_epoch)

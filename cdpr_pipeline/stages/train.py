@@ -26,7 +26,7 @@ from cdpr_pipeline.config import CONFIG_DIR
 from cdpr_pipeline.models.datamodule import TrajectoryDataModule
 from cdpr_pipeline.models.evaluation import evaluate, plot_predictions
 from cdpr_pipeline.models.forecast import Forecaster
-from cdpr_pipeline.models.module import ForecastModule
+from cdpr_pipeline.models.module import ForecastModule, TimeToBest
 from cdpr_pipeline.tracking import flatten_params, log_metrics, make_logger
 
 log = logging.getLogger(__name__)
@@ -62,11 +62,15 @@ def _fit_closed_form(net: torch.nn.Module, dm: TrajectoryDataModule, max_windows
 
 
 def _train_network(cfg: DictConfig, net: torch.nn.Module, dm: TrajectoryDataModule,
-                   logger, out_dir: Path) -> tuple[int, Path | None, float | None]:
-    """Lightning training with early stopping; loads the best weights into ``net``."""
+                   logger, out_dir: Path) -> tuple[dict[str, float], Path | None]:
+    """Lightning training with early stopping; loads the best weights into ``net``.
+    Returns training figures (epochs, best validation loss, time to it) and the best
+    checkpoint."""
     scheduler = instantiate(cfg.scheduler) if cfg.get("scheduler") else None
     module = ForecastModule(net, instantiate(cfg.optimizer), scheduler)
     callbacks = [instantiate(c) for c in cfg.callbacks.values()] if cfg.get("callbacks") else []
+    timer = TimeToBest()
+    callbacks.append(timer)
     trainer: L.Trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks,
                                      default_root_dir=str(out_dir),
                                      enable_progress_bar=not cfg.quiet)
@@ -80,8 +84,8 @@ def _train_network(cfg: DictConfig, net: torch.nn.Module, dm: TrajectoryDataModu
     if best and best.exists():
         state = torch.load(best, map_location="cpu", weights_only=False)["state_dict"]
         module.load_state_dict(state)
-    score = trainer.checkpoint_callback.best_model_score if trainer.checkpoint_callback else None
-    return int(trainer.current_epoch), best, (float(score) if score is not None else None)
+    return {"epochs": float(trainer.current_epoch), "val/best_loss": timer.best,
+            "time/to_best_s": timer.seconds, "best_epoch": float(timer.epoch)}, best
 
 
 def train(cfg: DictConfig) -> TrainResult:
@@ -104,13 +108,13 @@ def train(cfg: DictConfig) -> TrainResult:
         start = time.perf_counter()
         best = None
         if getattr(net, "trainable", True):
-            epochs, best, val_loss = _train_network(cfg, net, dm, logger, out_dir)
-            summary = {"epochs": float(epochs), "val/best_loss": val_loss or float("nan")}
+            summary, best = _train_network(cfg, net, dm, logger, out_dir)
         else:
             val_loss = _fit_closed_form(net, dm, int(cfg.model.get("fit_windows", 65536)),
                                         int(cfg.seed))
             summary = {"epochs": 0.0, "val/best_loss": val_loss}
         summary["time/train_s"] = time.perf_counter() - start
+        summary.setdefault("time/to_best_s", summary["time/train_s"])
         summary["params/count"] = float(sum(p.numel() for p in net.parameters()))
 
         fc = Forecaster(net, dm.layout, dm.scaler, dm.window, net_config)
