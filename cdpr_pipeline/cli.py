@@ -15,6 +15,8 @@ SUBCOMMANDS = {
     "validate": "cdpr_pipeline.stages.validate",
     "train": "cdpr_pipeline.stages.train",
     "compare": "cdpr_pipeline.stages.compare",
+    "identify": "cdpr_pipeline.stages.identify",
+    "convert": "cdpr_pipeline.stages.convert",
 }
 
 USAGE = """usage: cdpr <subcommand> [key=value ...] [-m] [--cfg job] [--help]
@@ -25,6 +27,8 @@ subcommands:
   train      train one trajectory predictor (model=NAME data.path=DIR), logged to MLflow;
              -m model=tcn_transformer,tcn,transformer,bilstm is the paper's comparison
   compare    the paper's Tables I and II from the MLflow runs (CSV, markdown, figure)
+  identify   winch/axis parameters (method=lsm|rls|lms|ga) -> out_dir/identification.json
+  convert    other recordings -> cdpr-measured/1 (format=emps src=PATH out_dir=DIR)
 """
 
 

@@ -1,0 +1,109 @@
+"""Identification of a dataset: choose runs, build the regression, low-pass it with the
+wavelet split, fit with an identifier, score on the fit runs and on held-out runs."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from cdpr_pipeline.data.io import Dataset
+from cdpr_pipeline.data.rig import WINCH_KEYS
+from cdpr_pipeline.identification.identifiers import Estimate, fit_metrics
+from cdpr_pipeline.identification.regressors import (
+    RegressionSettings,
+    WinchRegression,
+    dataset_regression,
+)
+from cdpr_pipeline.sim.lab import truth_path_for
+from cdpr_pipeline.wavelet import WaveletSplit
+
+
+def split_fit_holdout(dataset: Dataset, holdout: Sequence[str] = (),
+                      runs: Sequence[str] | None = None) -> tuple[list[str], list[str]]:
+    """Run names to fit on and to hold out. ``holdout`` holds families or run names."""
+    held = [tr.name for tr in dataset if tr.name in holdout or tr.family in holdout]
+    if runs:
+        unknown = [r for r in runs if r not in dataset.names]
+        if unknown:
+            raise KeyError(f"runs {unknown} not in {dataset.root}")
+        fit = [r for r in runs if r not in held]
+    else:
+        fit = [n for n in dataset.names if n not in held]
+    if not fit:
+        raise ValueError(f"{dataset.root}: no runs left to fit on after holding out {holdout}")
+    return fit, held
+
+
+def lowpass_regression(reg: WinchRegression, split: WaveletSplit | None) -> WinchRegression:
+    """The wavelet low band of every column, run by run (runs are not joined)."""
+    if split is None:
+        return reg
+    runs = reg.run if reg.run is not None else np.zeros(len(reg), int)
+    phi, target = np.empty_like(reg.phi), np.empty_like(reg.target)
+    for r in np.unique(runs):
+        m = runs == r
+        phi[m] = split.low(reg.phi[m])
+        target[m] = split.low(reg.target[m])
+    return WinchRegression(phi, target, reg.run)
+
+
+def true_winch_params(dataset_dir: str | Path) -> np.ndarray | None:
+    """``(n, 4)`` true winch parameters of a simulated dataset (its truth file), if any."""
+    path = truth_path_for(dataset_dir)
+    if not path.exists():
+        return None
+    truth = yaml.safe_load(path.read_text())
+    winch = truth.get("true_plant", {}).get("winch")
+    if not winch:
+        return None
+    return np.array([winch[k] for k in WINCH_KEYS], float).T
+
+
+@dataclass
+class Identification:
+    """Outcome of :func:`identify_dataset`."""
+
+    estimate: Estimate
+    fit_runs: list[str]
+    heldout_runs: list[str]
+    metrics: dict[str, Any] = field(default_factory=dict)
+
+    def as_json(self) -> dict[str, Any]:
+        out = self.estimate.as_json()
+        out["metrics"] = self.metrics
+        out["fit_runs"], out["heldout_runs"] = self.fit_runs, self.heldout_runs
+        return out
+
+
+def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
+                     split: WaveletSplit | None, holdout: Sequence[str] = (),
+                     runs: Sequence[str] | None = None,
+                     truth: np.ndarray | None = None) -> Identification:
+    """Fit ``identifier`` on the (low-passed) regression of the fit runs.
+
+    Metrics: ``rmse``, ``relative_error_pct`` and ``condition_number`` per winch on the
+    full-band regression of the fit runs (what the model must explain), the same with the
+    ``heldout_`` prefix on held-out runs, and ``truth_error_pct`` (parameter error against
+    the simulator's truth) when a truth is given.
+    """
+    fit_names, held_names = split_fit_holdout(dataset, holdout, runs)
+    fit_reg = dataset_regression(dataset.select(fit_names), dataset.rig, settings)
+    est = identifier.fit(lowpass_regression(fit_reg, split))
+    metrics: dict[str, Any] = dict(fit_metrics(fit_reg, est.theta))
+    if held_names:
+        held_reg = dataset_regression(dataset.select(held_names), dataset.rig, settings)
+        metrics |= {f"heldout_{k}": v for k, v in fit_metrics(held_reg, est.theta).items()
+                    if k != "condition_number"}
+    if truth is not None:
+        with np.errstate(divide="ignore", invalid="ignore"):    # a zero true offset: NaN
+            rel = np.where(truth != 0, 100 * (est.theta - truth) / np.abs(truth), np.nan)
+        metrics["truth_error_pct"] = {k: rel[:, i].tolist() for i, k in enumerate(WINCH_KEYS)}
+        metrics["truth_abs_error"] = {k: (est.theta - truth)[:, i].tolist()
+                                      for i, k in enumerate(WINCH_KEYS)}
+    metrics["samples"] = len(fit_reg)
+    return Identification(est, fit_names, held_names, metrics)

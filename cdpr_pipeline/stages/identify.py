@@ -1,0 +1,88 @@
+"""``cdpr identify data.path=DIR method=lsm|rls|lms|ga out_dir=OUT``.
+
+Writes ``OUT/identification.json`` (method, params, std, metrics) and logs an MLflow run.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from pathlib import Path
+
+import hydra
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.identification.pipeline import (
+    Identification,
+    identify_dataset,
+    true_winch_params,
+)
+from cdpr_pipeline.tracking import flatten_params, log_metrics, make_logger
+
+log = logging.getLogger(__name__)
+
+
+def _flat_metrics(metrics: dict) -> dict[str, float]:
+    out = {}
+    for key, value in metrics.items():
+        if isinstance(value, dict):
+            for sub, vals in value.items():
+                for i, v in enumerate(vals):
+                    if v == v:                      # MLflow refuses NaN
+                        out[f"{key}/{sub}/{i + 1}"] = float(v)
+        elif isinstance(value, list):
+            for i, v in enumerate(value):
+                out[f"{key}/{i + 1}"] = float(v)
+        else:
+            out[key] = float(value)
+    return out
+
+
+def identify(cfg: DictConfig) -> Identification:
+    """Identify the winch (axis) parameters of ``cfg.data.path`` with ``cfg.method``."""
+    if cfg.method not in cfg.identification:
+        raise ValueError(f"unknown method {cfg.method!r}; known: "
+                         f"{sorted(cfg.identification)}")
+    data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
+                        min_samples=cfg.data.min_samples)
+    settings = instantiate(cfg.regression)
+    split = instantiate(cfg.wavelet) if cfg.get("wavelet") else None
+    identifier = instantiate(cfg.identification[cfg.method])
+    start = time.perf_counter()
+    result = identify_dataset(data, identifier, settings, split, list(cfg.holdout),
+                              list(cfg.runs) if cfg.runs else None,
+                              true_winch_params(cfg.data.path))
+    result.metrics["time_s"] = time.perf_counter() - start
+    out = Path(cfg.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "identification.json"
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(result.as_json(), indent=1))
+    tmp.replace(path)
+
+    logger = make_logger(cfg.tracking.experiment, run_name=f"identify-{cfg.method}",
+                         uri=cfg.tracking.uri, tags={"cdpr_task": "identify",
+                                                     "method": cfg.method})
+    logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
+    log_metrics(logger.experiment, logger.run_id, _flat_metrics(
+        {k: v for k, v in result.metrics.items()} | {"params": result.estimate.params,
+                                                       "std": result.estimate.std}))
+    logger.experiment.log_artifact(logger.run_id, str(path))
+    logger.experiment.set_terminated(logger.run_id, "FINISHED")
+    for k in ("inertia", "viscous", "coulomb", "offset"):
+        log.info("%-8s %s +- %s", k, [f"{v:.5g}" for v in result.estimate.params[k]],
+                 [f"{v:.2g}" for v in result.estimate.std[k]])
+    log.info("relative error %s %%%s", [f"{v:.2f}" for v in result.metrics["relative_error_pct"]],
+             f", held out {[f'{v:.2f}' for v in result.metrics['heldout_relative_error_pct']]} %"
+             if "heldout_relative_error_pct" in result.metrics else "")
+    log.info("wrote %s", path)
+    return result
+
+
+@hydra.main(config_path=CONFIG_DIR, config_name="identify", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    identify(cfg)
