@@ -90,7 +90,10 @@ def _normal_equations(reg: WinchRegression, i: int) -> tuple[np.ndarray, np.ndar
 
 class LeastSquares:
     """Ordinary least squares per winch with ``cov = s^2 (Phi^T Phi)^-1``,
-    ``s^2 = RSS / (N - p)``: the standard deviations assume white residuals."""
+    ``s^2 = RSS / (N - p)``: the Cramer-Rao bound if the residuals were white and
+    Gaussian, and the convention of published IDIM results. After low-pass filtering the
+    noise sits mostly above the band the regressors live in, so on the virtual lab these
+    standard deviations are conservative (see the README for the measured ratio)."""
 
     name = "lsm"
 

@@ -59,6 +59,25 @@ class LabRun:
     desired: DesiredTrajectories
     simulator: BatchSimulator
 
+    def rerecord(self, rng: np.random.Generator) -> list[Trajectory]:
+        """The same motion recorded again with fresh sensor noise: new motion-capture
+        and torque noise, and encoder count edges at a new random phase per winch (so
+        quantisation errors are drawn anew too). Repeated experiments for uncertainty
+        checks, without re-simulating (the controller's own feedback is left as it was)."""
+        sensors = self.simulator.sensors
+        out = []
+        for tr, (res, b) in zip(self.trajectories, self._batch_index(), strict=True):
+            phase = rng.uniform(0.0, 1.0, size=self.nominal.drum_radius.shape)
+            lengths = sensors.encoder_lengths(res.truth["theta"][b], self.nominal, phase)
+            out.append(Trajectory(tr.name, tr.t.copy(),
+                                  sensors.position(rng, res.truth["position"][b]),
+                                  sensors.torques(rng, res.truth["u_cmd"][b]),
+                                  desired=tr.desired, lengths=lengths))
+        return out
+
+    def _batch_index(self) -> list[tuple[SimulationResult, int]]:
+        return [(res, b) for res in self.results for b in range(len(res.families))]
+
 
 def family_list(counts: Mapping[str, int]) -> list[str]:
     """Expand ``{family: count}`` into one entry per run, in the paper's family order."""

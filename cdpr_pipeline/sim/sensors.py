@@ -33,13 +33,16 @@ class Sensors:
             return true_position.copy()
         return true_position + rng.normal(0.0, self.mocap_noise_m, true_position.shape)
 
-    def encoder_lengths(self, theta: np.ndarray, nominal: Plant) -> np.ndarray:
+    def encoder_lengths(self, theta: np.ndarray, nominal: Plant,
+                        count_phase: np.ndarray | float = 0.0) -> np.ndarray:
         """Reported cable lengths: the motor angle turned into length with the *nominal*
         drum radius, zeroed at the home pose on the *nominal* geometry (the rig's own
-        calibration)."""
+        calibration). ``count_phase`` (in counts, [0, 1)) shifts where the count edges
+        fall, as a different power-up position would."""
         if self.encoder_counts_per_rev > 0:
             step = 2 * np.pi / self.encoder_counts_per_rev
-            theta = np.round(theta / step) * step
+            phase = np.asarray(count_phase, float) * step
+            theta = np.round((theta + phase) / step) * step - phase
         return nominal.home_lengths - nominal.drum_radius * theta
 
     def torques(self, rng: np.random.Generator, commanded: np.ndarray) -> np.ndarray:
