@@ -1,0 +1,87 @@
+"""Regression builder on the axes kind, and the published EMPS identification."""
+
+import numpy as np
+import pytest
+
+from cdpr_pipeline.data.convert import (
+    EMPS_PUBLISHED,
+    EMPS_PUBLISHED_RELATIVE_ERROR,
+    EMPS_PUBLISHED_STD,
+    convert_emps,
+)
+from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.data.rig import WINCH_KEYS, AxesRig, WinchParams
+from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.identification.identifiers import LeastSquares
+from cdpr_pipeline.identification.regressors import (
+    DerivativeFilter,
+    RegressionSettings,
+    axis_regression,
+    build_regression,
+)
+from cdpr_pipeline.resources import emps_path
+
+EMPS_SETTINGS = RegressionSettings(DerivativeFilter(100.0, 4, 0.05), decimate=10,
+                                   sign_sharpness=None, zero_order_hold=False)
+
+
+@pytest.fixture(scope="module")
+def emps(tmp_path_factory):
+    return load_dataset(convert_emps(emps_path(), tmp_path_factory.mktemp("emps") / "emps"))
+
+
+@pytest.mark.parametrize("decimate", [1, 5])
+def test_axis_regression_recovers_an_exact_axis_model(decimate):
+    fs = 1000.0
+    t = np.arange(20000) / fs
+    q = 0.1 * np.sin(2 * np.pi * 0.5 * t) + 0.03 * np.sin(2 * np.pi * 1.7 * t)
+    dq = np.gradient(q, t)
+    ddq = np.gradient(dq, t)
+    true = np.array([2.0, 5.0, 1.5, -0.3])
+    u = true @ np.stack([ddq, dq, np.sign(dq), np.ones_like(q)])
+    rig = AxesRig(fs, ("q1",), WinchParams([1.0], [1.0], [1.0], [0.0]))
+    tr = Trajectory("000_test", t, q[:, None], u[:, None])
+    settings = RegressionSettings(DerivativeFilter(50.0, 4, 0.05), decimate, None, False)
+    reg = axis_regression(tr, rig, settings)
+    assert reg.phi.shape[0] == pytest.approx((20000 - 100) / decimate, abs=1)
+    theta = LeastSquares().fit(reg).theta[0]
+    # the hard sign is smeared by the parallel filter exactly as the torque is: no bias
+    np.testing.assert_allclose(theta, true, rtol=0.01, atol=0.01)
+
+
+def test_emps_converted_dataset(emps):
+    assert emps.names == ["000_bangbang", "001_pulses"]
+    assert emps.rig.kind == "axes" and emps.rig.sample_rate_hz == 1000.0
+    assert emps.rig.nominal.inertia == pytest.approx([EMPS_PUBLISHED["inertia"]])
+    tr = emps[0]
+    assert tr.n_samples == 24841 and tr.desired is not None
+    # force = gtau * vir with gtau = 35.15 N/V
+    from scipy.io import loadmat
+
+    raw = loadmat(emps_path() / "DATA_EMPS.mat")
+    np.testing.assert_allclose(tr.torques[:, 0], 35.15065188 * raw["vir"].ravel(), rtol=1e-8)
+    np.testing.assert_allclose(tr.position[:, 0], raw["qm"].ravel(), rtol=1e-8, atol=1e-12)
+    assert "pulses_n" in emps[1].extra
+
+
+def test_emps_lsm_reproduces_the_published_identification(emps):
+    fit = build_regression(emps[0], emps.rig, EMPS_SETTINGS)
+    est = LeastSquares().fit(fit)
+    for i, key in enumerate(WINCH_KEYS):
+        assert est.theta[0, i] == pytest.approx(EMPS_PUBLISHED[key], rel=0.01), key
+        assert est.theta_std[0, i] == pytest.approx(EMPS_PUBLISHED_STD[key], rel=0.1), key
+    train = est.metrics["relative_error_pct"][0]
+    cross = build_regression(emps[1], emps.rig, EMPS_SETTINGS)
+    res = cross.target - cross.predict(est.theta)
+    cross_err = 100 * np.linalg.norm(res) / np.linalg.norm(cross.target)
+    assert train == pytest.approx(EMPS_PUBLISHED_RELATIVE_ERROR["training"], abs=0.2)
+    assert cross_err == pytest.approx(EMPS_PUBLISHED_RELATIVE_ERROR["cross_test"], abs=0.2)
+
+
+def test_convert_names_a_file_that_is_not_emps(tmp_path):
+    bad = tmp_path / "x.mat"
+    bad.write_text("not a mat file")
+    with pytest.raises(ValueError, match="x.mat"):
+        convert_emps(bad, tmp_path / "out")
+    with pytest.raises(FileNotFoundError, match="none of"):
+        convert_emps(tmp_path, tmp_path / "out2")
