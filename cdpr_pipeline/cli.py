@@ -17,6 +17,8 @@ SUBCOMMANDS = {
     "compare": "cdpr_pipeline.stages.compare",
     "identify": "cdpr_pipeline.stages.identify",
     "convert": "cdpr_pipeline.stages.convert",
+    "virtual": "cdpr_pipeline.stages.virtual",
+    "reconstruct": "cdpr_pipeline.stages.reconstruct",
 }
 
 USAGE = """usage: cdpr <subcommand> [key=value ...] [-m] [--cfg job] [--help]
@@ -28,6 +30,8 @@ subcommands:
              -m model=tcn_transformer,tcn,transformer,bilstm is the paper's comparison
   compare    the paper's Tables I and II from the MLflow runs (CSV, markdown, figure)
   identify   winch/axis parameters (method=lsm|rls|lms|ga) -> out_dir/identification.json
+  reconstruct  Tables IV-V: U* rebuilt on held-out runs (identification_json=PATH)
+  virtual    virtual runs from a trained predictor (forecaster=PATH out_dir=DIR)
   convert    other recordings -> cdpr-measured/1 (format=emps src=PATH out_dir=DIR)
 """
 

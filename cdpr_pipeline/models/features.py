@@ -105,6 +105,17 @@ class FeatureLayout:
         return asdict(self)
 
 
+@dataclass(frozen=True)
+class ChannelLayout:
+    """The minimum a network needs to be built: input and output channels and the
+    sample rate (for models that filter). Used where inputs are not trajectory rows,
+    e.g. the high-frequency residual model of identification."""
+
+    n_inputs: int
+    n_outputs: int
+    sample_rate_hz: float
+
+
 @dataclass
 class RunArrays:
     """One run in the predictor's terms (raw units).

@@ -20,6 +20,7 @@ from omegaconf import DictConfig
 
 from cdpr_pipeline.config import CONFIG_DIR, compose_config
 from cdpr_pipeline.models.datamodule import dataset_digest
+from cdpr_pipeline.tables import to_markdown
 from cdpr_pipeline.tracking import latest_runs, make_logger
 
 log = logging.getLogger(__name__)
@@ -118,24 +119,6 @@ def summary_table(runs: pd.DataFrame, models: list[str],
                     row[f"{k}/{ref}"] = row[k] / _metric(by_model[ref], v)
         rows.append(row)
     return pd.DataFrame(rows).set_index("model")
-
-
-def to_markdown(df: pd.DataFrame, fmt: str = "{:.4g}") -> str:
-    """A plain markdown table (no extra dependency); NaN shows as a dash."""
-    def cell(v) -> str:
-        if isinstance(v, float):
-            return "-" if math.isnan(v) else fmt.format(v)
-        return str(v)
-
-    def label(c) -> str:
-        return " ".join(str(x) for x in c) if isinstance(c, tuple) else str(c)
-
-    names = [label(n) for n in (df.index.names if any(df.index.names) else [""])]
-    head = [" / ".join(names)] + [label(c) for c in df.columns]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for idx, row in df.iterrows():
-        lines.append("| " + " | ".join([label(idx)] + [cell(v) for v in row]) + " |")
-    return "\n".join(lines) + "\n"
 
 
 def plot_comparison(table2: pd.DataFrame, models: list[str], path: Path) -> Path:

@@ -1,0 +1,102 @@
+"""Reconstruction of ``U*`` from identified parameters, plus a network for the
+high-frequency part the physical model leaves (the paper's gray-box model), scored per
+winch with MSE, MAE and PPL (the paper's Tables IV and V).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+
+import lightning as L
+import numpy as np
+import torch
+
+from cdpr_pipeline.identification.regressors import WinchRegression
+from cdpr_pipeline.metrics import mae, mse, ppl
+from cdpr_pipeline.models.datamodule import WindowDataset
+from cdpr_pipeline.models.features import ChannelLayout
+from cdpr_pipeline.models.module import ForecastModule
+
+
+def _inputs(reg: WinchRegression, theta: np.ndarray) -> np.ndarray:
+    """Per row: every winch's ``a, b, c`` and the physical model's ``U*``."""
+    n = reg.n
+    return np.concatenate([reg.phi[..., :3].reshape(len(reg), 3 * n), reg.predict(theta)],
+                          axis=1)
+
+
+def _runs(reg: WinchRegression) -> list[np.ndarray]:
+    runs = reg.run if reg.run is not None else np.zeros(len(reg), int)
+    return [np.flatnonzero(runs == r) for r in np.unique(runs)]
+
+
+@dataclass
+class HighFrequencyModel:
+    """A sequence network fitted to the residual ``U* - Phi theta`` of the physical
+    model, from windows of the regressors and the model's own ``U*`` (causal).
+
+    Parameters
+    ----------
+    net_factory : callable
+        ``net_factory(layout=ChannelLayout)`` -> network (a Hydra partial of
+        ``conf/model/*.yaml``'s ``net``).
+    window, epochs, batch_size, lr : training sizes
+    max_windows : int
+        Training windows drawn per epoch.
+    seed : int
+    """
+
+    net_factory: object
+    window: int = 32
+    epochs: int = 5
+    batch_size: int = 256
+    lr: float = 1e-3
+    max_windows: int = 8192
+    seed: int = 0
+
+    def fit(self, reg: WinchRegression, theta: np.ndarray) -> HighFrequencyModel:
+        L.seed_everything(self.seed, verbose=False)
+        x = _inputs(reg, theta)
+        y = reg.target - reg.predict(theta)
+        self.x_mean, self.x_std = x.mean(axis=0), np.where(x.std(axis=0) > 0, x.std(axis=0), 1)
+        self.y_mean, self.y_std = y.mean(axis=0), np.where(y.std(axis=0) > 0, y.std(axis=0), 1)
+        rows = _runs(reg)
+        ds = WindowDataset([(x[r] - self.x_mean) / self.x_std for r in rows],
+                           [(y[r] - self.y_mean) / self.y_std for r in rows], self.window)
+        self.net = self.net_factory(layout=ChannelLayout(x.shape[1], reg.n, 1.0))
+        module = ForecastModule(self.net, partial(torch.optim.Adam, lr=self.lr))
+        sampler = torch.utils.data.RandomSampler(ds, num_samples=min(self.max_windows, len(ds)))
+        loader = torch.utils.data.DataLoader(ds, batch_size=self.batch_size, sampler=sampler)
+        trainer = L.Trainer(max_epochs=self.epochs, logger=False, enable_checkpointing=False,
+                            enable_progress_bar=False, enable_model_summary=False,
+                            accelerator="auto", devices=1)
+        trainer.fit(module, loader)
+        self.net = module.net.cpu().eval()
+        self.theta = np.asarray(theta, float)
+        return self
+
+    @torch.no_grad()
+    def predict(self, reg: WinchRegression) -> np.ndarray:
+        """Predicted residual per row (rows before a run's first full window get 0)."""
+        x = (_inputs(reg, self.theta) - self.x_mean) / self.x_std
+        out = np.zeros((len(reg), reg.n))
+        w = self.window
+        for rows in _runs(reg):
+            if len(rows) < w:
+                continue
+            xt = torch.as_tensor(x[rows], dtype=torch.float32)
+            windows = xt.unfold(0, w, 1).permute(0, 2, 1)          # (M, w, F)
+            pred = torch.cat([self.net(windows[i:i + 4096])[:, -1]
+                              for i in range(0, len(windows), 4096)]).numpy()
+            out[rows[w - 1:]] = pred * self.y_std + self.y_mean
+        return out
+
+
+def reconstruction_scores(target: np.ndarray, predictions: dict[str, np.ndarray]
+                          ) -> dict[str, dict[str, list[float]]]:
+    """``{label: {"mse": [...], "mae": [...], "ppl": [...]}}`` per winch."""
+    return {label: {"mse": np.atleast_1d(mse(target, p)).tolist(),
+                    "mae": np.atleast_1d(mae(target, p)).tolist(),
+                    "ppl": np.atleast_1d(ppl(target, p)).tolist()}
+            for label, p in predictions.items()}
