@@ -19,6 +19,7 @@ SUBCOMMANDS = {
     "convert": "cdpr_pipeline.stages.convert",
     "virtual": "cdpr_pipeline.stages.virtual",
     "reconstruct": "cdpr_pipeline.stages.reconstruct",
+    "wavelet": "cdpr_pipeline.stages.wavelet",
 }
 
 USAGE = """usage: cdpr <subcommand> [key=value ...] [-m] [--cfg job] [--help]
@@ -29,6 +30,7 @@ subcommands:
   train      train one trajectory predictor (model=NAME data.path=DIR), logged to MLflow;
              -m model=tcn_transformer,tcn,transformer,bilstm is the paper's comparison
   compare    the paper's Tables I and II from the MLflow runs (CSV, markdown, figure)
+  wavelet    db4 split of the identification regression (low/high parts, band energies)
   identify   winch/axis parameters (method=lsm|rls|lms|ga) -> out_dir/identification.json
   reconstruct  Tables IV-V: U* rebuilt on held-out runs (identification_json=PATH)
   virtual    virtual runs from a trained predictor (forecaster=PATH out_dir=DIR)

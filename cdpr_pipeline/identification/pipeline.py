@@ -83,16 +83,22 @@ class Identification:
 def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
                      split: WaveletSplit | None, holdout: Sequence[str] = (),
                      runs: Sequence[str] | None = None,
-                     truth: np.ndarray | None = None) -> Identification:
+                     truth: np.ndarray | None = None,
+                     extra: Sequence[Dataset] = ()) -> Identification:
     """Fit ``identifier`` on the (low-passed) regression of the fit runs.
 
     Metrics: ``rmse``, ``relative_error_pct`` and ``condition_number`` per winch on the
     full-band regression of the fit runs (what the model must explain), the same with the
     ``heldout_`` prefix on held-out runs, and ``truth_error_pct`` (parameter error against
-    the simulator's truth) when a truth is given.
+    the simulator's truth) when a truth is given. ``extra`` datasets (e.g. virtual runs
+    of the same rig) are added, whole, to the fit.
     """
     fit_names, held_names = split_fit_holdout(dataset, holdout, runs)
     fit_reg = dataset_regression(dataset.select(fit_names), dataset.rig, settings)
+    parts = [fit_reg] + [dataset_regression(d, d.rig, settings) for d in extra]
+    if extra:
+        fit_reg = WinchRegression.concatenate(parts)
+        fit_names = fit_names + [f"{d.root.name}/{n}" for d in extra for n in d.names]
     est = identifier.fit(lowpass_regression(fit_reg, split))
     metrics: dict[str, Any] = dict(fit_metrics(fit_reg, est.theta))
     if held_names:

@@ -122,7 +122,11 @@ class WinchRegression:
     @staticmethod
     def concatenate(parts: Iterable[WinchRegression]) -> WinchRegression:
         parts = list(parts)
-        runs = [np.full(len(p), i) if p.run is None else p.run for i, p in enumerate(parts)]
+        runs, offset = [], 0
+        for p in parts:    # run indices stay distinct across parts
+            r = np.zeros(len(p), int) if p.run is None else np.asarray(p.run, int)
+            runs.append(r + offset)
+            offset += int(r.max()) + 1 if len(r) else 0
         return WinchRegression(np.concatenate([p.phi for p in parts]),
                                np.concatenate([p.target for p in parts]), np.concatenate(runs))
 

@@ -53,9 +53,11 @@ def identify(cfg: DictConfig) -> Identification:
     split = instantiate(cfg.wavelet) if cfg.get("wavelet") else None
     identifier = instantiate(cfg.identification[cfg.method])
     start = time.perf_counter()
+    extra = [load_dataset(p, allow_gaps=cfg.data.allow_gaps, min_samples=cfg.data.min_samples)
+             for p in (cfg.extra_data or [])]
     result = identify_dataset(data, identifier, settings, split, list(cfg.holdout),
                               list(cfg.runs) if cfg.runs else None,
-                              true_winch_params(cfg.data.path))
+                              true_winch_params(cfg.data.path), extra)
     result.metrics["time_s"] = time.perf_counter() - start
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -120,3 +120,17 @@ def test_reconstruct_tables_four_and_five(small_lab, tracking, tmp_path):
         assert len(row["mse"]) == 3 and all(v > 0 for v in row["ppl"])
     for name in ("table4.md", "table5.md", "reconstruction.png", "reconstruction.json"):
         assert (tmp_path / "rec" / name).exists()
+
+
+def test_wavelet_stage_splits_exactly_and_reports_bands(small_lab, tmp_path):
+    from cdpr_pipeline.stages.wavelet import decompose
+
+    summary = decompose(compose_config("wavelet", [f"data.path={small_lab}",
+                                                   f"out_dir={tmp_path}"]))
+    assert summary["reconstruction_max_abs_error"] < 1e-9
+    assert summary["low_band_upper_hz"] == 37.5
+    for bands in summary["u_star_band_energy"].values():
+        assert sum(bands.values()) == pytest.approx(1.0)
+        assert bands["A2"] > 0.9            # U* follows slow trajectories
+    parts = np.load(tmp_path / "wavelet.npz")
+    assert parts["phi_low"].shape == parts["phi_high"].shape
