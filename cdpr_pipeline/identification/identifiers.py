@@ -20,6 +20,7 @@ Examples
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,6 +28,8 @@ import numpy as np
 
 from cdpr_pipeline.data.rig import WINCH_KEYS
 from cdpr_pipeline.identification.regressors import WinchRegression
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -193,6 +196,8 @@ class LeastMeanSquares:
 
     def __init__(self, step: float = 0.5, passes: int = 4, decay: float = 1.0,
                  eps: float = 1e-9, max_samples: int = 50_000, seed: int = 0):
+        if passes < 1:
+            raise ValueError("LMS needs at least one pass over the data")
         self.step, self.passes, self.decay = float(step), int(passes), float(decay)
         self.eps, self.max_samples, self.seed = float(eps), int(max_samples), int(seed)
 
@@ -339,8 +344,16 @@ class GeneticAlgorithm:
                     draws.append(self._run(ph.T @ ph, ph.T @ yy, float(yy @ yy),
                                            self.seed * 1000 + i + 7919 * (b + 1))[0])
                 std[i] = np.std(draws, axis=0, ddof=1)
+        lo, hi = self.bounds[:, 0], self.bounds[:, 1]
+        on_bound = np.isclose(theta, lo, rtol=0, atol=1e-6 * (hi - lo)) | \
+            np.isclose(theta, hi, rtol=0, atol=1e-6 * (hi - lo))
+        if on_bound.any():
+            log.warning("GA estimate sits on its bounds for %s: widen "
+                        "identification.ga.bounds", [(int(i) + 1, WINCH_KEYS[k])
+                                                     for i, k in np.argwhere(on_bound)])
         return Estimate(self.name, theta, std, fit_metrics(reg, theta),
                         {"population": self.population, "generations": self.generations,
+                         "on_bounds": on_bound.tolist(),
                          "bootstrap": self.bootstrap, "best_sse_per_generation": tracks})
 
 

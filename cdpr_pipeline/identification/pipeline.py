@@ -41,15 +41,21 @@ def split_fit_holdout(dataset: Dataset, holdout: Sequence[str] = (),
 
 def lowpass_regression(reg: WinchRegression, split: WaveletSplit | None) -> WinchRegression:
     """The wavelet low band of every column, run by run (runs are not joined)."""
-    if split is None:
-        return reg
+    return reg if split is None else split_regression(reg, split)[0]
+
+
+def split_regression(reg: WinchRegression, split: WaveletSplit
+                     ) -> tuple[WinchRegression, WinchRegression]:
+    """Low and high band (from the approximation and from the details) of every column,
+    run by run."""
     runs = reg.run if reg.run is not None else np.zeros(len(reg), int)
-    phi, target = np.empty_like(reg.phi), np.empty_like(reg.target)
+    parts = [(np.empty_like(reg.phi), np.empty_like(reg.target)) for _ in range(2)]
     for r in np.unique(runs):
         m = runs == r
-        phi[m] = split.low(reg.phi[m])
-        target[m] = split.low(reg.target[m])
-    return WinchRegression(phi, target, reg.run)
+        for k, src in enumerate((reg.phi, reg.target)):
+            low, high = split.split(src[m])
+            parts[0][k][m], parts[1][k][m] = low, high
+    return (WinchRegression(*parts[0], reg.run), WinchRegression(*parts[1], reg.run))
 
 
 def true_winch_params(dataset_dir: str | Path) -> np.ndarray | None:
@@ -72,11 +78,14 @@ class Identification:
     fit_runs: list[str]
     heldout_runs: list[str]
     metrics: dict[str, Any] = field(default_factory=dict)
+    extra_runs: dict[str, list[str]] = field(default_factory=dict)
 
     def as_json(self) -> dict[str, Any]:
         out = self.estimate.as_json()
         out["metrics"] = self.metrics
         out["fit_runs"], out["heldout_runs"] = self.fit_runs, self.heldout_runs
+        if self.extra_runs:
+            out["extra_runs"] = self.extra_runs      # other datasets fitted whole
         return out
 
 
@@ -98,7 +107,6 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
     parts = [fit_reg] + [dataset_regression(d, d.rig, settings) for d in extra]
     if extra:
         fit_reg = WinchRegression.concatenate(parts)
-        fit_names = fit_names + [f"{d.root.name}/{n}" for d in extra for n in d.names]
     est = identifier.fit(lowpass_regression(fit_reg, split))
     metrics: dict[str, Any] = dict(fit_metrics(fit_reg, est.theta))
     if held_names:
@@ -112,4 +120,5 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
         metrics["truth_abs_error"] = {k: (est.theta - truth)[:, i].tolist()
                                       for i, k in enumerate(WINCH_KEYS)}
     metrics["samples"] = len(fit_reg)
-    return Identification(est, fit_names, held_names, metrics)
+    return Identification(est, fit_names, held_names, metrics,
+                          {str(d.root): d.names for d in extra})

@@ -54,6 +54,7 @@ class HighFrequencyModel:
     lr: float = 1e-3
     max_windows: int = 8192
     seed: int = 0
+    sample_rate_hz: float = 1.0       # of the regression rows (for networks that filter)
 
     def fit(self, reg: WinchRegression, theta: np.ndarray) -> HighFrequencyModel:
         L.seed_everything(self.seed, verbose=False)
@@ -64,7 +65,7 @@ class HighFrequencyModel:
         rows = _runs(reg)
         ds = WindowDataset([(x[r] - self.x_mean) / self.x_std for r in rows],
                            [(y[r] - self.y_mean) / self.y_std for r in rows], self.window)
-        self.net = self.net_factory(layout=ChannelLayout(x.shape[1], reg.n, 1.0))
+        self.net = self.net_factory(layout=ChannelLayout(x.shape[1], reg.n, self.sample_rate_hz))
         module = ForecastModule(self.net, partial(torch.optim.Adam, lr=self.lr))
         sampler = torch.utils.data.RandomSampler(ds, num_samples=min(self.max_windows, len(ds)))
         loader = torch.utils.data.DataLoader(ds, batch_size=self.batch_size, sampler=sampler)

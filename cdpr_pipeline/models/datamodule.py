@@ -154,7 +154,8 @@ class TrajectoryDataModule(L.LightningDataModule):
         hp = self.hparams
         self.dataset: MeasuredDataset = load_dataset(
             self.path, allow_gaps=hp.allow_gaps, min_samples=hp.min_samples)
-        self.layout = FeatureLayout.for_rig(self.dataset.rig)
+        has_desired = all(tr.desired is not None for tr in self.dataset)
+        self.layout = FeatureLayout.for_rig(self.dataset.rig, has_desired)
         names = self.dataset.names
         families = [tr.family for tr in self.dataset]
         self.split = split_runs(names, families, hp.val_fraction, hp.test_fraction,

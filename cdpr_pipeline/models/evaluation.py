@@ -80,16 +80,25 @@ def free_run_pairs(fc: Forecaster, runs: list[RunArrays], horizon: int | None,
     otherwise rollouts of ``horizon`` samples started every ``every`` samples.
     """
     npos, first = fc.layout.n_position, fc.window + 1
-    owner, sel, starts = [], [], []
+    empty = (np.zeros((0, npos)), np.zeros((0, npos)))
     if horizon is None:
-        horizon = min(r.n_samples for r in runs) - first - 1
-        owner, sel, starts = list(range(len(runs))), list(runs), [first] * len(runs)
-    else:
-        for i, r in enumerate(runs):
-            for e in range(first, r.n_samples - horizon - 1, every or horizon):
-                owner.append(i)
-                sel.append(r)
-                starts.append(e)
+        # whole runs: one batch per run length, each rolled to its own end
+        out: list = [empty] * len(runs)
+        for n in sorted({r.n_samples for r in runs}):
+            idx = [i for i, r in enumerate(runs) if r.n_samples == n]
+            h = n - first - 1
+            if h < 1:
+                continue
+            pred = fc.free_run([runs[i] for i in idx], [first] * len(idx), h)[..., :npos]
+            for j, i in enumerate(idx):
+                out[i] = (runs[i].state[first + 1:, :npos][None], pred[j:j + 1])
+        return out
+    owner, sel, starts = [], [], []
+    for i, r in enumerate(runs):
+        for e in range(first, r.n_samples - horizon, every or horizon):   # e + h < N
+            owner.append(i)
+            sel.append(r)
+            starts.append(e)
     if not sel or horizon < 1:
         return []
     pred = fc.free_run(sel, starts, horizon)[..., :npos]
@@ -101,7 +110,7 @@ def free_run_pairs(fc: Forecaster, runs: list[RunArrays], horizon: int | None,
                              for j in rows])
             out.append((true, pred[rows]))
         else:
-            out.append((np.zeros((0, npos)), np.zeros((0, npos))))
+            out.append(empty)
     return out
 
 
@@ -153,7 +162,7 @@ def plot_predictions(fc: Forecaster, runs: list[RunArrays], path: str | Path) ->
     rolled = free_run_pairs(fc, picks, None)          # one batched rollout for all
     for i, (r, (_, sim)) in enumerate(zip(picks, rolled, strict=True)):
         ends, one, _ = fc.one_step(r)
-        t_sim = r.t[fc.window + 2:fc.window + 2 + sim.shape[1]]
+        t_sim = r.t[fc.window + 2:fc.window + 2 + sim.shape[1]]   # free run from window+2
         for j, name in enumerate(fc.layout.position_names):
             ax = axes[i, j]
             ax.plot(r.t, r.state[:, j], "k", lw=1.2, label="measured")

@@ -51,11 +51,13 @@ class FeatureLayout:
     sample_rate_hz: float
 
     @classmethod
-    def for_rig(cls, rig: Rig) -> FeatureLayout:
+    def for_rig(cls, rig: Rig, has_desired: bool = True) -> FeatureLayout:
+        """Layout for a rig; ``has_desired=False`` when the runs carry no desired path
+        (optional for ``axes`` data)."""
         if isinstance(rig, CdprRig):
-            return cls(("x", "y", "z"), rig.n, rig.n, True, float(rig.sample_rate_hz))
+            return cls(("x", "y", "z"), rig.n, rig.n, has_desired, float(rig.sample_rate_hz))
         names = tuple(rig.axes)
-        return cls(names, 0, rig.n, True, float(rig.sample_rate_hz))
+        return cls(names, 0, rig.n, has_desired, float(rig.sample_rate_hz))
 
     @property
     def n_position(self) -> int:
@@ -101,6 +103,11 @@ class FeatureLayout:
         return (["t", *desired, *self.state_names, *(f"d_{s}" for s in self.state_names),
                  *(f"a_{p}" for p in self.position_names)])
 
+    @property
+    def measured_mask(self) -> list[bool]:
+        """Input columns derived from the measured state (not time, not the plan)."""
+        return [i >= 1 + self.n_desired for i in range(self.n_inputs)]
+
     def as_dict(self) -> dict:
         return asdict(self)
 
@@ -128,6 +135,11 @@ class RunArrays:
     t: np.ndarray              # (N,)
     desired_next: np.ndarray   # (N, n_desired)
     state: np.ndarray          # (N, n_state)
+    t0: float | None = None    # time origin of the time input (default: t[0])
+
+    @property
+    def origin(self) -> float:
+        return float(self.t[0] if self.t0 is None else self.t0)
 
     @property
     def n_samples(self) -> int:
@@ -142,7 +154,9 @@ def run_arrays(traj: Trajectory, layout: FeatureLayout) -> RunArrays:
     parts.append(traj.torques)
     state = np.concatenate(parts, axis=1).astype(float)
     if layout.has_desired:
-        desired = traj.desired if traj.desired is not None else traj.position
+        if traj.desired is None:     # never stand in the measured position: it is the target
+            raise ValueError(f"run {traj.name} has no desired path but the layout needs one")
+        desired = traj.desired
         desired_next = np.concatenate([desired[1:], desired[-1:]], axis=0).astype(float)
     else:
         desired_next = np.zeros((traj.n_samples, 0))
@@ -161,8 +175,8 @@ def run_features(run: RunArrays, layout: FeatureLayout) -> np.ndarray:
     """Input rows of a whole run; rows 0 and 1 lack history and are NaN."""
     s = run.state
     rows = np.full((run.n_samples, layout.n_inputs), np.nan)
-    rows[2:] = feature_rows(run.t[2:] - run.t[0], run.desired_next[2:], s[2:], s[1:-1], s[:-2],
-                            layout)
+    rows[2:] = feature_rows(run.t[2:] - run.origin, run.desired_next[2:], s[2:], s[1:-1],
+                            s[:-2], layout)
     return rows
 
 

@@ -106,7 +106,7 @@ class Forecaster:
             s_next = s + self._next_increment(buf)
             out[:, h] = s_next
             k = [e + h + 1 for e in starts]
-            t = np.array([r.t[i] - r.t[0] for r, i in zip(runs, k, strict=True)])
+            t = np.array([r.t[i] - r.origin for r, i in zip(runs, k, strict=True)])
             d = np.stack([r.desired_next[i] for r, i in zip(runs, k, strict=True)])
             row = self.scaler.inputs(feature_rows(t, d, s_next, s, s_prev, lay))
             buf = np.concatenate([buf[:, 1:], row[:, None]], axis=1)

@@ -21,14 +21,24 @@ class ForecastModule(L.LightningModule):
     scheduler : callable, optional
         Partial ``ReduceLROnPlateau`` (or any scheduler) called with the optimizer;
         it monitors ``val/loss``.
+    input_noise : float
+        Standard deviation (in scaled units) of Gaussian noise added during training to
+        the input columns selected by ``noise_mask``: a model that has seen perturbed
+        states learns to pull back towards the data, which keeps free runs from
+        drifting off (exposure bias). 0 trains on clean inputs, as the paper does.
+    noise_mask : sequence of bool, optional
+        Input columns that get the noise (the measured state and its differences).
     """
 
     def __init__(self, net: nn.Module, optimizer: Callable[..., torch.optim.Optimizer],
-                 scheduler: Callable[..., object] | None = None):
+                 scheduler: Callable[..., object] | None = None, input_noise: float = 0.0,
+                 noise_mask: list[bool] | None = None):
         super().__init__()
         # the network's own config is logged by the task; keep the checkpoint small
         self.save_hyperparameters(logger=False, ignore=["net"])
         self.net = net
+        mask = torch.as_tensor(noise_mask if noise_mask is not None else [], dtype=torch.float32)
+        self.register_buffer("noise_mask", mask, persistent=False)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.net(x)
@@ -38,6 +48,9 @@ class ForecastModule(L.LightningModule):
         return nn.functional.mse_loss(self.net(x)[:, -1], y)
 
     def training_step(self, batch, batch_idx: int) -> torch.Tensor:
+        if self.hparams.input_noise > 0 and self.noise_mask.numel():
+            x, y = batch
+            batch = (x + self.hparams.input_noise * torch.randn_like(x) * self.noise_mask, y)
         loss = self._loss(batch)
         self.log("train/loss", loss, on_step=False, on_epoch=True, prog_bar=True,
                  batch_size=batch[0].shape[0])

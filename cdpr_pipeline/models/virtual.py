@@ -53,23 +53,24 @@ def virtual_trajectories(forecaster: Forecaster, rig: CdprRig, counts: Mapping[s
     rate = float(rig.sample_rate_hz)
     w = forecaster.window
     lead = w + 2                          # samples at rest before the rollout
-    n = int(round(duration_s * rate))        # samples after the last one at rest
-    t = np.arange(lead + n) / rate
-    xd, _, _ = desired.evaluate(np.maximum(t - t[lead], 0.0))          # (B, N, 3)
+    n = int(round(duration_s * rate)) + 1    # recorded samples, as the lab writes them
+    # time 0 is the first recorded sample, as in recorded runs; before it, at rest
+    t = (np.arange(lead + n) - lead) / rate
+    xd, _, _ = desired.evaluate(np.maximum(t, 0.0))                      # (B, N, 3)
     runs, starts = [], []
     for b, fam in enumerate(families):
         state = np.tile(rest_state(rig, xd[b, 0]), (len(t), 1))
         desired_next = np.concatenate([xd[b, 1:], xd[b, -1:]])
-        runs.append(RunArrays(f"{b}_{fam}", fam, t, desired_next, state))
-        starts.append(lead - 1)
-    rolled = forecaster.free_run(runs, starts, len(t) - lead)
+        runs.append(RunArrays(f"{b}_{fam}", fam, t, desired_next, state, t0=0.0))
+        starts.append(lead)            # sample 0 is at rest; the rollout predicts 1, 2, ...
+    rolled = forecaster.free_run(runs, starts, n - 1)
+    npos, nl = forecaster.layout.n_position, forecaster.layout.n_lengths
     out = []
     for b, fam in enumerate(families):
-        state = np.concatenate([runs[b].state[:lead], rolled[b]])[lead - 1:]
-        npos, nl = forecaster.layout.n_position, forecaster.layout.n_lengths
-        out.append(Trajectory(f"{first_index + b:03d}_{fam}", t[lead - 1:] - t[lead - 1],
-                              state[:, :npos], state[:, npos + nl:],
-                              desired=xd[b, lead - 1:], lengths=state[:, npos:npos + nl]))
+        state = np.concatenate([runs[b].state[lead:lead + 1], rolled[b]])
+        out.append(Trajectory(f"{first_index + b:03d}_{fam}", t[lead:], state[:, :npos],
+                              state[:, npos + nl:], desired=xd[b, lead:],
+                              lengths=state[:, npos:npos + nl]))
     return out
 
 

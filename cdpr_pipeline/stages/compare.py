@@ -21,7 +21,7 @@ from omegaconf import DictConfig
 from cdpr_pipeline.config import CONFIG_DIR, compose_config
 from cdpr_pipeline.models.datamodule import dataset_digest
 from cdpr_pipeline.tables import to_markdown
-from cdpr_pipeline.tracking import latest_runs, make_logger
+from cdpr_pipeline.tracking import finished_or_failed, latest_runs, make_logger
 
 log = logging.getLogger(__name__)
 
@@ -203,10 +203,10 @@ def compare(cfg: DictConfig) -> Comparison:
 
     logger = make_logger(cfg.tracking.experiment, run_name="compare", uri=cfg.tracking.uri,
                          tags={"cdpr_task": "compare", "data_digest": digest or ""})
-    logger.log_hyperparams({"models": ",".join(columns), "data.path": str(path)})
-    for f in files:
-        logger.experiment.log_artifact(logger.run_id, str(f))
-    logger.experiment.set_terminated(logger.run_id, "FINISHED")
+    with finished_or_failed(logger):
+        logger.log_hyperparams({"models": ",".join(columns), "data.path": str(path)})
+        for f in files:
+            logger.experiment.log_artifact(logger.run_id, str(f))
     log.info("tables in %s", out)
     return Comparison(t1, t2, summary, files)
 

@@ -21,7 +21,7 @@ from cdpr_pipeline.identification.pipeline import (
     identify_dataset,
     true_winch_params,
 )
-from cdpr_pipeline.tracking import flatten_params, log_metrics, make_logger
+from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
 
 log = logging.getLogger(__name__)
 
@@ -32,8 +32,7 @@ def _flat_metrics(metrics: dict) -> dict[str, float]:
         if isinstance(value, dict):
             for sub, vals in value.items():
                 for i, v in enumerate(vals):
-                    if v == v:                      # MLflow refuses NaN
-                        out[f"{key}/{sub}/{i + 1}"] = float(v)
+                    out[f"{key}/{sub}/{i + 1}"] = float(v)
         elif isinstance(value, list):
             for i, v in enumerate(value):
                 out[f"{key}/{i + 1}"] = float(v)
@@ -69,12 +68,12 @@ def identify(cfg: DictConfig) -> Identification:
     logger = make_logger(cfg.tracking.experiment, run_name=f"identify-{cfg.method}",
                          uri=cfg.tracking.uri, tags={"cdpr_task": "identify",
                                                      "method": cfg.method})
-    logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
-    log_metrics(logger.experiment, logger.run_id, _flat_metrics(
-        {k: v for k, v in result.metrics.items()} | {"params": result.estimate.params,
-                                                       "std": result.estimate.std}))
-    logger.experiment.log_artifact(logger.run_id, str(path))
-    logger.experiment.set_terminated(logger.run_id, "FINISHED")
+    with finished_or_failed(logger):
+        logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
+        log_metrics(logger.experiment, logger.run_id, _flat_metrics(
+            dict(result.metrics) | {"params": result.estimate.params,
+                                    "std": result.estimate.std}))
+        logger.experiment.log_artifact(logger.run_id, str(path))
     for k in ("inertia", "viscous", "coulomb", "offset"):
         log.info("%-8s %s +- %s", k, [f"{v:.5g}" for v in result.estimate.params[k]],
                  [f"{v:.2g}" for v in result.estimate.std[k]])

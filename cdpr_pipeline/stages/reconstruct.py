@@ -28,7 +28,7 @@ from cdpr_pipeline.identification.reconstruction import (
 )
 from cdpr_pipeline.identification.regressors import dataset_regression
 from cdpr_pipeline.tables import to_markdown
-from cdpr_pipeline.tracking import flatten_params, log_metrics, make_logger
+from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
 
 log = logging.getLogger(__name__)
 
@@ -75,8 +75,9 @@ def reconstruct(cfg: DictConfig) -> dict:
     fit_reg = dataset_regression(data.select(ident["fit_runs"]), data.rig, settings)
     held_reg = dataset_regression(data.select(ident["heldout_runs"]), data.rig, settings)
     lsm = LeastSquares().fit(fit_reg).theta
-    hf = HighFrequencyModel(instantiate(cfg.residual_model.net), **cfg.residual).fit(fit_reg,
-                                                                                      theta)
+    rate = float(data.rig.sample_rate_hz) / max(1, int(settings.decimate))
+    hf = HighFrequencyModel(instantiate(cfg.residual_model.net), sample_rate_hz=rate,
+                            **cfg.residual).fit(fit_reg, theta)
     method = ident["method"]
     labels = ("lsm_full_band", f"{method}_identified", f"{method}_plus_network")
 
@@ -106,13 +107,14 @@ def reconstruct(cfg: DictConfig) -> dict:
     logger = make_logger(cfg.tracking.experiment, run_name=f"reconstruct-{method}",
                          uri=cfg.tracking.uri, tags={"cdpr_task": "reconstruct",
                                                      "method": method})
-    logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
-    log_metrics(logger.experiment, logger.run_id, {
-        f"{tab}/{label}/{m}/{i + 1}": v for tab, sc in (("table4", table4), ("table5", table5))
-        for label, row in sc.items() for m, vals in row.items() for i, v in enumerate(vals)})
-    for f in files:
-        logger.experiment.log_artifact(logger.run_id, str(f))
-    logger.experiment.set_terminated(logger.run_id, "FINISHED")
+    with finished_or_failed(logger):
+        logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
+        log_metrics(logger.experiment, logger.run_id, {
+            f"{tab}/{label}/{m}/{i + 1}": v
+            for tab, sc in (("table4", table4), ("table5", table5))
+            for label, row in sc.items() for m, vals in row.items() for i, v in enumerate(vals)})
+        for f in files:
+            logger.experiment.log_artifact(logger.run_id, str(f))
     log.info("Table IV (held-out runs):\n%s", to_markdown(_table(table4)))
     return result
 

@@ -67,7 +67,9 @@ def _train_network(cfg: DictConfig, net: torch.nn.Module, dm: TrajectoryDataModu
     Returns training figures (epochs, best validation loss, time to it) and the best
     checkpoint."""
     scheduler = instantiate(cfg.scheduler) if cfg.get("scheduler") else None
-    module = ForecastModule(net, instantiate(cfg.optimizer), scheduler)
+    module = ForecastModule(net, instantiate(cfg.optimizer), scheduler,
+                            input_noise=float(cfg.get("input_noise", 0.0)),
+                            noise_mask=dm.layout.measured_mask)
     callbacks = [instantiate(c) for c in cfg.callbacks.values()] if cfg.get("callbacks") else []
     timer = TimeToBest()
     callbacks.append(timer)

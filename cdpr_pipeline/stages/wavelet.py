@@ -19,7 +19,7 @@ from omegaconf import DictConfig
 
 from cdpr_pipeline.config import CONFIG_DIR
 from cdpr_pipeline.data.io import load_dataset
-from cdpr_pipeline.identification.pipeline import lowpass_regression
+from cdpr_pipeline.identification.pipeline import split_regression
 from cdpr_pipeline.identification.regressors import COLUMNS, dataset_regression
 from cdpr_pipeline.wavelet import WaveletSplit, band_energies
 
@@ -32,8 +32,8 @@ def decompose(cfg: DictConfig) -> dict:
                         min_samples=cfg.data.min_samples)
     split: WaveletSplit = instantiate(cfg.wavelet) if cfg.get("wavelet") else WaveletSplit()
     reg = dataset_regression(data, data.rig, instantiate(cfg.regression))
-    low = lowpass_regression(reg, split)
-    high_phi, high_target = reg.phi - low.phi, reg.target - low.target
+    low, high = split_regression(reg, split)
+    high_phi, high_target = high.phi, high.target
     n = reg.n
     bands = {f"winch_{i + 1}": band_energies(reg.target[:, i], split) for i in range(n)}
     low_share = {f"winch_{i + 1}": {c: float(np.sum(low.phi[:, i, k] ** 2)

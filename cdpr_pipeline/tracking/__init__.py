@@ -2,6 +2,7 @@
 
 from cdpr_pipeline.tracking.mlflow import (
     DEFAULT_TRACKING_URI,
+    finished_or_failed,
     flatten_params,
     latest_runs,
     log_metrics,
@@ -9,5 +10,5 @@ from cdpr_pipeline.tracking.mlflow import (
     tracking_uri,
 )
 
-__all__ = ["DEFAULT_TRACKING_URI", "flatten_params", "latest_runs", "log_metrics",
-           "make_logger", "tracking_uri"]
+__all__ = ["DEFAULT_TRACKING_URI", "finished_or_failed", "flatten_params", "latest_runs",
+           "log_metrics", "make_logger", "tracking_uri"]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
+from contextlib import contextmanager
 from typing import Any
 
 import pandas as pd
@@ -45,13 +46,16 @@ def make_logger(experiment: str, run_name: str, uri: str | None = None,
 
 
 def log_metrics(client, run_id: str, metrics: Mapping[str, float], step: int = 0) -> None:
-    """Log many metrics in batches (one request per 500)."""
+    """Log many metrics in batches (one request per 500). Non-finite values (a NaN
+    time-to-best, an undefined R^2) are left out rather than stored as numbers."""
+    import math
     import time
 
     from mlflow.entities import Metric
 
     now = int(time.time() * 1000)
-    items = [Metric(k, float(v), now, step) for k, v in metrics.items()]
+    items = [Metric(k, float(v), now, step) for k, v in metrics.items()
+             if v is not None and math.isfinite(float(v))]
     for lo in range(0, len(items), 500):
         client.log_batch(run_id, metrics=items[lo:lo + 500])
 
@@ -76,3 +80,14 @@ def latest_runs(experiment: str, uri: str | None = None, task: str = "train",
     return runs.drop_duplicates(subset=[f"tags.{key}"], keep="first").reset_index(drop=True)
 
 
+
+
+@contextmanager
+def finished_or_failed(logger):
+    """Mark the logger's MLflow run FINISHED when the block ends, FAILED if it raises."""
+    try:
+        yield logger
+    except BaseException:
+        logger.experiment.set_terminated(logger.run_id, "FAILED")
+        raise
+    logger.experiment.set_terminated(logger.run_id, "FINISHED")

@@ -79,3 +79,14 @@ def test_constant_column_does_not_blow_up():
 def test_no_training_runs_is_an_error():
     with pytest.raises(ValueError, match="zero training runs"):
         Standardizer.fit([], LAYOUT)
+
+
+def test_a_run_without_desired_path_never_borrows_the_measured_position():
+    tr = _traj()
+    tr.desired = None
+    with pytest.raises(ValueError, match="000_flat_circle has no desired path"):
+        run_arrays(tr, LAYOUT)
+    no_plan = FeatureLayout(("x", "y", "z"), 3, 3, False, 100.0)
+    run = run_arrays(tr, no_plan)
+    assert run.desired_next.shape == (50, 0)
+    assert run_features(run, no_plan).shape == (50, no_plan.n_inputs)
