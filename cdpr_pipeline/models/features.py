@@ -10,12 +10,16 @@ the informative part of the target (the position itself is nearly its last value
 
 Input row ``k`` (one code path builds it, for recorded runs and for rollouts)::
 
-    [t_k - t_0,  desired(k+1),  s(k),  s(k) - s(k-1),  p(k) - 2 p(k-1) + p(k-2)]
+    [t_k - t_0,  desired(k+1),  desired(k+1) - p(k),  s(k),  s(k) - s(k-1),
+     p(k) - 2 p(k-1) + p(k-2)]
 
 ``s(k) - s(k-1)`` is the velocity of the paper (``v = dp/dt`` up to the constant ``dt``)
 for the position channels, and the same backward difference of lengths and torques; the
 last block is the acceleration. The desired position of the *next* sample is used because
-the plan is known ahead and the next torque depends on it.
+the plan is known ahead and the next torque depends on it. The tracking error
+``desired(k+1) - p(k)`` is the difference of two paper inputs, given as a column of its
+own: it is millimetres on positions of metres, so after scaling a network could hardly
+resolve it from the two columns, and the closed loop's motion is driven by it.
 """
 
 from __future__ import annotations
@@ -74,7 +78,7 @@ class FeatureLayout:
 
     @property
     def n_inputs(self) -> int:
-        return 1 + self.n_desired + 2 * self.n_state + self.n_position
+        return 1 + 2 * self.n_desired + 2 * self.n_state + self.n_position
 
     @property
     def n_outputs(self) -> int:
@@ -82,14 +86,14 @@ class FeatureLayout:
 
     @property
     def state_slice(self) -> slice:
-        start = 1 + self.n_desired
+        start = 1 + 2 * self.n_desired
         return slice(start, start + self.n_state)
 
     @property
     def delta_slice(self) -> slice:
         """Input columns holding ``s(k) - s(k-1)``: the same quantity as the target,
         one step earlier (constant-velocity extrapolation copies them)."""
-        start = 1 + self.n_desired + self.n_state
+        start = 1 + 2 * self.n_desired + self.n_state
         return slice(start, start + self.n_state)
 
     @property
@@ -100,13 +104,14 @@ class FeatureLayout:
     @property
     def input_names(self) -> list[str]:
         desired = [f"{p}d_next" for p in self.position_names] if self.has_desired else []
-        return (["t", *desired, *self.state_names, *(f"d_{s}" for s in self.state_names),
-                 *(f"a_{p}" for p in self.position_names)])
+        error = [f"e_{p}" for p in self.position_names] if self.has_desired else []
+        return (["t", *desired, *error, *self.state_names,
+                 *(f"d_{s}" for s in self.state_names), *(f"a_{p}" for p in self.position_names)])
 
     @property
     def measured_mask(self) -> list[bool]:
         """Input columns derived from the measured state (not time, not the plan)."""
-        return [i >= 1 + self.n_desired for i in range(self.n_inputs)]
+        return [i >= 1 + self.n_desired for i in range(self.n_inputs)]   # error, state, ...
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -168,7 +173,8 @@ def feature_rows(t: np.ndarray, desired_next: np.ndarray, s: np.ndarray, s_prev:
     """Input rows from the current and two previous states (any leading shape)."""
     npos = layout.n_position
     accel = s[..., :npos] - 2.0 * s_prev[..., :npos] + s_prev2[..., :npos]
-    return np.concatenate([t[..., None], desired_next, s, s - s_prev, accel], axis=-1)
+    error = desired_next - s[..., :npos] if layout.has_desired else desired_next
+    return np.concatenate([t[..., None], desired_next, error, s, s - s_prev, accel], axis=-1)
 
 
 def run_features(run: RunArrays, layout: FeatureLayout) -> np.ndarray:

@@ -24,11 +24,11 @@ def _traj(n=50, seed=0, name="000_flat_circle"):
 
 
 def test_layout_columns():
-    assert LAYOUT.n_inputs == 1 + 3 + 9 + 9 + 3 == len(LAYOUT.input_names)
+    assert LAYOUT.n_inputs == 1 + 3 + 3 + 9 + 9 + 3 == len(LAYOUT.input_names)
     assert LAYOUT.input_names[LAYOUT.delta_slice][0] == "d_x"
     assert LAYOUT.input_names[LAYOUT.state_slice] == LAYOUT.state_names
     axes = FeatureLayout(("q1",), 0, 1, True, 1000.0)
-    assert axes.state_names == ["q1", "u1"] and axes.n_inputs == 1 + 1 + 4 + 1
+    assert axes.state_names == ["q1", "u1"] and axes.n_inputs == 1 + 1 + 1 + 4 + 1
 
 
 def test_rows_hold_state_increment_acceleration_and_next_desired():
@@ -39,6 +39,7 @@ def test_rows_hold_state_increment_acceleration_and_next_desired():
     assert np.isnan(x[:2]).all() and not np.isnan(x[2:]).any()
     np.testing.assert_allclose(x[k, 0], tr.t[k] - tr.t[0])
     np.testing.assert_allclose(x[k, 1:4], tr.desired[k + 1])
+    np.testing.assert_allclose(x[k, 4:7], tr.desired[k + 1] - tr.position[k])
     np.testing.assert_allclose(x[k, LAYOUT.state_slice],
                                np.r_[tr.position[k], tr.lengths[k], tr.torques[k]])
     s = run.state
@@ -54,7 +55,7 @@ def test_scaling_uses_training_runs_only_and_shares_increment_scale():
     runs = [run_arrays(_traj(seed=i), LAYOUT) for i in range(3)]
     sc = Standardizer.fit(runs[:2], LAYOUT)
     feats = np.concatenate([run_features(r, LAYOUT)[2:] for r in runs[:2]])
-    np.testing.assert_allclose(sc.input_std[:4], feats[:, :4].std(axis=0))
+    np.testing.assert_allclose(sc.input_std[:7], feats[:, :7].std(axis=0))
     np.testing.assert_allclose(sc.input_mean[LAYOUT.delta_slice], sc.target_mean)
     np.testing.assert_allclose(sc.input_std[LAYOUT.delta_slice], sc.target_std)
     # the third run plays no part
