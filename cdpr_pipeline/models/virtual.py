@@ -74,6 +74,17 @@ def virtual_trajectories(forecaster: Forecaster, rig: CdprRig, counts: Mapping[s
     return out
 
 
+def physically_valid(traj: Trajectory, rig: CdprRig, margin_m: float = 0.0) -> bool:
+    """Whether a virtual run stays finite, inside the anchor frame and on positive cable
+    lengths (a diverged free run does not)."""
+    lo, hi = rig.frame_bounds()
+    arrays = [traj.position, traj.torques] + ([traj.lengths] if traj.lengths is not None else [])
+    if not all(np.isfinite(a).all() for a in arrays):
+        return False
+    inside = ((traj.position >= lo - margin_m) & (traj.position <= hi + margin_m)).all()
+    return bool(inside and (traj.lengths is None or (traj.lengths > 0).all()))
+
+
 def write_virtual_dataset(out_dir: str | Path, rig: CdprRig,
                           trajectories: list[Trajectory], overwrite: bool = True) -> Path:
     """Write virtual runs with ``virtual: true`` in rig.yaml."""
