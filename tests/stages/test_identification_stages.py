@@ -140,3 +140,19 @@ def test_wavelet_stage_splits_exactly_and_reports_bands(small_lab, tmp_path):
         assert bands["A2"] > 0.9            # U* follows slow trajectories
     parts = np.load(tmp_path / "wavelet.npz")
     assert parts["phi_low"].shape == parts["phi_high"].shape
+
+
+def test_diverged_virtual_runs_are_recognised(small_lab):
+    from cdpr_pipeline.models.virtual import physically_valid
+
+    data = load_dataset(small_lab)
+    tr = data[0]
+    assert physically_valid(tr, data.rig)
+    off = tr.position.copy()
+    off[-10:, 0] = 5.0                      # beyond the 3 m frame
+    from dataclasses import replace
+
+    assert not physically_valid(replace(tr, position=off), data.rig)
+    bad = tr.torques.copy()
+    bad[3, 1] = np.nan
+    assert not physically_valid(replace(tr, torques=bad), data.rig)
