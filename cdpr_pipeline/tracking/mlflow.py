@@ -24,14 +24,15 @@ def tracking_uri(configured: str | None = None) -> str:
 
 
 def flatten_params(tree: Mapping[str, Any], prefix: str = "") -> dict[str, str]:
-    """Nested config -> ``{"model.net.layers": "4", ...}`` (MLflow params are strings)."""
+    """Nested config -> ``{"model.net.layers": "4", ...}`` (MLflow params are strings;
+    Lightning's MLFlowLogger cuts each value to 250 characters)."""
     out: dict[str, str] = {}
     for key, value in tree.items():
         name = f"{prefix}{key}"
         if isinstance(value, Mapping):
             out |= flatten_params(value, f"{name}.")
         else:
-            out[name] = str(value)[:6000]
+            out[name] = str(value)
     return out
 
 

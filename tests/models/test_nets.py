@@ -54,21 +54,20 @@ def test_causal_models_ignore_the_future(name):
     assert not torch.allclose(y[:, t + 2:], y2[:, t + 2:])
 
 
-def test_bilstm_is_not_causal_inside_the_window():
+NON_CAUSAL = {
+    "bilstm": lambda: BiLSTM(LAYOUT, hidden=8, layers=1),
+    "transformer_unmasked": lambda: Transformer(LAYOUT, d_model=16, heads=4, layers=1,
+                                                feedforward=16, causal=False),
+}
+
+
+@pytest.mark.parametrize("name", list(NON_CAUSAL))
+def test_non_causal_models_do_see_the_future(name):
+    """The causality test can fail: models that read the whole window change their
+    early outputs when later inputs change."""
     torch.manual_seed(0)
-    net = BiLSTM(LAYOUT, hidden=8, layers=1).eval()
+    net = NON_CAUSAL[name]().eval()
     assert not net.causal
-    x = torch.randn(1, 10, LAYOUT.n_inputs)
-    x2 = x.clone()
-    x2[:, 8:] += 3.0
-    with torch.no_grad():
-        assert not torch.allclose(net(x)[:, :5], net(x2)[:, :5])
-
-
-def test_transformer_without_mask_is_not_causal():
-    torch.manual_seed(0)
-    net = Transformer(LAYOUT, d_model=16, heads=4, layers=1, feedforward=16,
-                      causal=False).eval()
     x = torch.randn(1, 10, LAYOUT.n_inputs)
     x2 = x.clone()
     x2[:, 8:] += 3.0
