@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.signal import butter, decimate, sosfiltfilt
@@ -27,6 +28,11 @@ from cdpr_pipeline.sim.plant import SIGN_SHARPNESS, cable_geometry, smooth_sign,
 
 #: regressor columns, in ``WinchParams`` order (inertia, viscous, coulomb, offset)
 COLUMNS = ("a", "b", "c", "1")
+
+
+@lru_cache(maxsize=32)
+def _butter_sos(order: int, cutoff_hz: float, fs: float) -> np.ndarray:
+    return butter(order, cutoff_hz, fs=fs, output="sos")
 
 
 @dataclass(frozen=True)
@@ -48,8 +54,7 @@ class DerivativeFilter:
     trim_s: float = 0.3
 
     def smooth(self, x: np.ndarray, fs: float) -> np.ndarray:
-        sos = butter(self.order, self.cutoff_hz, fs=fs, output="sos")
-        return sosfiltfilt(sos, x, axis=0)
+        return sosfiltfilt(_butter_sos(self.order, self.cutoff_hz, fs), x, axis=0)
 
     def derivatives(self, x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                                                                   np.ndarray]:

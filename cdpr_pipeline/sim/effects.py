@@ -23,6 +23,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from cdpr_pipeline.sim.expressions import evaluate
 from cdpr_pipeline.sim.plant import Plant, smooth_sign
 
 #: Effect classes by vocabulary name, filled by subclass registration.
@@ -52,6 +53,12 @@ class Effect:
 
     name: ClassVar[str] = ""
     in_vocabulary: ClassVar[bool] = True
+    #: the physics in one line, for reports
+    expression: ClassVar[str] = ""
+    #: ``cdpr`` effects need cables; ``axes`` ones act on any drive
+    kinds: ClassVar[frozenset[str]] = frozenset({"cdpr", "axes"})
+    #: False for effects that are fitted, never drawn at random (no ``ranges``)
+    drawable: ClassVar[bool] = True
     ranges: ClassVar[dict[str, tuple[float, float]]] = {}
     signed: ClassVar[frozenset[str]] = frozenset()
     log_uniform: ClassVar[frozenset[str]] = frozenset()
@@ -132,6 +139,7 @@ class WinchParameterError(Effect):
     wrong data sheet). Scales multiply the nominal value; ``offset_delta`` adds to d."""
 
     name: ClassVar[str] = "winch_parameter_error"
+    expression: ClassVar[str] = "U* = I_m a + F_v b + F_c c + d with re-identified I_m, F_v, F_c, d"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative_error": (0.2, 0.4)}
 
     cable: int = 1
@@ -170,6 +178,7 @@ class StribeckFriction(Effect):
     nominal Coulomb term, with ``F_s = static_ratio * F_c``."""
 
     name: ClassVar[str] = "stribeck_friction"
+    expression: ClassVar[str] = "tau_f += (F_s - F_c) exp(-(w/w_s)^2) sign(w)"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {
         "static_ratio": (1.6, 2.5), "stribeck_velocity": (0.5, 2.0)}
 
@@ -191,6 +200,7 @@ class AsymmetricViscousFriction(Effect):
     winch turns in ``direction`` (+1 reeling in, -1 paying out)."""
 
     name: ClassVar[str] = "asymmetric_viscous_friction"
+    expression: ClassVar[str] = "tau_f += r F_v max(s w, 0) s  (s = direction)"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"ratio": (0.3, 0.8)}
 
     ratio: float = 0.5
@@ -213,6 +223,8 @@ class CableElasticity(Effect):
     damping; encoder length minus geometric length is ``-t l / EA``."""
 
     name: ClassVar[str] = "cable_elasticity"
+    expression: ClassVar[str] = "dl = -t l / (EA + t)"
+    kinds: ClassVar[frozenset[str]] = frozenset({"cdpr"})
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"ea_n": (1.0e4, 5.0e4)}
     log_uniform: ClassVar[frozenset[str]] = frozenset({"ea_n"})
 
@@ -233,6 +245,8 @@ class AnchorOffset(Effect):
     """One cable's exit point is not where rig.yaml says (installation error)."""
 
     name: ClassVar[str] = "anchor_offset"
+    expression: ClassVar[str] = "l = |A + dA - p|"
+    kinds: ClassVar[frozenset[str]] = frozenset({"cdpr"})
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"distance_m": (0.01, 0.03)}
 
     cable: int = 1
@@ -265,6 +279,8 @@ class DrumRadiusError(Effect):
     reeled length."""
 
     name: ClassVar[str] = "drum_radius_error"
+    expression: ClassVar[str] = "l_enc = l_0 - R_nom theta, theta = (l_0 - l) / (R (1 + e))"
+    kinds: ClassVar[frozenset[str]] = frozenset({"cdpr"})
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative": (0.01, 0.03)}
     signed: ClassVar[frozenset[str]] = frozenset({"relative"})
 
@@ -283,6 +299,8 @@ class PayloadMassError(Effect):
     """The platform is heavier or lighter than stated: ``m_true = m (1 + relative)``."""
 
     name: ClassVar[str] = "payload_mass_error"
+    expression: ClassVar[str] = "U* -= R (K^T)^+ dm (a - g)"
+    kinds: ClassVar[frozenset[str]] = frozenset({"cdpr"})
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative": (0.1, 0.3)}
     signed: ClassVar[frozenset[str]] = frozenset({"relative"})
 
@@ -298,6 +316,7 @@ class ActuatorLag(Effect):
     """The torque reaches the drum late: first-order lag ``tau u_drum' = u_cmd - u_drum``."""
 
     name: ClassVar[str] = "actuator_lag"
+    expression: ClassVar[str] = "tau u_drum' = u_cmd - u_drum"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"time_constant_s": (0.003, 0.010)}
 
     time_constant_s: float = 0.005
@@ -314,6 +333,7 @@ class QuadraticDamping(Effect):
     ``ratio`` sets ``c`` so that the drag equals ``ratio * F_v * w`` at ``w = 5 rad/s``."""
 
     name: ClassVar[str] = "quadratic_damping"
+    expression: ClassVar[str] = "tau_f += c w |w|"
     in_vocabulary: ClassVar[bool] = False
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"ratio": (0.3, 0.6)}
 
@@ -332,6 +352,7 @@ class CoggingTorque(Effect):
     """Position-periodic motor torque ``A sin(N theta + phase)`` (not in the vocabulary)."""
 
     name: ClassVar[str] = "cogging_torque"
+    expression: ClassVar[str] = "tau_f += A sin(N theta + phi)"
     in_vocabulary: ClassVar[bool] = False
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"amplitude_nm": (0.08, 0.2)}
 
@@ -349,3 +370,38 @@ class CoggingTorque(Effect):
     def draw(cls, rng, n_cables):
         return {**super().draw(rng, n_cables), "periods_per_rev": int(rng.integers(4, 13)),
                 "phase_rad": float(rng.uniform(0, 2 * np.pi))}
+
+
+@dataclass
+class SymbolicWinchTorque(Effect):
+    """Free-form winch torque found by discovery: ``sum_j c_j f_j(theta, omega)`` per
+    cable, each ``f_j`` an expression of :mod:`cdpr_pipeline.sim.expressions`. Outside
+    the vocabulary by construction (diagnosed as ``unnamed``)."""
+
+    name: ClassVar[str] = "symbolic_winch_torque"
+    in_vocabulary: ClassVar[bool] = False
+    expression: ClassVar[str] = "tau_f += sum_j c_j f_j(theta, w)"
+    drawable: ClassVar[bool] = False
+
+    #: ``[{"cable": 2, "expression": "sin_k(theta, 8)", "coefficient": 0.07}, ...]``
+    terms: list[dict[str, Any]] = field(default_factory=list)
+
+    def winch_torque(self, theta, omega, plant):
+        out = np.zeros(np.broadcast_shapes(np.shape(theta), np.shape(omega)))
+        for term in self.terms:
+            i = int(term["cable"]) - 1
+            if not 0 <= i < plant.n:
+                raise ValueError(f"term for cable {term['cable']} on a {plant.n}-cable rig")
+            out[..., i] += float(term["coefficient"]) * evaluate(
+                term["expression"], {"omega": omega[..., i], "theta": theta[..., i]})
+        return out
+
+    @classmethod
+    def draw(cls, rng, n_cables):
+        raise NotImplementedError("symbolic torques are found by discovery, not drawn")
+
+    def describe(self):
+        from cdpr_pipeline.sim.expressions import to_infix
+        parts = [f"{t['coefficient']:+.4g} {to_infix(t['expression'], str(t['cable']))}"
+                 for t in self.terms]
+        return "extra winch torque " + " ".join(parts)

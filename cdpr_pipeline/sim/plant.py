@@ -41,9 +41,33 @@ if TYPE_CHECKING:  # pragma: no cover
 SIGN_SHARPNESS = 20.0
 
 
-def smooth_sign(x: np.ndarray, sharpness: float = SIGN_SHARPNESS) -> np.ndarray:
-    """The paper's si-tanh, ``tanh(k x)``: a differentiable sign for Coulomb friction."""
+def smooth_sign(x: np.ndarray, sharpness: float | None = SIGN_SHARPNESS) -> np.ndarray:
+    """The paper's si-tanh, ``tanh(k x)``: a differentiable sign for Coulomb friction.
+    ``sharpness`` None or infinite gives the hard ``sign(x)``."""
+    if sharpness is None or np.isinf(sharpness):
+        return np.sign(np.asarray(x, dtype=float))
     return np.tanh(sharpness * np.asarray(x))
+
+
+def resisting_torque(model: Plant | Drives, theta: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """Everything that resists a winch or axis besides inertia and load:
+    ``F_v omega + F_c s(omega) + d`` plus the effects' extra torques. Shared by the cable
+    plant and by plain drive axes, so both see the same friction physics."""
+    w = model.winch
+    torque = w.viscous * omega + w.coulomb * smooth_sign(omega, model.sign_sharpness) + w.offset
+    for effect in model.effects:
+        extra = effect.winch_torque(theta, omega, model)
+        if extra is not None:
+            torque = torque + extra
+    return torque
+
+
+def commanded_torque(drum_torque: np.ndarray, t: np.ndarray, time_constant: float) -> np.ndarray:
+    """The command that makes a first-order actuator (``tau u' = u_cmd - u``) deliver
+    ``drum_torque`` (N, n) on the time grid ``t``: ``u_cmd = u + tau u'``."""
+    if time_constant <= 0.0:
+        return drum_torque
+    return drum_torque + time_constant * np.gradient(drum_torque, t, axis=0)
 
 
 def cable_geometry(anchors: np.ndarray, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -171,15 +195,40 @@ class Plant:
 
     # ------------------------------------------------------------------ winch side
     def friction_torque(self, theta: np.ndarray, omega: np.ndarray) -> np.ndarray:
-        """Everything that resists the winch besides inertia and tension:
-        ``F_v omega + F_c s(omega) + d`` plus the effects' extra torques."""
-        w = self.winch
-        torque = w.viscous * omega + w.coulomb * smooth_sign(omega, self.sign_sharpness) + w.offset
-        for effect in self.effects:
-            extra = effect.winch_torque(theta, omega, self)
-            if extra is not None:
-                torque = torque + extra
-        return torque
+        """Everything that resists the winch besides inertia and tension (see
+        :func:`resisting_torque`)."""
+        return resisting_torque(self, theta, omega)
+
+    def reeled_length(self, geometric: np.ndarray, tension: np.ndarray) -> np.ndarray:
+        """Reeled-out (unstretched) cable length that spans ``geometric`` under
+        ``tension`` at rest: ``l / (1 + t / EA)`` for elastic cables, ``l`` for rigid."""
+        if not self.elastic:
+            return geometric
+        return geometric / (1.0 + np.maximum(tension, 0.0) / self.cable_stiffness)
+
+    def load_tensions(self, position: np.ndarray, acceleration: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Cable tensions implied by measured platform motion, ``K^T t = m (p'' - g)``.
+
+        Returns tensions, geometric lengths and unit vectors, each ``(..., n[, 3])``.
+        """
+        g, units = cable_geometry(self.anchors, position)
+        tension = tensions_for_force(units, self.mass * (acceleration - self.gravity_vector))
+        return tension, g, units
+
+    def inverse_dynamics(self, position: np.ndarray, acceleration: np.ndarray,
+                         theta: np.ndarray, omega: np.ndarray, alpha: np.ndarray,
+                         t: np.ndarray) -> dict[str, np.ndarray]:
+        """Motor torque commands (N, n) that make this plant follow measured motion:
+        platform ``position``/``acceleration`` (N, 3), winch angle, speed and acceleration
+        (N, n) on times ``t``. Tensions come from the platform dynamics, the winch side
+        is ``u = R t + I theta'' + friction``, and an actuator lag is inverted last.
+        Also returns the tensions and geometric lengths it used."""
+        tension, g, _ = self.load_tensions(position, acceleration)
+        drum = self.drum_radius * tension + self.winch.inertia * alpha \
+            + self.friction_torque(theta, omega)
+        return {"torque": commanded_torque(drum, t, self.actuator_time_constant),
+                "tension": tension, "geometric_length": g}
 
     def winch_angle_from_length(self, reeled_length: np.ndarray) -> np.ndarray:
         """Motor angle from the reeled-out length (0 at home, positive reeling in)."""
@@ -218,7 +267,7 @@ class Plant:
             g, units = cable_geometry(self.anchors, position)
             tension = static_tensions(units, self.mass, self.gravity_vector)
             # unstretched (reeled-out) length that gives that tension at rest
-            reeled = g / (1.0 + tension / self.cable_stiffness)
+            reeled = self.reeled_length(g, tension)
             state[:, i:i + self.n] = self.winch_angle_from_length(reeled)
             i += 2 * self.n
         if self.lagged:
@@ -320,6 +369,40 @@ class Plant:
         }
 
 
+@dataclass(frozen=True)
+class Drives:
+    """Independent drive axes (``kind: axes``): the winch side of the plant without
+    cables, ``u = I q'' + F_v q' + F_c s(q') + d`` plus effects, optionally behind a
+    first-order actuator. Friction effects act on it exactly as on a winch."""
+
+    winch: WinchParams
+    sign_sharpness: float | None = SIGN_SHARPNESS
+    actuator_time_constant: float = 0.0
+    effects: tuple[Effect, ...] = ()
+
+    @property
+    def n(self) -> int:
+        return self.winch.n
+
+    def replace(self, **changes: Any) -> Drives:
+        return replace(self, **changes)
+
+    def with_effects(self, effects: Sequence[Effect]) -> Drives:
+        model = self
+        for effect in effects:
+            model = effect.apply(model)
+        return model
+
+    def friction_torque(self, theta: np.ndarray, omega: np.ndarray) -> np.ndarray:
+        return resisting_torque(self, theta, omega)
+
+    def inverse_dynamics(self, theta: np.ndarray, omega: np.ndarray, alpha: np.ndarray,
+                         t: np.ndarray) -> dict[str, np.ndarray]:
+        """Force/torque commands (N, n) that make the axes follow ``theta`` (positions)."""
+        drive = self.winch.inertia * alpha + self.friction_torque(theta, omega)
+        return {"torque": commanded_torque(drive, t, self.actuator_time_constant)}
+
+
 def winch_rates(
     units: np.ndarray,
     lengths: np.ndarray,
@@ -377,11 +460,13 @@ def tensions_for_force(units: np.ndarray, force: np.ndarray) -> np.ndarray:
 
     ``units`` (..., n, 3), ``force`` (..., 3) -> (..., n). No sign constraint: this is the
     analysis direction (what tensions the measured motion implies), not the controller's
-    tension distribution.
+    tension distribution. The least-norm solution ``K (K^T K)^-1 f`` needs only a 3x3
+    solve per sample (a batched SVD pseudo-inverse is ten times slower), valid wherever
+    the cables span space, i.e. inside any workspace a CDPR can hold.
     """
-    kt = np.swapaxes(units, -1, -2)                        # (..., 3, n)
     force = np.broadcast_to(force, units.shape[:-2] + (3,))
-    return np.einsum("...ni,...i->...n", np.linalg.pinv(kt), force)
+    gram = np.einsum("...ni,...nj->...ij", units, units)
+    return np.einsum("...ni,...i->...n", units, np.linalg.solve(gram, force[..., None])[..., 0])
 
 
 def static_tensions(units: np.ndarray, mass: float, gravity_vector: np.ndarray) -> np.ndarray:

@@ -182,3 +182,41 @@ def hold(points: np.ndarray, duration_s: float) -> DesiredTrajectories:
         radius=zeros, end_radius=zeros, rise=zeros, angular_speed=zeros, phase=zeros,
         tilt=zeros, tilt_axis=zeros, duration_s=duration_s,
     )
+
+
+@dataclass
+class SampledDesired:
+    """Desired trajectories given as samples (a recorded ``xd, yd, zd``), interpolated
+    with cubic splines so the controller gets position, velocity and acceleration at its
+    own ticks. The interface of :class:`DesiredTrajectories` that the simulator uses.
+
+    Parameters
+    ----------
+    t : (N,) array
+        Sample times, starting at 0.
+    positions : (B, N, 3) array
+    family : list of str
+    """
+
+    t: np.ndarray
+    positions: np.ndarray
+    family: list[str]
+
+    def __len__(self) -> int:
+        return len(self.family)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+    def take(self, index: slice | Sequence[int]) -> SampledDesired:
+        idx = index if isinstance(index, slice) else np.asarray(index, dtype=int)
+        return SampledDesired(self.t, self.positions[idx],
+                              list(np.asarray(self.family, dtype=object)[idx]))
+
+    def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        from scipy.interpolate import CubicSpline
+
+        spline = CubicSpline(self.t - self.t[0], self.positions, axis=1)
+        t = np.clip(np.asarray(t, float), 0.0, self.duration_s)
+        return spline(t), spline(t, 1), spline(t, 2)

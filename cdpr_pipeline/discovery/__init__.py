@@ -1,0 +1,1 @@
+"""Discovery: what the simulation gets wrong, its cause, the extended model."""

@@ -1,0 +1,507 @@
+"""``cdpr diagnose``: show what the simulation gets wrong, name the cause, extend the
+model and measure the gain (``spec/diagnosis.md``, format ``cdpr-diagnosis/1``).
+
+:func:`diagnose` is a pure function of a dataset and settings; the stage wraps it with
+file output and MLflow. Everything it fits uses the training runs only; the held-out
+runs judge.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from cdpr_pipeline.data.io import Dataset
+from cdpr_pipeline.data.rig import CdprRig
+from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
+from cdpr_pipeline.discovery.freeform import FreeFormSearch
+from cdpr_pipeline.discovery.residuals import (
+    Model,
+    Residuals,
+    channel_names,
+    measured_rows,
+    nominal_model,
+    residuals,
+)
+from cdpr_pipeline.discovery.selection import Judgement, SelectionSettings, select_causes
+from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
+from cdpr_pipeline.discovery.validity import (
+    block_bootstrap,
+    correlation,
+    correlation_tests,
+    ljung_box_pvalue,
+    split_blocks,
+)
+from cdpr_pipeline.identification.regressors import RegressionSettings
+from cdpr_pipeline.sim.effects import Effect, WinchParameterError
+from cdpr_pipeline.sim.plant import smooth_sign
+from cdpr_pipeline.wavelet.split import WaveletSplit, band_energies
+
+log = logging.getLogger(__name__)
+
+FORMAT = "cdpr-diagnosis/1"
+#: families held out by default (spec/diagnosis.md)
+HELDOUT_FAMILIES = ("spiral", "pulses")
+
+
+@dataclass
+class BlackBoxSettings:
+    """The black-box residual model the named physics is compared with."""
+
+    net_factory: Any = None          # partial of a network (conf/model/*.yaml net)
+    window: int = 32
+    epochs: int = 5
+    max_windows: int = 4096
+    seed: int = 0
+
+
+@dataclass
+class DiagnosisSettings:
+    """Everything :func:`diagnose` needs besides the data (``conf/diagnose.yaml``)."""
+
+    regression: RegressionSettings = field(default_factory=RegressionSettings)
+    selection: SelectionSettings = field(default_factory=SelectionSettings)
+    freeform: FreeFormSearch | None = field(default_factory=FreeFormSearch)
+    heldout: list[str] | None = None
+    closed_loop: bool = True
+    blackbox: BlackBoxSettings | None = None
+    max_lag: int = 20
+    wavelet: WaveletSplit = field(default_factory=lambda: WaveletSplit("db4", 5))
+    correlation_threshold: float = 0.3
+
+
+def split_runs(trajectories: Sequence[Trajectory], heldout: Sequence[str] | None = None
+               ) -> tuple[list[str], list[str]]:
+    """Training and held-out run names. ``heldout`` entries match a run name or family;
+    by default families ``spiral`` or ``pulses`` are held out, else the last file."""
+    names = [tr.name for tr in trajectories]
+    if heldout:
+        wanted = set(heldout)
+        held = [tr.name for tr in trajectories if tr.name in wanted or tr.family in wanted]
+        unknown = wanted - {tr.name for tr in trajectories} - {tr.family for tr in trajectories}
+        if unknown:
+            raise ValueError(f"split.heldout: no run or family named {sorted(unknown)}; "
+                             f"runs: {names}")
+    else:
+        held = [tr.name for tr in trajectories if tr.family in HELDOUT_FAMILIES] or names[-1:]
+    train = [n for n in names if n not in held]
+    if not train:
+        raise ValueError(f"every run is held out ({held}); diagnosis needs training runs")
+    return train, held
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`diagnose` (see :meth:`as_json` for the file layout)."""
+
+    dataset: str
+    rig: Any
+    train: list[str]
+    heldout: list[str]
+    nominal: Model
+    extended: Model
+    causes: list[Judgement]
+    steps: list[list[Judgement]]
+    discrepancies: list[dict[str, Any]]
+    nominal_metrics: dict[str, Any]
+    extended_metrics: dict[str, Any]
+    gain: dict[str, Any]
+    validity: dict[str, Any]
+    closed_loop: dict[str, Any]
+    blackbox: dict[str, Any] | None
+    sentence: str
+    timings: dict[str, float]
+    plots: dict[str, Any]
+
+    @property
+    def verdict(self) -> str:
+        return self.causes[0].effect if self.causes else "none"
+
+    @property
+    def effects(self) -> list[Effect]:
+        return list(self.extended.effects) if hasattr(self.extended, "effects") else []
+
+    def as_json(self, extended_model_file: str = "extended_model.yaml") -> dict[str, Any]:
+        return {
+            "format": FORMAT,
+            "dataset": self.dataset,
+            "split": {"train": self.train, "heldout": self.heldout},
+            "nominal": {"params": self.rig_params(), "metrics": self.nominal_metrics},
+            "discrepancies": self.discrepancies,
+            "causes": [cause_record(c, self.nominal) for c in self.causes],
+            "verdict": self.verdict,
+            "summary": self.sentence,
+            "extended_model": extended_model_file,
+            "extended": {"metrics": self.extended_metrics},
+            "gain": self.gain,
+            "validity": self.validity,
+            "closed_loop": self.closed_loop,
+            "blackbox": self.blackbox,
+            "candidates": [[judgement_record(j) for j in step] for step in self.steps],
+            "timings_s": self.timings,
+        }
+
+    def rig_params(self) -> dict[str, list[float]]:
+        return self.nominal.winch.as_dict()
+
+
+# ---------------------------------------------------------------------- records
+def _winch_change(effect: WinchParameterError, nominal: Model) -> dict[str, Any]:
+    i = effect.cable - 1
+    w = nominal.winch
+    old = {k: float(getattr(w, k)[i]) for k in ("inertia", "viscous", "coulomb", "offset")}
+    new = {"inertia": old["inertia"] * effect.inertia_scale,
+           "viscous": old["viscous"] * effect.viscous_scale,
+           "coulomb": old["coulomb"] * effect.coulomb_scale,
+           "offset": old["offset"] + effect.offset_delta}
+    return {"winch": effect.cable, "old": old, "new": new}
+
+
+def cause_params(effects: Sequence[Effect], nominal: Model) -> dict[str, Any]:
+    """The fitted physical parameters of a cause, with old and new winch values."""
+    out: dict[str, Any] = {}
+    changes = [_winch_change(e, nominal) for e in effects if isinstance(e, WinchParameterError)]
+    for e in effects:
+        if not isinstance(e, WinchParameterError):
+            out.update(e.params())
+    if changes:
+        out["winches" if all(isinstance(e, WinchParameterError) for e in effects)
+            else "refit_winches"] = changes
+    return out
+
+
+def cause_record(j: Judgement, nominal: Model) -> dict[str, Any]:
+    if j.freeform is not None:
+        expression = j.freeform.describe()
+    else:
+        structural = [e for e in j.effects if not isinstance(e, WinchParameterError)]
+        expression = (structural or j.effects)[0].expression if j.effects else ""
+    return {"effect": j.effect, "channels": j.channels,
+            "params": cause_params(j.effects, nominal), "expression": expression,
+            "description": describe_cause(j, nominal), "evidence": j.evidence()}
+
+
+def judgement_record(j: Judgement) -> dict[str, Any]:
+    return {"effect": j.effect, "variant": j.label, "n_params": j.n_params, "lr": j.lr,
+            "pvalue": j.pvalue, "bic_drop": j.bic_drop, "signal": j.channel,
+            "heldout_sse_drop_pct": 100 * j.heldout_gain,
+            "ci95_pct": [100 * j.ci[0], 100 * j.ci[1]], "passed": j.passed,
+            "reason": j.reason}
+
+
+def describe_cause(j: Judgement, nominal: Model) -> str:
+    """One sentence with the fitted physical parameter."""
+    parts = []
+    for e in j.effects:
+        if isinstance(e, WinchParameterError):
+            c = _winch_change(e, nominal)
+            diffs = [f"{k} {c['old'][k]:.4g} -> {c['new'][k]:.4g}" for k in c["old"]
+                     if abs(c["new"][k] - c["old"][k]) > 0.02 * max(abs(c["old"][k]), 1e-9)
+                     or k == "offset" and abs(c["new"][k] - c["old"][k]) > 1e-3]
+            if diffs:
+                parts.append(f"winch {e.cable}: " + ", ".join(diffs))
+        else:
+            parts.append(e.describe())
+    return "; ".join(parts) if parts else j.label
+
+
+# ---------------------------------------------------------------------- metrics
+def _metrics(res: Residuals, measured: np.ndarray, channel: str) -> dict[str, float]:
+    r = res.stacked(channel)
+    return {"rmse": float(np.sqrt(np.mean(r ** 2))),
+            "relative_error_pct": float(100 * np.linalg.norm(r) / max(np.linalg.norm(measured),
+                                                                       1e-300)),
+            "rmse_per_channel": np.sqrt(np.mean(r ** 2, axis=0)).tolist()}
+
+
+def model_metrics(model: Model, nominal: Model, train: list[RunSignals],
+                  held: list[RunSignals]) -> dict[str, Any]:
+    """``{"train": {...}, "heldout": {...}}`` for the torque channel (the spec's
+    ``rmse``/``relative_error_pct``), plus ``by_signal`` for every channel."""
+    out: dict[str, Any] = {}
+    by_signal: dict[str, Any] = {}
+    for part, sigs in (("train", train), ("heldout", held)):
+        res = residuals(model, nominal, sigs)
+        for ch in res.channels:
+            by_signal.setdefault(ch, {})[part] = _metrics(res, measured_rows(sigs, ch), ch)
+        out[part] = {k: v for k, v in by_signal["torque"][part].items()
+                     if k != "rmse_per_channel"}
+    out["by_signal"] = by_signal
+    return out
+
+
+def _bands(x: np.ndarray, fs: float, split: WaveletSplit) -> list[dict[str, float]]:
+    level = max(1, min(split.level, int(np.log2(max(len(x), 2) / 8))))
+    split = WaveletSplit(split.wavelet, level, split.mode)
+    shares = band_energies(x, split)
+    out = []
+    for name, share in shares.items():
+        j = int(name[1:])
+        hi = fs / 2 ** j if name[0] == "D" else fs / 2 ** (level + 1)
+        lo = hi / 2 if name[0] == "D" else 0.0
+        out.append({"band": name, "lo_hz": lo, "hi_hz": hi, "share": share})
+    return sorted(out, key=lambda b: b["lo_hz"])
+
+
+def _signatures(sig: RunSignals, nominal: Model, channel: str, i: int
+                ) -> dict[str, np.ndarray]:
+    """Full-rate signals a residual of winch/cable ``i`` may follow."""
+    w = sig.omega[:, i]
+    out = {"winch speed": w, "speed sign": smooth_sign(w, nominal.sign_sharpness),
+           "|speed|": np.abs(w), "low speed (exp(-(w/w_rms)^2) sign w)":
+           np.exp(-(w / (np.sqrt(np.mean(w ** 2)) + 1e-12) / 0.3) ** 2) * np.sign(w),
+           "winch acceleration": sig.alpha[:, i],
+           "torque rate": np.gradient(sig.torque[:, i], sig.t)}
+    if sig.position is not None:
+        tension, g, _ = nominal.load_tensions(sig.position, sig.slow_acceleration)
+        out.update({"tension": tension[:, i], "tension x length": tension[:, i] * g[:, i],
+                    "cable length": g[:, i], "platform x": sig.position[:, 0],
+                    "platform y": sig.position[:, 1], "platform z": sig.position[:, 2]})
+    return out
+
+
+def discrepancies(nominal: Model, signals: list[RunSignals], settings: DiagnosisSettings
+                  ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Per channel column: residual size, share, band, whiteness, what it follows, and the
+    correlation tests. Also returns plot data."""
+    res = residuals(nominal, nominal, signals)
+    out, plots = [], {}
+    for ch in res.channels:
+        stacked = res.stacked(ch)
+        total = float(np.sum(stacked ** 2)) or 1.0
+        names = channel_names(ch, stacked.shape[1])
+        for i, name in enumerate(names):
+            r = stacked[:, i]
+            sigs = {k: np.concatenate([s.rows(_signatures(s, nominal, ch, i)[k][:, None])[:, 0]
+                                       for s in signals])
+                    for k in _signatures(signals[0], nominal, ch, i)}
+            corr = {k: float(np.corrcoef(v, r)[0, 1]) if np.std(v) > 0 and np.std(r) > 0
+                    else 0.0 for k, v in sigs.items()}
+            follows = sorted((k for k, v in corr.items()
+                              if abs(v) >= settings.correlation_threshold),
+                             key=lambda k: -abs(corr[k]))
+            # bands on the unfiltered full-rate residual of the longest run
+            longest = max(signals, key=lambda s: s.t.size)
+            full = _full_rate_residual(nominal, longest, ch)[:, i]
+            bands = _bands(full, longest.fs, settings.wavelet)
+            top = max(bands, key=lambda b: b["share"])
+            speed = sigs["winch speed"]
+            inputs = speed if ch == "torque" else sigs.get("cable length", speed)
+            tests = correlation_tests(r, inputs, min(settings.max_lag, len(r) // 4))
+            out.append({"signal": ch, "channel": name, "rms": float(np.sqrt(np.mean(r ** 2))),
+                        "share_of_error": float(np.sum(r ** 2) / total),
+                        "band_hz": [top["lo_hz"], top["hi_hz"]],
+                        "bands": bands,
+                        "whiteness_pvalue": ljung_box_pvalue(r, settings.max_lag),
+                        "correlates_with": follows,
+                        "correlations": corr,
+                        "validity": tests.as_dict()})
+            plots[name] = {"residual": r, "signatures": sigs, "bands": bands,
+                           "tests": tests}
+    return out, plots
+
+
+def _full_rate_residual(model: Model, sig: RunSignals, channel: str) -> np.ndarray:
+    from cdpr_pipeline.discovery.residuals import predict
+
+    pred = predict(model, model, sig)[channel]
+    measured = sig.torque if channel == "torque" else sig.lengths
+    r = measured - pred
+    return r - r.mean(axis=0) if channel == "length" else r
+
+
+# ---------------------------------------------------------------------- gain
+def heldout_gain(before: Residuals, after: Residuals, held: list[RunSignals], channel: str,
+                 block_s: float, n_boot: int, seed: int) -> dict[str, Any]:
+    """Held-out RMSE of ``channel`` before and after, relative drop and its 95 % block
+    bootstrap interval; per channel column too."""
+    def stat(b, a):
+        return 1 - np.sqrt(a.sum() / max(b.sum(), 1e-300))
+
+    blocks, per_col = [], {}
+    for sig, rb, ra in zip(held, before.by_run, after.by_run, strict=True):
+        rate = len(rb[channel]) / max(sig.t[-1] - sig.t[0], 1e-9)
+        length = max(2, int(round(block_s * rate)))
+        blocks += split_blocks((rb[channel] ** 2, ra[channel] ** 2), length)
+    b, a = before.stacked(channel), after.stacked(channel)
+    est, lo, hi = (block_bootstrap(lambda x, y: stat(x.sum(1), y.sum(1)), blocks, n_boot,
+                                   0.95, seed) if len(blocks) > 1
+                   else (stat(b ** 2, a ** 2), -np.inf, np.inf))
+    for i, name in enumerate(channel_names(channel, b.shape[1])):
+        _, clo, chi = (block_bootstrap(lambda x, y, i=i: stat(x[:, i], y[:, i]), blocks, n_boot,
+                                       0.95, seed) if len(blocks) > 1 else (0, -np.inf, np.inf))
+        per_col[name] = {"before": float(np.sqrt(np.mean(b[:, i] ** 2))),
+                         "after": float(np.sqrt(np.mean(a[:, i] ** 2))),
+                         "relative": float(stat(b[:, i] ** 2, a[:, i] ** 2)),
+                         "ci95": [float(clo), float(chi)]}
+    return {"metric": "heldout_rmse", "signal": channel,
+            "before": float(np.sqrt(np.mean(b ** 2))), "after": float(np.sqrt(np.mean(a ** 2))),
+            "relative": float(est), "ci95": [float(lo), float(hi)], "by_channel": per_col}
+
+
+def _validity(res: Residuals, held: list[RunSignals], channel: str, max_lag: int
+              ) -> dict[str, Any]:
+    r = res.stacked(channel)
+    speed = np.concatenate([s.rows(s.omega) for s in held])
+    out = {}
+    for i, name in enumerate(channel_names(channel, r.shape[1])):
+        tests = correlation_tests(r[:, i], speed[:, i], min(max_lag, len(r) // 4))
+        out[name] = tests.as_dict() | {"ljung_box_pvalue": ljung_box_pvalue(r[:, i], max_lag)}
+    return out
+
+
+# ---------------------------------------------------------------------- black box
+def blackbox_share(nominal: Model, extended: Model, train: list[RunSignals],
+                   held: list[RunSignals], channel: str, settings: BlackBoxSettings
+                   ) -> dict[str, Any]:
+    """Held-out share of the nominal residual a sequence network explains, against the
+    share the named physics explains, on the same rows."""
+    from cdpr_pipeline.identification.reconstruction import HighFrequencyModel
+    from cdpr_pipeline.identification.regressors import WinchRegression
+
+    def regression(sigs: list[RunSignals]) -> WinchRegression:
+        parts = []
+        for k, s in enumerate(sigs):
+            cols = [s.theta, s.omega, s.alpha]
+            if s.position is not None:
+                tension, g, _ = nominal.load_tensions(s.position, s.slow_acceleration)
+                cols += [tension, g]
+            phi = s.rows(np.stack(cols + [np.ones_like(s.omega)], axis=-1))
+            target = residuals(nominal, nominal, [s]).stacked(channel)
+            parts.append(WinchRegression(phi, target, np.full(len(target), k)))
+        return WinchRegression.concatenate(parts)
+
+    start = time.perf_counter()
+    tr, ho = regression(train), regression(held)
+    n = tr.n
+    model = HighFrequencyModel(settings.net_factory, settings.window, settings.epochs,
+                               max_windows=settings.max_windows, seed=settings.seed,
+                               sample_rate_hz=1.0).fit(tr, np.zeros((n, tr.phi.shape[2])))
+    pred = model.predict(ho)
+    runs = ho.run
+    mask = np.concatenate([np.arange((runs == r).sum()) >= settings.window - 1
+                           for r in np.unique(runs)])
+    before = ho.target[mask]
+    after_bb = before - pred[mask]
+    after_phys = residuals(extended, nominal, held).stacked(channel)[mask]
+    share_bb = 1 - float(np.sum(after_bb ** 2) / np.sum(before ** 2))
+    share_phys = 1 - float(np.sum(after_phys ** 2) / np.sum(before ** 2))
+    return {"model": "tcn_transformer on the nominal residual", "signal": channel,
+            "heldout_explained_share_blackbox": share_bb,
+            "heldout_explained_share_physics": share_phys,
+            "physics_recovers_pct_of_blackbox": 100 * share_phys / share_bb
+            if share_bb > 0 else None,
+            "train_s": time.perf_counter() - start}
+
+
+# ---------------------------------------------------------------------- the whole
+def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Diagnosis:
+    """Diagnose a ``cdpr-measured/1`` dataset against its nominal model."""
+    settings = settings or DiagnosisSettings()
+    clock: dict[str, float] = {}
+    start = time.perf_counter()
+    rig = dataset.rig
+    trajectories = list(dataset.trajectories)
+    train_names, held_names = split_runs(trajectories, settings.heldout)
+    signals = dataset_signals(trajectories, rig, settings.regression)
+    by_name = {s.name: s for s in signals}
+    train = [by_name[n] for n in train_names]
+    held = [by_name[n] for n in held_names]
+    nominal = nominal_model(rig, settings.regression.sign_sharpness)
+    clock["signals"] = time.perf_counter() - start
+
+    t0 = time.perf_counter()
+    found, plots = discrepancies(nominal, signals, settings)
+    nominal_metrics = model_metrics(nominal, nominal, train, held)
+    clock["discrepancies"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    selection = select_causes(nominal, rig, train, held, settings.selection, settings.freeform,
+                              log=log)
+    extended = nominal.with_effects(selection.effects)
+    clock["causes"] = time.perf_counter() - t0
+
+    channel = selection.causes[0].channel if selection.causes else "torque"
+    before_held = residuals(nominal, nominal, held)
+    after_held = residuals(extended, nominal, held)
+    gain = heldout_gain(before_held, after_held, held, channel, settings.selection.block_s,
+                        settings.selection.n_boot, settings.selection.seed)
+    validity = {"signal": channel,
+                "before": _validity(before_held, held, channel, settings.max_lag),
+                "after": _validity(after_held, held, channel, settings.max_lag)}
+    extended_metrics = model_metrics(extended, nominal, train, held)
+
+    closed: dict[str, Any] = {"available": False}
+    why_not = can_resimulate(rig, trajectories) if settings.closed_loop else "disabled"
+    if why_not is None:
+        t0 = time.perf_counter()
+        closed = _closed_loop(nominal, extended, rig, trajectories, held_names, found,
+                              bool(selection.causes))
+        plots["closed_loop"] = closed.pop("_plot")
+        clock["closed_loop"] = time.perf_counter() - t0
+    else:
+        closed["reason"] = why_not
+
+    blackbox = None
+    if settings.blackbox is not None and settings.blackbox.net_factory is not None:
+        t0 = time.perf_counter()
+        blackbox = blackbox_share(nominal, extended, train, held, channel, settings.blackbox)
+        clock["blackbox"] = time.perf_counter() - t0
+    clock["total"] = time.perf_counter() - start
+
+    sentence = summary_sentence(selection.causes, nominal, gain)
+    plots["before_after"] = {"before": before_held.stacked(channel),
+                             "after": after_held.stacked(channel), "channel": channel,
+                             "t": np.concatenate([s.row_times() for s in held])}
+    return Diagnosis(str(dataset.root), rig, train_names, held_names, nominal, extended,
+                     selection.causes, selection.steps, found, nominal_metrics,
+                     extended_metrics, gain, validity, closed, blackbox, sentence, clock, plots)
+
+
+def summary_sentence(causes: list[Judgement], nominal: Model, gain: dict[str, Any]) -> str:
+    if not causes:
+        return ("The nominal model explains the measurements: no candidate effect beats "
+                "chance on the held-out runs (verdict: none).")
+    top = causes[0]
+    name = "an effect outside the vocabulary (unnamed)" if top.effect == "unnamed" \
+        else top.effect.replace("_", " ")
+    text = (f"Most likely cause: {name}: {describe_cause(top, nominal)}. Extending the model "
+            f"lowers the held-out {gain['signal']} RMSE by {100 * gain['relative']:.1f} % "
+            f"(95 % CI {100 * gain['ci95'][0]:.1f} to {100 * gain['ci95'][1]:.1f} %).")
+    if len(causes) > 1:
+        text += " Also: " + "; ".join(c.effect for c in causes[1:]) + "."
+    return text
+
+
+def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names, found,
+                 extended_differs: bool) -> dict[str, Any]:
+    sim_nom = resimulate(nominal, nominal, rig, trajectories)
+    err_nom = closed_loop_errors(trajectories, sim_nom)
+    err_ext = err_nom
+    if extended_differs:
+        err_ext = closed_loop_errors(trajectories, resimulate(extended, nominal, rig,
+                                                              trajectories))
+    out: dict[str, Any] = {"available": True, "runs": {}}
+    for sig_name in ("position", "torque"):
+        allb = np.concatenate([err_nom[n][sig_name] for n in err_nom])
+        total = float(np.sum(allb ** 2)) or 1.0
+        cols = ["x", "y", "z"] if sig_name == "position" else \
+            channel_names("torque", allb.shape[1])
+        for i, col in enumerate(cols):
+            found.append({"signal": f"closed_loop_{sig_name}", "channel": col,
+                          "rms": float(np.sqrt(np.mean(allb[:, i] ** 2))),
+                          "share_of_error": float(np.sum(allb[:, i] ** 2) / total)})
+        hb = np.concatenate([err_nom[n][sig_name] for n in held_names])
+        ha = np.concatenate([err_ext[n][sig_name] for n in held_names])
+        out[sig_name] = {"heldout_rmse_before": np.sqrt(np.mean(hb ** 2, axis=0)).tolist(),
+                         "heldout_rmse_after": np.sqrt(np.mean(ha ** 2, axis=0)).tolist()}
+    first = held_names[0]
+    out["_plot"] = {"run": first, "before": err_nom[first]["position"],
+                    "after": err_ext[first]["position"]}
+    return out

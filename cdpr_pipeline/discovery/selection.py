@@ -1,0 +1,302 @@
+"""Name the cause: fit every candidate, test it honestly, keep what passes, rank it.
+
+Forward selection over candidate effects and the free-form search. At every step each
+candidate is fitted on the training runs *on top of the causes already kept*, then
+judged by
+
+* a likelihood-ratio test on the training runs, ``LR = sum_c N_c log(SSE0_c/SSE1_c)``
+  over channels (Gaussian channels with their own variance), with ``N_c`` the honest
+  statistics rows (see :mod:`~cdpr_pipeline.discovery.signals`), against chi^2 with the
+  candidate's parameter count, Bonferroni-corrected for the candidates of the step;
+* its held-out gain: the relative drop of the residual sum of squares on runs that took
+  no part in any fit, on the channel it explains best, with a block-bootstrap interval
+  (at the corrected level) that must exclude zero, and at least ``min_gain``;
+* BIC, ``LR - k log N``, to rank those that pass: fewer parameters win when two
+  explain the data alike (a structural effect against re-fitting winch parameters).
+
+The free-form search competes like a candidate. When it ranks first, a named
+candidate still takes the step if the free-form terms add nothing significant on top of
+it (the terms *confirm* it); otherwise the step is reported as ``unnamed``. So an effect
+outside the vocabulary cannot borrow a name from a candidate that only partly mimics it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.stats import chi2
+
+from cdpr_pipeline.discovery.candidates import Candidate, DataScale, candidates_for
+from cdpr_pipeline.discovery.fitting import Fit, FitContext, fit_candidate
+from cdpr_pipeline.discovery.freeform import FreeFormResult, FreeFormSearch
+from cdpr_pipeline.discovery.residuals import Model, Residuals, channel_names
+from cdpr_pipeline.discovery.signals import RunSignals
+from cdpr_pipeline.discovery.validity import block_bootstrap, split_blocks
+from cdpr_pipeline.sim.effects import Effect
+
+
+@dataclass
+class SelectionSettings:
+    """How causes are tested (``conf/discovery``).
+
+    Parameters
+    ----------
+    alpha : float
+        Family-wise error rate of each step (Bonferroni over its candidates).
+    min_gain : float
+        Smallest relative held-out drop of the residual sum of squares, on the channel
+        a cause explains best, that counts as a discrepancy explained (practical
+        significance: with tens of thousands of rows, micro-metre artefacts of any model
+        are "significant"; a rig engineer does not care about them).
+    max_causes : int
+        Forward-selection steps.
+    block_s : float
+        Bootstrap block length (residuals are correlated within a block).
+    n_boot : int
+        Bootstrap draws.
+    effects : list of str or None
+        Candidate effects (all of the vocabulary when None).
+    refit_winches : bool
+        Also try torque-side effects with the winch parameters re-identified.
+    seed : int
+    """
+
+    alpha: float = 0.05
+    min_gain: float = 0.05
+    max_causes: int = 3
+    block_s: float = 1.0
+    n_boot: int = 400
+    effects: list[str] | None = None
+    refit_winches: bool = True
+    seed: int = 0
+
+
+@dataclass
+class Judgement:
+    """One fitted candidate (or free-form model) and the verdict of the tests."""
+
+    effect: str
+    label: str
+    effects: list[Effect]
+    n_params: int
+    train_sse: dict[str, tuple[float, float]]
+    heldout_sse: dict[str, tuple[float, float]]
+    lr: float
+    pvalue: float
+    bic_drop: float
+    channel: str
+    heldout_gain: float
+    ci: tuple[float, float]
+    channels: list[str]
+    fit: Fit | None = None
+    freeform: FreeFormResult | None = None
+    passed: bool = False
+    reason: str = ""
+    confirmed_by: str | None = None
+
+    def evidence(self) -> dict[str, Any]:
+        return {"pvalue": self.pvalue, "lr": self.lr, "n_params": self.n_params,
+                "bic_drop": self.bic_drop, "heldout_rmse_drop_pct": 100 * (
+                    1 - np.sqrt(max(1 - self.heldout_gain, 0.0))),
+                "heldout_sse_drop_pct": 100 * self.heldout_gain,
+                "heldout_sse_drop_ci95_pct": [100 * self.ci[0], 100 * self.ci[1]],
+                "signal": self.channel, "variant": self.label,
+                **({"confirmed_by_freeform": self.confirmed_by} if self.confirmed_by else {})}
+
+
+def _row_sq(res: Residuals, channel: str) -> list[np.ndarray]:
+    return [r[channel] ** 2 for r in res.by_run]
+
+
+@dataclass
+class Judge:
+    """Tests fitted extensions against the model they extend."""
+
+    ctx: FitContext
+    heldout: list[RunSignals]
+    settings: SelectionSettings
+    base_train: Residuals = field(init=False)
+    base_held: Residuals = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.base_train = self.ctx.residuals([])
+        self.base_held = self.ctx.residuals([], self.heldout)
+
+    def __call__(self, effect: str, label: str, effects: list[Effect], n_params: int,
+                 n_tests: int) -> Judgement:
+        train = self.ctx.residuals(effects)
+        held = self.ctx.residuals(effects, self.heldout)
+        chans = self.base_train.channels
+        tr = {c: (self.base_train.sse(c), train.sse(c)) for c in chans}
+        ho = {c: (self.base_held.sse(c), held.sse(c)) for c in chans}
+        per = {c: self.base_train.count(c) * np.log(tr[c][0] / max(tr[c][1], 1e-300))
+               for c in chans}
+        lr = float(sum(per.values()))
+        n_total = sum(self.base_train.count(c) for c in chans)
+        pvalue = float(chi2.sf(max(lr, 0.0), max(n_params, 1)))
+        bic = lr - n_params * np.log(n_total)
+        channel = max(per, key=per.get)
+        gain = 1 - ho[channel][1] / ho[channel][0]
+        level = 1 - 2 * self.settings.alpha / max(n_tests, 1)
+        ci = self._interval(held, channel, level)
+        names = self._channels_explained(train, chans, n_tests)
+        j = Judgement(effect, label, effects, n_params, tr, ho, lr, pvalue, float(bic),
+                      channel, float(gain), ci, names)
+        total_before = sum(ho[c][0] * self.ctx.weights[c] ** 2 for c in chans)
+        total_after = sum(ho[c][1] * self.ctx.weights[c] ** 2 for c in chans)
+        if pvalue >= self.settings.alpha / max(n_tests, 1):
+            j.reason = f"not significant on training runs (p = {pvalue:.2g})"
+        elif gain < self.settings.min_gain:
+            j.reason = (f"held-out {channel} gain {100 * gain:.1f} % below "
+                        f"{100 * self.settings.min_gain:.0f} %")
+        elif ci[0] <= 0:
+            j.reason = f"held-out gain interval includes zero ({100 * ci[0]:.1f} %)"
+        elif total_after >= total_before:
+            j.reason = "worse on held-out runs over all channels"
+        else:
+            j.passed = True
+        return j
+
+    def _interval(self, held: Residuals, channel: str, level: float) -> tuple[float, float]:
+        before, after = _row_sq(self.base_held, channel), _row_sq(held, channel)
+        blocks = []
+        for sig, b, a in zip(self.heldout, before, after, strict=True):
+            rate = len(b) / max(sig.t[-1] - sig.t[0], 1e-9)
+            length = max(2, int(round(self.settings.block_s * rate)))
+            blocks += split_blocks((b.sum(axis=1), a.sum(axis=1)), length)
+        if len(blocks) < 2:
+            return (-np.inf, np.inf)
+        _, lo, hi = block_bootstrap(lambda b, a: 1 - a.sum() / max(b.sum(), 1e-300), blocks,
+                                    self.settings.n_boot, level, self.settings.seed)
+        return float(lo), float(hi)
+
+    def _channels_explained(self, train: Residuals, chans: Sequence[str],
+                            n_tests: int) -> list[str]:
+        """Channel columns (``u2``, ``l1``) whose own residual drops significantly."""
+        out = []
+        for c in chans:
+            b, a = self.base_train.stacked(c), train.stacked(c)
+            names = channel_names(c, b.shape[1])
+            for i, name in enumerate(names):
+                s0, s1 = float(b[:, i] @ b[:, i]), float(a[:, i] @ a[:, i])
+                lr_i = len(b) * np.log(s0 / max(s1, 1e-300))
+                if s1 < (1 - self.settings.min_gain) * s0 and \
+                        chi2.sf(max(lr_i, 0), 1) < self.settings.alpha / max(n_tests, 1):
+                    out.append(name)
+        return out
+
+
+@dataclass
+class Selection:
+    """Outcome of :func:`select_causes`."""
+
+    causes: list[Judgement]
+    steps: list[list[Judgement]]
+    effects: list[Effect]
+
+
+def _data_scale(signals: Sequence[RunSignals], kind: str) -> DataScale:
+    omega = np.concatenate([s.omega for s in signals])
+    return DataScale(float(np.sqrt(np.mean(omega ** 2))) or 1.0, omega.shape[1], kind)
+
+
+def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[RunSignals],
+                  settings: SelectionSettings, freeform: FreeFormSearch | None,
+                  log=None) -> Selection:
+    """Forward selection of causes (see the module docstring)."""
+    kind = "axes" if not hasattr(nominal, "anchors") else "cdpr"
+    scale = _data_scale(train, kind)
+    candidates = candidates_for(rig, scale, settings.effects, settings.refit_winches)
+    kept: list[Effect] = []
+    causes: list[Judgement] = []
+    steps: list[list[Judgement]] = []
+    columns = None
+    for _ in range(settings.max_causes):
+        base = FitContext(nominal, train, kept, {})
+        base_res = base.residuals([])
+        weights = {c: 1.0 / max(base_res.rms(c), 1e-300) for c in base_res.channels}
+        ctx = FitContext(nominal, train, kept, weights, columns)
+        columns = ctx.columns
+        judge = Judge(ctx, heldout, settings)
+        n_tests = len(candidates) + (freeform is not None)
+        step = [_judge_candidate(c, ctx, judge, n_tests) for c in candidates]
+        ff = None
+        if freeform is not None:
+            ff = _judge_freeform(freeform, ctx, judge, scale, kind, n_tests)
+            step.append(ff)
+        steps.append(step)
+        passed = sorted((j for j in step if j.passed), key=lambda j: -j.bic_drop)
+        if log:
+            for j in sorted(step, key=lambda j: -j.bic_drop)[:6]:
+                log.info("  %-48s LR %10.1f BIC %+10.1f gain %6.1f %% %s", j.label, j.lr,
+                         j.bic_drop, 100 * j.heldout_gain, "PASS" if j.passed else j.reason)
+        if not passed:
+            break
+        best = passed[0]
+        if best is ff:
+            best = _named_or_unnamed(ff, [j for j in passed if j is not ff], ctx, heldout,
+                                     settings, freeform, scale, kind, n_tests)
+        elif ff is not None and ff.passed:
+            best.confirmed_by = ff.freeform.describe()
+        kept = kept + best.effects
+        causes.append(best)
+        # a further cause needs its own discovery; the same variant again adds nothing
+        candidates = [c for c in candidates if c.label != best.label
+                      or best.effect == "winch_parameter_error"]
+    return Selection(_merge(causes), steps, kept)
+
+
+def _judge_candidate(cand: Candidate, ctx: FitContext, judge: Judge, n_tests: int
+                     ) -> Judgement:
+    fit = fit_candidate(cand, ctx)
+    j = judge(cand.effect, cand.label, fit.effects, fit.n_params, n_tests)
+    j.fit = fit
+    if not fit.success and not fit.effects:
+        j.passed, j.reason = False, "fit failed"
+    return j
+
+
+def _judge_freeform(search: FreeFormSearch, ctx: FitContext, judge: Judge, scale: DataScale,
+                    kind: str, n_tests: int, gp: bool = True) -> Judgement:
+    torque = judge.base_train.stacked("torque")
+    result = search.fit(ctx.train, torque, scale.speed_rms, kind == "cdpr", use_gp=gp)
+    j = judge("unnamed", "free-form", [result.effect] if result.terms else [],
+              result.n_params, n_tests)
+    j.freeform = result
+    if not result.terms:
+        j.passed, j.reason = False, "no term selected"
+    return j
+
+
+def _named_or_unnamed(ff: Judgement, named: list[Judgement], ctx: FitContext,
+                      heldout: list[RunSignals], settings: SelectionSettings,
+                      search: FreeFormSearch, scale: DataScale, kind: str,
+                      n_tests: int) -> Judgement:
+    """The free-form model ranked first: keep the best named candidate whose model the
+    free-form terms do not improve any more (they confirm it), else report unnamed."""
+    for cand in named:
+        inner = FitContext(ctx.nominal, ctx.train, [*ctx.base, *cand.effects], ctx.weights,
+                           ctx.columns)
+        again = _judge_freeform(search.with_terms(ff.freeform), inner,
+                                Judge(inner, heldout, settings), scale, kind, n_tests, gp=False)
+        if not again.passed:
+            cand.confirmed_by = ff.freeform.describe()
+            return cand
+    return ff
+
+
+def _merge(causes: list[Judgement]) -> list[Judgement]:
+    """One entry per effect name (several winches re-identified become one cause)."""
+    out: dict[str, Judgement] = {}
+    for j in causes:
+        if j.effect in out and j.effect == "winch_parameter_error":
+            first = out[j.effect]
+            first.effects = first.effects + j.effects
+            first.channels = sorted(set(first.channels) | set(j.channels))
+            first.n_params += j.n_params
+        else:
+            out.setdefault(j.effect, j)
+    return list(out.values())

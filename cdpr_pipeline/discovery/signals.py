@@ -1,0 +1,119 @@
+"""Measured signals of a run, prepared once for every model the diagnosis compares.
+
+Positions are low-passed and differentiated the way the identification does it
+(:class:`~cdpr_pipeline.identification.regressors.DerivativeFilter`). A model predicts
+the raw measured channels (motor torque, encoder length) from these smooth signals; the
+residual, measured minus predicted, then goes through the *same* parallel low-pass and
+is sampled on the *statistics rows*: trimmed at both ends and thinned to about 2.5 times
+the cut-off, so neighbouring rows carry nearly independent noise and likelihood-ratio
+tests count honest degrees of freedom.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.signal import decimate
+
+from cdpr_pipeline.data.rig import CdprRig, Rig
+from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.identification.regressors import RegressionSettings, _held_torque
+from cdpr_pipeline.sim.plant import Plant
+
+#: statistics rows per cut-off period: rows are thinned to ``2.5 * cutoff_hz``
+ROWS_PER_CUTOFF = 2.5
+#: low-pass of the platform acceleration behind the *static* cable-stretch model. The
+#: length residual carries the motion-capture noise of the position; an acceleration
+#: differentiated from the same noisy position within the same band would correlate
+#: with it (errors in variables) and fake a stretch. Below 3 Hz that shared noise is
+#: negligible (it grows with frequency squared) while the motion passes.
+STRETCH_CUTOFF_HZ = 3.0
+
+
+@dataclass
+class RunSignals:
+    """One run, smooth signals at the full sample rate (``N`` samples, ``n`` winches).
+
+    ``theta, omega, alpha`` are winch angles (from the encoders, nominal radius) or axis
+    positions and their derivatives; ``position, velocity, acceleration`` the filtered
+    platform motion (``cdpr`` only). ``torque`` is the recorded command (held for a
+    sample when the settings say so), ``lengths`` the raw encoder lengths.
+    """
+
+    name: str
+    family: str
+    t: np.ndarray
+    theta: np.ndarray
+    omega: np.ndarray
+    alpha: np.ndarray
+    torque: np.ndarray
+    settings: RegressionSettings
+    position: np.ndarray | None = None
+    velocity: np.ndarray | None = None
+    acceleration: np.ndarray | None = None
+    lengths: np.ndarray | None = None
+    desired: np.ndarray | None = None
+    raw_position: np.ndarray | None = None
+    slow_acceleration: np.ndarray | None = None
+
+    @property
+    def fs(self) -> float:
+        return 1.0 / float(np.median(np.diff(self.t)))
+
+    @property
+    def n(self) -> int:
+        return int(self.torque.shape[1])
+
+    @property
+    def thin(self) -> int:
+        """Extra thinning after the low-pass (1 when the settings decimate already)."""
+        if self.settings.decimate > 1:
+            return 1
+        return max(1, int(self.fs // (ROWS_PER_CUTOFF * self.settings.filter.cutoff_hz)))
+
+    def rows(self, x: np.ndarray) -> np.ndarray:
+        """Parallel-filter ``x`` (N, ...) and sample it on the statistics rows."""
+        filt = self.settings.filter
+        trim = int(round(filt.trim_s * self.fs))
+        if self.settings.decimate > 1:
+            # the protocol's own anti-alias filter and decimation, after trimming
+            return decimate(x[trim:len(x) - trim], int(self.settings.decimate), axis=0,
+                            zero_phase=True)
+        return filt.smooth(x, self.fs)[trim:len(x) - trim:self.thin]
+
+    def row_times(self) -> np.ndarray:
+        """Times of the statistics rows."""
+        trim = int(round(self.settings.filter.trim_s * self.fs))
+        t = self.t[trim:len(self.t) - trim]
+        step = int(self.settings.decimate) if self.settings.decimate > 1 else self.thin
+        return t[::step][: len(self.rows(self.t[:, None]))]
+
+
+def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
+                nominal: Plant | None = None) -> RunSignals:
+    """Prepare one measured run. ``nominal`` (``cdpr``) gives the encoder zero and radius
+    that turn lengths into winch angles."""
+    filt = settings.filter
+    torque = _held_torque(np.asarray(traj.torques, float), settings.zero_order_hold)
+    if isinstance(rig, CdprRig):
+        if nominal is None:
+            nominal = Plant.from_rig(rig)
+        theta_raw = (nominal.home_lengths - traj.lengths) / nominal.drum_radius
+        theta, omega, alpha = filt.derivatives(theta_raw, traj.t)
+        pos, vel, acc = filt.derivatives(traj.position, traj.t)
+        slow = replace(filt, cutoff_hz=min(STRETCH_CUTOFF_HZ, filt.cutoff_hz))
+        slow_acc = slow.derivatives(traj.position, traj.t)[2]
+        return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque,
+                          settings, pos, vel, acc, np.asarray(traj.lengths, float),
+                          traj.desired, np.asarray(traj.position, float), slow_acc)
+    theta, omega, alpha = filt.derivatives(np.asarray(traj.position, float), traj.t)
+    return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque, settings,
+                      desired=traj.desired, raw_position=np.asarray(traj.position, float))
+
+
+def dataset_signals(trajectories: Sequence[Trajectory], rig: Rig,
+                    settings: RegressionSettings) -> list[RunSignals]:
+    nominal = Plant.from_rig(rig) if isinstance(rig, CdprRig) else None
+    return [run_signals(tr, rig, settings, nominal) for tr in trajectories]

@@ -1,0 +1,110 @@
+"""Safe symbolic expressions of winch state: what free-form discovery finds and the
+simulator runs.
+
+An expression is a string in function-call form over the variables ``omega`` (winch or
+axis speed) and ``theta`` (angle or position), e.g. ``mul(abs_(omega), omega)`` or
+``sin_k(theta, 8)``. It is parsed with :mod:`ast` and evaluated only through the
+functions of :data:`FUNCTIONS` (no ``eval``), so a model file cannot run code. The same
+table drives the grammar of the genetic-programming search, so whatever the search can
+write, the simulator can run, and :func:`to_infix` prints it for people.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+VARIABLES = ("omega", "theta")
+
+
+@dataclass(frozen=True)
+class Function:
+    """One building block: ``fn`` on arrays, ``infix`` a format string for people."""
+
+    fn: Callable[..., np.ndarray]
+    infix: str
+
+
+def _gauss(x: np.ndarray, scale: float) -> np.ndarray:
+    return np.exp(-((x / scale) ** 2))
+
+
+FUNCTIONS: dict[str, Function] = {
+    "mul": Function(lambda a, b: a * b, "{0} {1}"),
+    "neg": Function(lambda a: -a, "-{0}"),
+    "abs_": Function(np.abs, "|{0}|"),
+    "sign_": Function(np.sign, "sign({0})"),
+    "square": Function(np.square, "{0}^2"),
+    "pos": Function(lambda a: np.maximum(a, 0.0), "max({0}, 0)"),
+    "negpart": Function(lambda a: np.minimum(a, 0.0), "min({0}, 0)"),
+    "gauss": Function(_gauss, "exp(-({0}/{1})^2)"),
+    "softsign": Function(lambda a, s: np.tanh(a / s), "tanh({0}/{1})"),
+    "sin_k": Function(lambda a, k: np.sin(k * a), "sin({1} {0})"),
+    "cos_k": Function(lambda a, k: np.cos(k * a), "cos({1} {0})"),
+    "one": Function(lambda a: np.ones_like(a), "1"),
+}
+
+
+def _parse(expression: str) -> ast.expr:
+    try:
+        return ast.parse(expression, mode="eval").body
+    except SyntaxError as err:
+        raise ValueError(f"expression {expression!r} is not valid: {err.msg}") from err
+
+
+def evaluate(expression: str, variables: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Value of ``expression`` for arrays ``variables`` (``omega``, ``theta``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> evaluate("mul(abs_(omega), omega)", {"omega": np.array([-2.0, 3.0])})
+    array([-4.,  9.])
+    """
+
+    def walk(node: ast.expr):
+        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)):
+            return float(node.value)
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+            return -walk(node.operand)
+        if isinstance(node, ast.Name):
+            if node.id not in variables:
+                raise ValueError(f"expression {expression!r}: unknown variable {node.id!r}")
+            return np.asarray(variables[node.id], dtype=float)
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
+                and node.func.id in FUNCTIONS and not node.keywords:
+            return FUNCTIONS[node.func.id].fn(*(walk(a) for a in node.args))
+        raise ValueError(f"expression {expression!r}: {ast.unparse(node)!r} is not allowed "
+                         f"(functions: {sorted(FUNCTIONS)}; variables: {list(variables)})")
+
+    value = walk(_parse(expression))
+    reference = next(iter(variables.values()))
+    return np.broadcast_to(value, np.shape(reference)).astype(float)
+
+
+def to_infix(expression: str, subscript: str = "") -> str:
+    """``expression`` written for people; ``subscript`` is appended to variable names.
+
+    Examples
+    --------
+    >>> to_infix("mul(abs_(omega), sin_k(theta, 8))", "2")
+    '|omega2| sin(8 theta2)'
+    """
+
+    def walk(node: ast.expr) -> str:
+        if isinstance(node, ast.Constant):
+            v = node.value
+            return f"{v:g}" if isinstance(v, float) else str(v)
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+            return "-" + walk(node.operand)
+        if isinstance(node, ast.Name):
+            return node.id + subscript
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
+                and node.func.id in FUNCTIONS:
+            return FUNCTIONS[node.func.id].infix.format(*(walk(a) for a in node.args))
+        return ast.unparse(node)
+
+    return walk(_parse(expression))
