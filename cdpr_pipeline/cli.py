@@ -20,6 +20,7 @@ SUBCOMMANDS = {
     "virtual": "cdpr_pipeline.stages.virtual",
     "reconstruct": "cdpr_pipeline.stages.reconstruct",
     "wavelet": "cdpr_pipeline.stages.wavelet",
+    "diagnose": "cdpr_pipeline.stages.diagnose",
 }
 
 USAGE = """usage: cdpr <subcommand> [key=value ...] [-m] [--cfg job] [--help]
@@ -34,6 +35,8 @@ subcommands:
   identify   winch/axis parameters (method=lsm|rls|lms|ga) -> out_dir/identification.json
   reconstruct  Tables IV-V: U* rebuilt on held-out runs (identification_json=PATH)
   virtual    virtual runs from a trained predictor (forecaster=PATH out_dir=DIR)
+  diagnose   what the simulation gets wrong, its cause, the extended model and the gain
+             (data.path=DIR out_dir=OUT -> diagnosis.json, report.html, extended_model.yaml)
   convert    other recordings -> cdpr-measured/1 (format=emps src=PATH out_dir=DIR)
 """
 

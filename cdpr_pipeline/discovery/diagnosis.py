@@ -118,6 +118,7 @@ class Diagnosis:
     sentence: str
     timings: dict[str, float]
     plots: dict[str, Any]
+    extension: list[Effect] = field(default_factory=list)
 
     @property
     def verdict(self) -> str:
@@ -125,7 +126,8 @@ class Diagnosis:
 
     @property
     def effects(self) -> list[Effect]:
-        return list(self.extended.effects) if hasattr(self.extended, "effects") else []
+        """The effects that turn the nominal model into the extended one."""
+        return list(self.extension)
 
     def as_json(self, extended_model_file: str = "extended_model.yaml") -> dict[str, Any]:
         return {
@@ -201,9 +203,10 @@ def describe_cause(j: Judgement, nominal: Model) -> str:
     for e in j.effects:
         if isinstance(e, WinchParameterError):
             c = _winch_change(e, nominal)
+            # a change worth a sentence: 2 % of the value (of F_c for the offset)
+            ref = {k: abs(c["old"]["coulomb" if k == "offset" else k]) for k in c["old"]}
             diffs = [f"{k} {c['old'][k]:.4g} -> {c['new'][k]:.4g}" for k in c["old"]
-                     if abs(c["new"][k] - c["old"][k]) > 0.02 * max(abs(c["old"][k]), 1e-9)
-                     or k == "offset" and abs(c["new"][k] - c["old"][k]) > 1e-3]
+                     if abs(c["new"][k] - c["old"][k]) > 0.02 * max(ref[k], 1e-12)]
             if diffs:
                 parts.append(f"winch {e.cable}: " + ", ".join(diffs))
         else:
@@ -461,7 +464,8 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
                              "t": np.concatenate([s.row_times() for s in held])}
     return Diagnosis(str(dataset.root), rig, train_names, held_names, nominal, extended,
                      selection.causes, selection.steps, found, nominal_metrics,
-                     extended_metrics, gain, validity, closed, blackbox, sentence, clock, plots)
+                     extended_metrics, gain, validity, closed, blackbox, sentence, clock, plots,
+                     list(selection.effects))
 
 
 def summary_sentence(causes: list[Judgement], nominal: Model, gain: dict[str, Any]) -> str:

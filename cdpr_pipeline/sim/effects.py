@@ -192,6 +192,11 @@ class StribeckFriction(Effect):
             -(omega / self.stribeck_velocity) ** 2)
         return np.where(mask, bump * smooth_sign(omega, plant.sign_sharpness), 0.0)
 
+    def describe(self):
+        where = "every winch" if self.cables is None else f"winch(es) {self.cables}"
+        return (f"friction on {where} rises to {self.static_ratio:.2f} x F_c near zero speed "
+                f"(Stribeck velocity {self.stribeck_velocity:.3g})")
+
 
 
 @dataclass
@@ -215,6 +220,12 @@ class AsymmetricViscousFriction(Effect):
     @classmethod
     def draw(cls, rng, n_cables):
         return {**super().draw(rng, n_cables), "direction": int(rng.choice([-1, 1]))}
+
+    def describe(self):
+        where = "every winch" if self.cables is None else f"winch(es) {self.cables}"
+        side = "positive" if self.direction > 0 else "negative"
+        return (f"viscous friction on {where} is {100 * self.ratio:+.0f} % of F_v higher "
+                f"when the speed is {side}")
 
 
 @dataclass
@@ -292,6 +303,10 @@ class DrumRadiusError(Effect):
         return plant.replace(drum_radius=np.where(mask, plant.drum_radius * (1 + self.relative),
                                                   plant.drum_radius))
 
+    def describe(self):
+        where = "every drum" if self.cables is None else f"drum(s) {self.cables}"
+        return f"{where}: radius is {100 * self.relative:+.2f} % off the nominal R"
+
 
 
 @dataclass
@@ -309,6 +324,9 @@ class PayloadMassError(Effect):
     def apply(self, plant):
         return plant.replace(mass=plant.mass * (1.0 + self.relative))
 
+    def describe(self):
+        return f"the platform mass is {100 * self.relative:+.1f} % off the nominal mass"
+
 
 
 @dataclass
@@ -323,6 +341,10 @@ class ActuatorLag(Effect):
 
     def apply(self, plant):
         return plant.replace(actuator_time_constant=float(self.time_constant_s))
+
+    def describe(self):
+        return (f"the drives deliver torque with a first-order lag of "
+                f"{1000 * self.time_constant_s:.1f} ms")
 
 
 

@@ -18,6 +18,7 @@ from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.validation import parse_rig
 from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.lab import LabRun, generate_dataset
+from cdpr_pipeline.sim.model_file import read_model
 
 log = logging.getLogger(__name__)
 
@@ -56,9 +57,19 @@ def effects_from_config(cfg: DictConfig | None, n_cables: int, seed: int) -> lis
 
 
 def simulate(cfg: DictConfig) -> LabRun:
-    """Run the virtual lab as configured and write the dataset and its truth."""
-    rig = rig_from_config(cfg.rig)
-    effects = effects_from_config(cfg.get("effects"), rig.n, cfg.seed)
+    """Run the virtual lab as configured and write the dataset and its truth.
+
+    ``model_file=FILE`` (a ``cdpr-model/1`` file, e.g. a diagnosis's extended_model.yaml)
+    replaces the rig and adds its effects to the configured ones."""
+    if cfg.get("model_file"):
+        rig, effects = read_model(cfg.model_file)
+        if not isinstance(rig, CdprRig):
+            raise ValueError(f"{cfg.model_file}: the virtual lab simulates cable robots only")
+        log.info("model %s: %d effect(s)", cfg.model_file, len(effects))
+        effects += effects_from_config(cfg.get("effects"), rig.n, cfg.seed)
+    else:
+        rig = rig_from_config(cfg.rig)
+        effects = effects_from_config(cfg.get("effects"), rig.n, cfg.seed)
     traj = cfg.trajectory
     sim = cfg.simulator
     return generate_dataset(

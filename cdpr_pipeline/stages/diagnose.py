@@ -1,0 +1,123 @@
+"""``cdpr diagnose data.path=DIR out_dir=OUT``: what the simulation gets wrong, the cause,
+the extended model and the gain (``spec/diagnosis.md``).
+
+Writes ``diagnosis.json``, ``report.html`` and ``extended_model.yaml`` (a ``cdpr-model/1``
+file that ``cdpr simulate model_file=...`` runs) and logs the run to MLflow.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+import hydra
+import numpy as np
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.discovery.diagnosis import (
+    BlackBoxSettings,
+    Diagnosis,
+    DiagnosisSettings,
+    diagnose,
+)
+from cdpr_pipeline.sim.model_file import write_model
+from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
+from cdpr_pipeline.wavelet.split import WaveletSplit
+
+log = logging.getLogger(__name__)
+
+
+def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
+    disc = cfg.discovery
+    blackbox = None
+    if cfg.blackbox.enabled:
+        bb = cfg.blackbox
+        blackbox = BlackBoxSettings(instantiate(bb.model.net), int(bb.window), int(bb.epochs),
+                                    int(bb.max_windows), int(bb.seed))
+    heldout = cfg.split.heldout
+    return DiagnosisSettings(
+        regression=instantiate(cfg.regression),
+        selection=instantiate(disc.selection),
+        freeform=instantiate(disc.freeform) if disc.freeform else None,
+        heldout=list(heldout) if heldout else None,
+        closed_loop=bool(disc.closed_loop),
+        blackbox=blackbox,
+        max_lag=int(disc.max_lag),
+        wavelet=WaveletSplit("db4", int(disc.wavelet_level)),
+        correlation_threshold=float(disc.correlation_threshold),
+    )
+
+
+def _plain(value: Any) -> Any:
+    """JSON-safe: numpy to Python, non-finite floats to null."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        return float(value) if math.isfinite(float(value)) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str) -> dict[str, Path]:
+    """diagnosis.json, report.html and extended_model.yaml in ``out_dir``."""
+    from cdpr_pipeline.discovery.report import render
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = {"json": out_dir / "diagnosis.json", "html": out_dir / "report.html",
+             "model": out_dir / "extended_model.yaml"}
+    record = d.as_json(paths["model"].name)
+    record["dataset"] = str(dataset_path)
+    paths["json"].write_text(json.dumps(_plain(record), indent=1))
+    paths["html"].write_text(render(d))
+    write_model(paths["model"], d.rig, d.effects, source=f"cdpr diagnose of {dataset_path}",
+                verdict=d.verdict, summary=d.sentence)
+    return paths
+
+
+def run_diagnosis(cfg: DictConfig) -> Diagnosis:
+    """Load, diagnose, write, log."""
+    data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
+                        min_samples=cfg.data.min_samples)
+    d = diagnose(data, settings_from_config(cfg))
+    paths = write_outputs(d, Path(cfg.out_dir), cfg.data.path)
+    log.info("verdict: %s", d.verdict)
+    log.info("%s", d.sentence)
+    logger = make_logger(cfg.tracking.experiment, run_name=f"diagnose-{Path(cfg.data.path).name}",
+                         uri=cfg.tracking.uri, tags={"cdpr_task": "diagnose",
+                                                     "verdict": d.verdict})
+    with finished_or_failed(logger):
+        logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
+        metrics = {"gain/before": d.gain["before"], "gain/after": d.gain["after"],
+                   "gain/relative": d.gain["relative"], "causes/count": len(d.causes),
+                   "time/total_s": d.timings["total"]}
+        for part in ("train", "heldout"):
+            for sig, m in d.nominal_metrics["by_signal"].items():
+                metrics[f"nominal/{part}/{sig}/rmse"] = m[part]["rmse"]
+                metrics[f"extended/{part}/{sig}/rmse"] = \
+                    d.extended_metrics["by_signal"][sig][part]["rmse"]
+            metrics[f"nominal/{part}/relative_error_pct"] = \
+                d.nominal_metrics[part]["relative_error_pct"]
+            metrics[f"extended/{part}/relative_error_pct"] = \
+                d.extended_metrics[part]["relative_error_pct"]
+        log_metrics(logger.experiment, logger.run_id, metrics)
+        for p in paths.values():
+            logger.experiment.log_artifact(logger.run_id, str(p))
+    return d
+
+
+@hydra.main(config_path=CONFIG_DIR, config_name="diagnose", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    run_diagnosis(cfg)
