@@ -177,13 +177,16 @@ class GrammarGP:
         Tree height limit (bloat control).
     top : int
         Distinct best terms returned.
+    patience : int
+        Generations without improvement of the best term before stopping.
     seed : int
     """
 
-    population: int = 120
-    generations: int = 15
-    max_height: int = 5
+    population: int = 150
+    generations: int = 60
+    max_height: int = 6
     top: int = 8
+    patience: int = 12
     seed: int = 0
 
     def _pset(self, speed_rms: float, angles: bool):
@@ -232,21 +235,32 @@ class GrammarGP:
         toolbox.register("individual", tools.initIterate, creator.FreeFormTree, toolbox.expr)
         toolbox.register("population", tools.initRepeat, list, toolbox.individual)
         toolbox.register("select", tools.selTournament, tournsize=3)
-        toolbox.register("mate", gp.cxOnePoint)
+        toolbox.register("mate", _one_point_crossover)
         toolbox.register("expr_mut", gp.genGrow, min_=0, max_=2)
-        toolbox.register("mutate", gp.mutUniform, expr=toolbox.expr_mut, pset=pset)
+        mutations = (partial(gp.mutUniform, expr=toolbox.expr_mut, pset=pset),
+                     partial(gp.mutNodeReplacement, pset=pset),
+                     partial(gp.mutInsert, pset=pset), gp.mutShrink)
+        toolbox.register("mutate", lambda ind: random.choice(mutations)(ind))
         limit = gp.staticLimit(key=operator.attrgetter("height"), max_value=self.max_height)
         toolbox.decorate("mate", limit)
         toolbox.decorate("mutate", limit)
 
         total = float(np.sum(residual ** 2)) or 1.0
         cache: dict[str, float] = {}
+        # fitness ranks terms on the winch state at the row times, unfiltered: an order
+        # of magnitude cheaper than the parallel filter, and the terms are smooth
+        # functions of smooth signals; the final sparse regression filters properly
+        rows = [s.row_index() for s in signals]
+        state = {"omega": np.concatenate([s.omega[i] for s, i in zip(signals, rows,
+                                                                      strict=True)]),
+                 "theta": np.concatenate([s.theta[i] for s, i in zip(signals, rows,
+                                                                     strict=True)])}
 
         def fitness(ind) -> tuple[float]:
             expr = self.expression(ind)
             if expr not in cache:
                 try:
-                    col = term_columns([expr], signals)[..., 0]
+                    col = evaluate(expr, state)
                 except (ValueError, FloatingPointError, ZeroDivisionError):
                     cache[expr] = 0.0
                 else:
@@ -263,8 +277,9 @@ class GrammarGP:
         pop = toolbox.population(n=self.population)
         for ind in pop:
             ind.fitness.values = fitness(ind)
+        best, stalled = -np.inf, 0
         for _ in range(self.generations):
-            if time.perf_counter() - start > time_budget_s:
+            if time.perf_counter() - start > time_budget_s or stalled >= self.patience:
                 break
             offspring = [toolbox.clone(i) for i in toolbox.select(pop, len(pop))]
             for a, b in zip(offspring[::2], offspring[1::2], strict=False):
@@ -275,12 +290,49 @@ class GrammarGP:
                 if random.random() < 0.3:
                     toolbox.mutate(m)
                     del m.fitness.values
-            for ind in offspring:
+            # diversity: a duplicate expression is replaced by a newcomer, so the
+            # population cannot collapse onto one good term and stop exploring
+            seen: set[str] = set()
+            for k, ind in enumerate(offspring):
+                expr = self.expression(ind)
+                if expr in seen:
+                    offspring[k] = ind = toolbox.individual()
+                seen.add(expr)
                 if not ind.fitness.valid:
                     ind.fitness.values = fitness(ind)
             pop = tools.selBest(pop, 2) + offspring[:-2]       # elitism
-        ranked = sorted(cache.items(), key=lambda kv: -kv[1])
-        return ranked[: self.top]
+            top = max(cache.values())
+            best, stalled = (top, 0) if top > best + 1e-6 else (best, stalled + 1)
+        # best first; among equals the shortest (bloat carries no information)
+        ranked = sorted(cache.items(), key=lambda kv: (-round(kv[1], 6), len(kv[0])))
+        distinct: list[tuple[str, float]] = []
+        for expr, share in ranked:
+            if not any(abs(share - s) < 1e-9 for _, s in distinct[-1:]):
+                distinct.append((expr, share))
+            if len(distinct) == self.top:
+                break
+        return distinct
+
+
+def _one_point_crossover(a, b):
+    """Swap random subtrees of the same grammar type. Written out (rather than DEAP's
+    ``cxOnePoint``) so the type is chosen from a *sorted* list: a set of classes iterates
+    in an order that changes between processes, and the search must be reproducible."""
+    if len(a) < 2 or len(b) < 2:
+        return a, b
+    where_a: dict[type, list[int]] = {}
+    where_b: dict[type, list[int]] = {}
+    for tree, where in ((a, where_a), (b, where_b)):
+        for i, node in enumerate(tree[1:], 1):
+            where.setdefault(node.ret, []).append(i)
+    common = sorted(set(where_a) & set(where_b), key=lambda t: t.__name__)
+    if not common:
+        return a, b
+    kind = random.choice(common)
+    sa = a.searchSubtree(random.choice(where_a[kind]))
+    sb = b.searchSubtree(random.choice(where_b[kind]))
+    a[sa], b[sb] = b[sb], a[sa]
+    return a, b
 
 
 def _strip_calls(text: str, names: Sequence[str]) -> str:
@@ -332,7 +384,7 @@ class FreeFormSearch:
 
     gp: GrammarGP | None = field(default_factory=GrammarGP)
     regression: L0Regression = field(default_factory=L0Regression)
-    time_budget_s: float = 10.0
+    time_budget_s: float = 5.0
     harmonics: int = 16
     extra_terms: list[str] = field(default_factory=list)
 

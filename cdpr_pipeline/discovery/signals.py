@@ -83,12 +83,16 @@ class RunSignals:
                             zero_phase=True)
         return filt.smooth(x, self.fs)[trim:len(x) - trim:self.thin]
 
+    def row_index(self) -> np.ndarray:
+        """Full-rate sample index of every statistics row."""
+        trim = int(round(self.settings.filter.trim_s * self.fs))
+        step = int(self.settings.decimate) if self.settings.decimate > 1 else self.thin
+        idx = np.arange(trim, len(self.t) - trim, step)
+        return idx[: len(self.rows(self.t[:, None]))]
+
     def row_times(self) -> np.ndarray:
         """Times of the statistics rows."""
-        trim = int(round(self.settings.filter.trim_s * self.fs))
-        t = self.t[trim:len(self.t) - trim]
-        step = int(self.settings.decimate) if self.settings.decimate > 1 else self.thin
-        return t[::step][: len(self.rows(self.t[:, None]))]
+        return self.t[self.row_index()]
 
 
 def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
