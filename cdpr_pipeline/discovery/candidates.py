@@ -15,7 +15,7 @@ re-fit is linear and solved exactly inside every evaluation (variable projection
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -31,6 +31,10 @@ from cdpr_pipeline.sim.effects import (
     StribeckFriction,
     WinchParameterError,
 )
+
+
+#: effects that act on the winch side only
+TORQUE = frozenset({"torque"})
 
 
 @dataclass(frozen=True)
@@ -62,6 +66,9 @@ class Candidate:
         Typical parameter sizes (conditions the optimiser).
     refit_winches : bool
         Re-identify every winch's I_m, F_v, F_c, d alongside (adds ``4 n`` parameters).
+    affects : set of str
+        Channels the effect can change (the others are not recomputed while fitting;
+        with elastic cables in the model, tension changes reach the lengths too).
     linear : bool
         Residuals are linear in the parameters (one Gauss-Newton step is exact).
     """
@@ -76,6 +83,7 @@ class Candidate:
     refit_winches: bool = False
     linear: bool = False
     names: list[str] = field(default_factory=list)
+    affects: frozenset[str] = frozenset({"torque", "length"})
 
     @property
     def n_params(self) -> int:
@@ -96,7 +104,8 @@ def winch_parameter_error(rig: Rig, scale: DataScale) -> list[Candidate]:
                                                     float(x[2]), float(x[3]))],
             [_arr(1, 1, 1, 0)], _arr(0.0, -np.inf, -np.inf, -np.inf),
             _arr(np.inf, np.inf, np.inf, np.inf), _arr(0.1, 0.1, 0.1, 0.1), linear=True,
-            names=["inertia_scale", "viscous_scale", "coulomb_scale", "offset_delta"]))
+            names=["inertia_scale", "viscous_scale", "coulomb_scale", "offset_delta"],
+            affects=TORQUE))
     return out
 
 
@@ -107,14 +116,15 @@ def stribeck_friction(rig: Rig, scale: DataScale) -> list[Candidate]:
         lambda x: [StribeckFriction(float(x[0]), float(x[1]))],
         [_arr(1.5, f * w) for f in (0.05, 0.2, 0.6)], _arr(0.0, 0.005 * w),
         _arr(20.0, 5.0 * w), _arr(0.5, 0.2 * w),
-        names=["static_ratio", "stribeck_velocity"])]
+        names=["static_ratio", "stribeck_velocity"], affects=TORQUE)]
 
 
 def asymmetric_viscous_friction(rig: Rig, scale: DataScale) -> list[Candidate]:
     return [Candidate(
         "asymmetric_viscous_friction", f"asymmetric_viscous_friction[{word}]",
         lambda x, d=direction: [AsymmetricViscousFriction(float(x[0]), d)],
-        [_arr(0.0)], _arr(-0.95), _arr(10.0), _arr(0.3), linear=True, names=["ratio"])
+        [_arr(0.0)], _arr(-0.95), _arr(10.0), _arr(0.3), linear=True, names=["ratio"],
+        affects=TORQUE)
         for direction, word in ((1, "reeling in" if scale.kind == "cdpr" else "positive"),
                                 (-1, "paying out" if scale.kind == "cdpr" else "negative"))]
 
@@ -124,7 +134,7 @@ def actuator_lag(rig: Rig, scale: DataScale) -> list[Candidate]:
         "actuator_lag", "actuator_lag",
         lambda x: [ActuatorLag(float(x[0]))] if x[0] > 0 else [],
         [_arr(0.002), _arr(0.01)], _arr(0.0), _arr(0.2), _arr(0.005),
-        names=["time_constant_s"])]
+        names=["time_constant_s"], affects=TORQUE)]
 
 
 def payload_mass_error(rig: Rig, scale: DataScale) -> list[Candidate]:
@@ -139,7 +149,8 @@ def cable_elasticity(rig: Rig, scale: DataScale) -> list[Candidate]:
     return [Candidate(
         "cable_elasticity", "cable_elasticity",
         lambda x: [CableElasticity(ea_n=1.0 / float(x[0]))] if x[0] > 0 else [],
-        [_arr(1e-6)], _arr(0.0), _arr(1e-2), _arr(1e-5), names=["compliance_per_n"])]
+        [_arr(1e-6)], _arr(0.0), _arr(1e-2), _arr(1e-5), names=["compliance_per_n"],
+        affects=frozenset({"length"}))]
 
 
 def anchor_offset(rig: Rig, scale: DataScale) -> list[Candidate]:
@@ -192,6 +203,6 @@ def candidates_for(rig: Rig, scale: DataScale, names: list[str] | None = None,
         out.extend(variants)
         if refit_winches and name in REFIT_WITH:
             for v in variants:
-                out.append(Candidate(v.effect, v.label + "+winches", v.build, v.starts,
-                                     v.lower, v.upper, v.x_scale, True, v.linear, v.names))
+                out.append(replace(v, label=v.label + "+winches", refit_winches=True,
+                                   affects=v.affects | TORQUE))
     return out

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from cdpr_pipeline.discovery.candidates import Candidate
-from cdpr_pipeline.discovery.residuals import Model, Residuals, residuals
+from cdpr_pipeline.discovery.residuals import Model, Residuals, residual_rows, residuals
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.sim.effects import Effect, WinchParameterError
 from cdpr_pipeline.sim.plant import smooth_sign
@@ -49,11 +49,26 @@ class FitContext:
             self.columns = np.concatenate([winch_columns(s, self.nominal) for s in self.train])
         # per-winch projectors of the linear winch re-fit (variable projection)
         self._pinv = [np.linalg.pinv(self.columns[:, i, :]) for i in range(self.columns.shape[1])]
+        self._base_by_run = self.residuals([]).by_run if self.weights else []
 
     def residuals(self, effects: Sequence[Effect], signals: Sequence[RunSignals] | None = None
                   ) -> Residuals:
         model = self.nominal.with_effects([*self.base, *effects])
         return residuals(model, self.nominal, self.train if signals is None else signals)
+
+    def training_residuals(self, effects: Sequence[Effect], channels: frozenset[str]
+                           ) -> Residuals:
+        """Training residuals, recomputing only ``channels`` (the rest are the base
+        model's); every channel when the model has elastic cables (tension changes
+        reach the lengths)."""
+        model = self.nominal.with_effects([*self.base, *effects])
+        if getattr(model, "elastic", False) or not self._base_by_run:
+            return residuals(model, self.nominal, self.train)
+        out = []
+        for sig, base in zip(self.train, self._base_by_run, strict=True):
+            r = residual_rows(model, self.nominal, sig, channels)
+            out.append({c: r.get(c, base[c]) for c in base})
+        return Residuals([s.name for s in self.train], out)
 
     def winch_refit(self, torque_residual: np.ndarray) -> np.ndarray:
         """Least-squares winch parameter changes (n, 4) that best explain the stacked
@@ -93,7 +108,8 @@ def fit_candidate(candidate: Candidate, ctx: FitContext) -> Fit:
     """Best of the candidate's starts (bounded trust-region least squares)."""
 
     def fun(x: np.ndarray) -> np.ndarray:
-        return ctx.vector(ctx.residuals(candidate.build(x)), candidate.refit_winches)
+        res = ctx.training_residuals(candidate.build(x), candidate.affects)
+        return ctx.vector(res, candidate.refit_winches)
 
     best = None
     for x0 in candidate.starts:

@@ -23,7 +23,7 @@ import ast
 import operator
 import random
 import time
-from functools import partial
+from functools import lru_cache, partial
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
@@ -216,9 +216,7 @@ class GrammarGP:
     @staticmethod
     def expression(tree) -> str:
         """A DEAP tree as an expression of :mod:`cdpr_pipeline.sim.expressions`."""
-        # the grammar's identity wrappers carry types only
-        text = _strip_calls(str(tree), ("ident", "scale", "harmonic", "angle"))
-        return text.replace("unit", "one(omega)")
+        return _expression(str(tree))
 
     def search(self, signals: Sequence[RunSignals], residual: np.ndarray, speed_rms: float,
                angles: bool, time_budget_s: float) -> list[tuple[str, float]]:
@@ -312,6 +310,13 @@ class GrammarGP:
             if len(distinct) == self.top:
                 break
         return distinct
+
+
+@lru_cache(maxsize=65536)
+def _expression(text: str) -> str:
+    # the grammar's identity wrappers carry types only
+    text = _strip_calls(text, ("ident", "scale", "harmonic", "angle"))
+    return text.replace("unit", "one(omega)")
 
 
 def _one_point_crossover(a, b):

@@ -50,14 +50,19 @@ def channel_names(channel: str, n: int) -> list[str]:
     return [f"{CHANNEL_PREFIX[channel]}{i + 1}" for i in range(n)]
 
 
-def predict(model: Model, nominal: Model, sig: RunSignals) -> dict[str, np.ndarray]:
-    """Full-rate predictions (N, n) of every channel for the measured motion ``sig``."""
+def predict(model: Model, nominal: Model, sig: RunSignals,
+            channels: frozenset[str] | None = None) -> dict[str, np.ndarray]:
+    """Full-rate predictions (N, n) of every channel (or of ``channels``) for the
+    measured motion ``sig``."""
     if isinstance(model, Plant):
+        load = _load(model, sig, sig.acceleration)
         out = model.inverse_dynamics(sig.position, sig.acceleration, sig.theta, sig.omega,
-                                     sig.alpha, sig.t)
+                                     sig.alpha, sig.t, load=load)
+        if channels is not None and "length" not in channels:
+            return {"torque": out["torque"]}
         tension = out["tension"]
         if model.elastic:   # quasi-static stretch, from the slow acceleration (see signals)
-            tension = model.load_tensions(sig.position, sig.slow_acceleration)[0]
+            tension = _load(model, sig, sig.slow_acceleration)[0]
         reeled = model.reeled_length(out["geometric_length"], tension)
         theta = model.winch_angle_from_length(reeled)
         return {"torque": out["torque"],
@@ -65,10 +70,24 @@ def predict(model: Model, nominal: Model, sig: RunSignals) -> dict[str, np.ndarr
     return {"torque": model.inverse_dynamics(sig.theta, sig.omega, sig.alpha, sig.t)["torque"]}
 
 
-def residual_rows(model: Model, nominal: Model, sig: RunSignals) -> dict[str, np.ndarray]:
+def _load(model: Plant, sig: RunSignals, acceleration: np.ndarray):
+    """:meth:`Plant.load_tensions` of a run, memoised on the run: most candidates leave
+    geometry and mass alone, and the per-sample solves are the costliest part of a fit."""
+    key = (model.anchors.tobytes(), float(model.mass), float(model.gravity), id(acceleration))
+    if key not in sig.cache:
+        if len(sig.cache) > 64:
+            sig.cache.clear()
+        sig.cache[key] = model.load_tensions(sig.position, acceleration)
+    return sig.cache[key]
+
+
+def residual_rows(model: Model, nominal: Model, sig: RunSignals,
+                  channels: frozenset[str] | None = None) -> dict[str, np.ndarray]:
     """Measured minus predicted, parallel-filtered, on the statistics rows (rows, n)."""
-    pred = predict(model, nominal, sig)
-    out = {"torque": sig.rows(sig.torque - pred["torque"])}
+    pred = predict(model, nominal, sig, channels)
+    out = {}
+    if channels is None or "torque" in channels:
+        out["torque"] = sig.rows(sig.torque - pred["torque"])
     if "length" in pred:
         r = sig.rows(sig.lengths - pred["length"])
         out["length"] = r - r.mean(axis=0)      # the encoder zero is not the model's

@@ -218,13 +218,14 @@ class Plant:
 
     def inverse_dynamics(self, position: np.ndarray, acceleration: np.ndarray,
                          theta: np.ndarray, omega: np.ndarray, alpha: np.ndarray,
-                         t: np.ndarray) -> dict[str, np.ndarray]:
+                         t: np.ndarray, load: tuple | None = None) -> dict[str, np.ndarray]:
         """Motor torque commands (N, n) that make this plant follow measured motion:
         platform ``position``/``acceleration`` (N, 3), winch angle, speed and acceleration
         (N, n) on times ``t``. Tensions come from the platform dynamics, the winch side
         is ``u = R t + I theta'' + friction``, and an actuator lag is inverted last.
-        Also returns the tensions and geometric lengths it used."""
-        tension, g, _ = self.load_tensions(position, acceleration)
+        Also returns the tensions and geometric lengths it used. ``load`` is
+        :meth:`load_tensions` of the same motion, when the caller has it already."""
+        tension, g, _ = load if load is not None else self.load_tensions(position, acceleration)
         drum = self.drum_radius * tension + self.winch.inertia * alpha \
             + self.friction_torque(theta, omega)
         return {"torque": commanded_torque(drum, t, self.actuator_time_constant),
