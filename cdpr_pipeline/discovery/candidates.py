@@ -114,7 +114,8 @@ def stribeck_friction(rig: Rig, scale: DataScale) -> list[Candidate]:
     return [Candidate(
         "stribeck_friction", "stribeck_friction",
         lambda x: [StribeckFriction(float(x[0]), float(x[1]))],
-        [_arr(1.5, f * w) for f in (0.05, 0.2, 0.6)], _arr(0.0, 0.005 * w),
+        # friction *rises* at low speed: a ratio below one is another effect, not this one
+        [_arr(1.5, f * w) for f in (0.05, 0.2, 0.6)], _arr(1.0, 0.005 * w),
         _arr(20.0, 5.0 * w), _arr(0.5, 0.2 * w),
         names=["static_ratio", "stribeck_velocity"], affects=TORQUE)]
 

@@ -268,7 +268,7 @@ class GrammarGP:
                     share = float(np.sum(np.where(den > 0, num / np.where(den > 0, den, 1), 0))
                                   / total)
                     cache[expr] = share if np.isfinite(share) else 0.0
-            return (cache[expr] - 1e-4 * len(ind),)   # parsimony pressure
+            return (cache[expr] - 1e-3 * len(ind),)   # parsimony pressure
 
         random.seed(self.seed)
         start = time.perf_counter()
@@ -310,6 +310,13 @@ class GrammarGP:
             if len(distinct) == self.top:
                 break
         return distinct
+
+
+def _nodes(expression: str) -> int:
+    """Size of an expression: functions, variables and constants (every function name
+    and variable is an ``ast.Name``)."""
+    return sum(isinstance(n, (ast.Name, ast.Constant))
+               for n in ast.walk(ast.parse(expression, mode="eval")))
 
 
 @lru_cache(maxsize=65536)
@@ -385,12 +392,15 @@ class FreeFormSearch:
         Wall-clock budget of the GP.
     harmonics : int
         Angle harmonics in the fixed library.
+    max_nodes : int
+        Largest GP term (functions, variables and constants) admitted to the library.
     """
 
     gp: GrammarGP | None = field(default_factory=GrammarGP)
     regression: L0Regression = field(default_factory=L0Regression)
     time_budget_s: float = 5.0
     harmonics: int = 16
+    max_nodes: int = 8
     extra_terms: list[str] = field(default_factory=list)
 
     def with_terms(self, result: FreeFormResult) -> FreeFormSearch:
@@ -406,6 +416,8 @@ class FreeFormSearch:
         found: list[tuple[str, float]] = []
         if use_gp and self.gp is not None and self.time_budget_s > 0:
             found = self.gp.search(signals, residual, speed_rms, angles, self.time_budget_s)
+            # a term a person can read: bloated trees explain noise and nothing else
+            found = [(e, v) for e, v in found if _nodes(e) <= self.max_nodes]
             library += [e for e, _ in found if e not in library]
         X = term_columns(library, signals)
         terms = []

@@ -203,50 +203,116 @@ def _data_scale(signals: Sequence[RunSignals], kind: str) -> DataScale:
     return DataScale(float(np.sqrt(np.mean(omega ** 2))) or 1.0, omega.shape[1], kind)
 
 
+@dataclass
+class _Search:
+    """What the forward passes of one selection share."""
+
+    nominal: Model
+    train: list[RunSignals]
+    heldout: list[RunSignals]
+    settings: SelectionSettings
+    freeform: FreeFormSearch | None
+    scale: DataScale
+    kind: str
+    log: Any = None
+    columns: np.ndarray | None = None
+    steps: list[list[Judgement]] = field(default_factory=list)
+
+    def context(self, kept: list[Effect]) -> tuple[FitContext, Judge]:
+        base = FitContext(self.nominal, self.train, kept, {}, self.columns)
+        self.columns = base.columns
+        base_res = base.residuals([])
+        weights = {c: 1.0 / max(base_res.rms(c), 1e-300) for c in base_res.channels}
+        ctx = FitContext(self.nominal, self.train, kept, weights, self.columns)
+        return ctx, Judge(ctx, self.heldout, self.settings)
+
+    def forward(self, kept: list[Effect], candidates: list[Candidate], freeform: bool,
+                max_steps: int) -> list[Judgement]:
+        """Add the best passing candidate (by BIC) until none passes."""
+        causes: list[Judgement] = []
+        for _ in range(max_steps):
+            ctx, judge = self.context(kept)
+            n_tests = len(candidates) + bool(freeform and self.freeform)
+            step = [_judge_candidate(c, ctx, judge, n_tests) for c in candidates]
+            if freeform and self.freeform is not None:
+                step.append(_judge_freeform(self.freeform, ctx, judge, self.scale,
+                                            self.kind, n_tests))
+            self.steps.append(step)
+            self._log(step)
+            passed = sorted((j for j in step if j.passed), key=lambda j: -j.bic_drop)
+            if not passed:
+                break
+            best = passed[0]
+            kept = kept + best.effects
+            causes.append(best)
+            freeform = freeform and best.effect != "unnamed"    # one free-form part
+            # the same variant again adds nothing (winches are re-identified one by one)
+            candidates = [c for c in candidates if c.label != best.label
+                          or best.effect == "winch_parameter_error"]
+        return causes
+
+    def refit(self, judgement: Judgement, kept: list[Effect], n_tests: int) -> Judgement:
+        """The same candidate (or free-form library) re-fitted on top of ``kept``."""
+        ctx, judge = self.context(kept)
+        if judgement.freeform is not None:
+            search = self.freeform.with_terms(judgement.freeform)
+            return _judge_freeform(search, ctx, judge, self.scale, self.kind, n_tests,
+                                   gp=False)
+        return _judge_candidate(judgement.fit.candidate, ctx, judge, n_tests)
+
+    def _log(self, step: list[Judgement]) -> None:
+        if self.log:
+            for j in sorted(step, key=lambda j: -j.bic_drop)[:6]:
+                self.log.info("  %-48s LR %10.1f BIC %+10.1f gain %6.1f %% %s", j.label,
+                              j.lr, j.bic_drop, 100 * j.heldout_gain,
+                              "PASS" if j.passed else j.reason)
+
+
+def _effects(causes: Sequence[Judgement]) -> list[Effect]:
+    return [e for c in causes for e in c.effects]
+
+
 def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[RunSignals],
                   settings: SelectionSettings, freeform: FreeFormSearch | None,
                   log=None) -> Selection:
-    """Forward selection of causes (see the module docstring)."""
+    """Forward selection of causes, then the named-replacement check (module docstring).
+
+    1. Forward selection over named candidates and the free-form search.
+    2. If it kept an unnamed part: forward selection over *named* candidates only on top
+       of the named causes, then the free-form terms again on top of all of them. If
+       they add nothing the named causes explain the discrepancy (the free-form terms
+       confirm them). Otherwise the unnamed part stays, and of the named causes added
+       in 2. only those that still pass on top of it are kept: a candidate that merely
+       mimics part of an unnamed effect never gets to name it.
+    """
     kind = "axes" if not hasattr(nominal, "anchors") else "cdpr"
-    scale = _data_scale(train, kind)
-    candidates = candidates_for(rig, scale, settings.effects, settings.refit_winches)
-    kept: list[Effect] = []
-    causes: list[Judgement] = []
-    steps: list[list[Judgement]] = []
-    columns = None
-    for _ in range(settings.max_causes):
-        base = FitContext(nominal, train, kept, {})
-        base_res = base.residuals([])
-        weights = {c: 1.0 / max(base_res.rms(c), 1e-300) for c in base_res.channels}
-        ctx = FitContext(nominal, train, kept, weights, columns)
-        columns = ctx.columns
-        judge = Judge(ctx, heldout, settings)
-        n_tests = len(candidates) + (freeform is not None)
-        step = [_judge_candidate(c, ctx, judge, n_tests) for c in candidates]
-        ff = None
-        if freeform is not None:
-            ff = _judge_freeform(freeform, ctx, judge, scale, kind, n_tests)
-            step.append(ff)
-        steps.append(step)
-        passed = sorted((j for j in step if j.passed), key=lambda j: -j.bic_drop)
-        if log:
-            for j in sorted(step, key=lambda j: -j.bic_drop)[:6]:
-                log.info("  %-48s LR %10.1f BIC %+10.1f gain %6.1f %% %s", j.label, j.lr,
-                         j.bic_drop, 100 * j.heldout_gain, "PASS" if j.passed else j.reason)
-        if not passed:
-            break
-        best = passed[0]
-        if best is ff:
-            best = _named_or_unnamed(ff, [j for j in passed if j is not ff], ctx, heldout,
-                                     settings, freeform, scale, kind, n_tests)
-        elif ff is not None and ff.passed:
-            best.confirmed_by = ff.freeform.describe()
-        kept = kept + best.effects
-        causes.append(best)
-        # a further cause needs its own discovery; the same variant again adds nothing
-        candidates = [c for c in candidates if c.label != best.label
-                      or best.effect == "winch_parameter_error"]
-    return Selection(_merge(causes), steps, kept)
+    search = _Search(nominal, train, heldout, settings, freeform, _data_scale(train, kind),
+                     kind, log)
+    candidates = candidates_for(rig, search.scale, settings.effects, settings.refit_winches)
+    causes = search.forward([], candidates, freeform is not None, settings.max_causes)
+    unnamed = [c for c in causes if c.effect == "unnamed"]
+    if unnamed:
+        named = [c for c in causes if c.effect != "unnamed"]
+        taken = {c.label for c in named if c.effect != "winch_parameter_error"}
+        rest = [c for c in candidates if c.label not in taken]
+        extra = search.forward(_effects(named), rest, False,
+                               max(1, settings.max_causes - len(named)))
+        n_tests = len(rest) + 1
+        again = search.refit(unnamed[0], _effects(named + extra), n_tests)
+        if not again.passed:
+            for c in extra:
+                c.confirmed_by = unnamed[0].freeform.describe()
+            causes = named + extra
+        else:
+            keep = []
+            for c in extra:
+                others = [o for o in extra if o is not c]
+                check = search.refit(c, _effects(named + others) + again.effects, n_tests)
+                if check.passed:
+                    keep.append(check)
+            causes = named + [unnamed[0]] + keep
+    causes = sorted(causes, key=lambda c: -c.bic_drop)
+    return Selection(_merge(causes), search.steps, _effects(causes))
 
 
 def _judge_candidate(cand: Candidate, ctx: FitContext, judge: Judge, n_tests: int
@@ -269,23 +335,6 @@ def _judge_freeform(search: FreeFormSearch, ctx: FitContext, judge: Judge, scale
     if not result.terms:
         j.passed, j.reason = False, "no term selected"
     return j
-
-
-def _named_or_unnamed(ff: Judgement, named: list[Judgement], ctx: FitContext,
-                      heldout: list[RunSignals], settings: SelectionSettings,
-                      search: FreeFormSearch, scale: DataScale, kind: str,
-                      n_tests: int) -> Judgement:
-    """The free-form model ranked first: keep the best named candidate whose model the
-    free-form terms do not improve any more (they confirm it), else report unnamed."""
-    for cand in named:
-        inner = FitContext(ctx.nominal, ctx.train, [*ctx.base, *cand.effects], ctx.weights,
-                           ctx.columns)
-        again = _judge_freeform(search.with_terms(ff.freeform), inner,
-                                Judge(inner, heldout, settings), scale, kind, n_tests, gp=False)
-        if not again.passed:
-            cand.confirmed_by = ff.freeform.describe()
-            return cand
-    return ff
 
 
 def _merge(causes: list[Judgement]) -> list[Judgement]:
