@@ -32,7 +32,6 @@ from cdpr_pipeline.sim.effects import (
     WinchParameterError,
 )
 
-
 #: effects that act on the winch side only
 TORQUE = frozenset({"torque"})
 

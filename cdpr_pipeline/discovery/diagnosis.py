@@ -33,7 +33,6 @@ from cdpr_pipeline.discovery.selection import Judgement, SelectionSettings, sele
 from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
 from cdpr_pipeline.discovery.validity import (
     block_bootstrap,
-    correlation,
     correlation_tests,
     ljung_box_pvalue,
     split_blocks,

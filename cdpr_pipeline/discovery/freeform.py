@@ -23,9 +23,9 @@ import ast
 import operator
 import random
 import time
-from functools import lru_cache, partial
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import lru_cache, partial
 
 import numpy as np
 

@@ -104,7 +104,7 @@ def _validity_plot(d: Diagnosis) -> str:
     names = ("ee", "ue", "e_eu", "u2e", "u2e2")
     fig, axes = plt.subplots(1, 5, figsize=(12, 2.6), sharey=True)
     for ax, name in zip(axes, names, strict=True):
-        for k, (label, res) in enumerate((("before", before), ("after", after))):
+        for k, res in enumerate((before, after)):
             t = res[name]
             ax.bar([k], [t["max_abs"]], color="C3" if not t["passed"] else "C2",
                    alpha=0.8)
@@ -216,5 +216,6 @@ def render(d: Diagnosis) -> str:
                      f"residual explains {100 * bb['heldout_explained_share_blackbox']:.1f} % "
                      "of it on held-out runs; the named physics explains "
                      f"{100 * bb['heldout_explained_share_physics']:.1f} %.</p>")
-    parts.append(f"<p class='small'>Timings (s): {html.escape(str({k: round(v, 1) for k, v in d.timings.items()}))}</p></body></html>")
+    timings = {k: round(v, 1) for k, v in d.timings.items()}
+    parts.append(f"<p class='small'>Timings (s): {html.escape(str(timings))}</p></body></html>")
     return "\n".join(parts)

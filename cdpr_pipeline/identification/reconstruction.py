@@ -22,7 +22,6 @@ from cdpr_pipeline.models.module import ForecastModule
 def _inputs(reg: WinchRegression, theta: np.ndarray) -> np.ndarray:
     """Per row: every winch's regressors but the constant (``a, b, c``) and the physical
     model's ``U*``."""
-    n = reg.n
     return np.concatenate([reg.phi[..., :-1].reshape(len(reg), -1), reg.predict(theta)],
                           axis=1)
 

@@ -1,0 +1,44 @@
+"""Virtual-lab datasets with hidden effects, simulated in memory for diagnosis tests.
+
+Seeds are drawn at random (``CDPR_TEST_SEED`` fixes them) and printed on failure, so a
+failing draw can be replayed; magnitudes come from each effect's documented ranges.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+
+import numpy as np
+
+from cdpr_pipeline.config import compose_config
+from cdpr_pipeline.data.io import Dataset
+from cdpr_pipeline.sim.effects import Effect
+from cdpr_pipeline.sim.lab import simulate_lab
+
+
+def draw_seed() -> int:
+    return int(os.environ.get("CDPR_TEST_SEED", secrets.randbelow(2 ** 31)))
+
+
+def lab_dataset(rig, effects: list[Effect], seed: int, duration_s: float | None = None
+                ) -> Dataset:
+    """The `trajectory=diagnosis` experiment (five runs, spiral held out) with effects."""
+    traj = compose_config("simulate", ["trajectory=diagnosis"]).trajectory
+    lab = simulate_lab(rig, dict(traj.counts), effects=effects,
+                       duration_s=float(duration_s or traj.duration_s), seed=seed)
+    return Dataset(f"lab(seed={seed})", rig, lab.trajectories)
+
+
+def fast_settings(**changes):
+    """Diagnosis settings for tests: everything on but the closed loop and black box,
+    a short GP budget."""
+    from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings
+    from cdpr_pipeline.discovery.freeform import FreeFormSearch
+
+    base = {"freeform": FreeFormSearch(time_budget_s=3.0), "closed_loop": False}
+    return DiagnosisSettings(**{**base, **changes})
+
+
+def rng_for(seed: int) -> np.random.Generator:
+    return np.random.default_rng([seed, 2718])

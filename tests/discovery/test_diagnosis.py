@@ -1,0 +1,101 @@
+"""Hidden-effect tests: simulate the lab with one effect hidden (magnitude and seed drawn
+at random within the documented ranges), diagnose, and require the right verdict, the
+fitted physical parameter, and a held-out gain whose interval excludes zero.
+
+The fast suite draws one case of each kind; ``tests/discovery/test_detection_rates.py``
+(slow) runs every effect with several seeds and reports detection and false-alarm rates.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from lab_cases import fast_settings, lab_dataset, rng_for
+
+from cdpr_pipeline.discovery.diagnosis import diagnose
+from cdpr_pipeline.sim.effects import EFFECTS, Effect, make_effect
+
+VOCABULARY = sorted(n for n, c in EFFECTS.items() if c.in_vocabulary and c.drawable)
+OUTSIDE = sorted(n for n, c in EFFECTS.items() if not c.in_vocabulary and c.drawable)
+
+
+def check_parameters(effect: Effect, cause: dict) -> None:
+    """The fitted physical parameter is the one the simulator was given."""
+    p = cause["params"]
+    name = effect.name
+    if name == "anchor_offset":
+        assert p["cable"] == effect.cable
+        assert np.allclose(p["offset_m"], effect.offset_m, atol=3e-3)
+    elif name == "cable_elasticity":
+        assert p["ea_n"] == pytest.approx(effect.ea_n, rel=0.15)
+    elif name == "drum_radius_error":
+        assert p["relative"] == pytest.approx(effect.relative, abs=0.002)
+    elif name == "payload_mass_error":
+        assert p["relative"] == pytest.approx(effect.relative, abs=0.02)
+    elif name == "actuator_lag":
+        assert p["time_constant_s"] == pytest.approx(effect.time_constant_s, rel=0.2)
+    elif name == "stribeck_friction":
+        assert p["static_ratio"] == pytest.approx(effect.static_ratio, rel=0.1)
+    elif name == "asymmetric_viscous_friction":
+        assert p["direction"] * p["ratio"] == pytest.approx(effect.direction * effect.ratio,
+                                                            abs=0.1)
+    elif name == "winch_parameter_error":
+        changes = {c["winch"]: c for c in p["winches"]}
+        assert effect.cable in changes
+        c = changes[effect.cable]
+        for key in ("inertia", "viscous", "coulomb"):
+            scale = getattr(effect, f"{key}_scale")
+            if scale != 1.0:
+                assert c["new"][key] == pytest.approx(c["old"][key] * scale, rel=0.05)
+
+
+def _diagnose(paper_rig, effects, seed):
+    d = diagnose(lab_dataset(paper_rig, effects, seed), fast_settings())
+    return d, d.as_json()
+
+
+def _assert_gain(record, case):
+    gain = record["gain"]
+    assert gain["relative"] > 0 and gain["ci95"][0] > 0, f"{case}: gain {gain}"
+    assert gain["after"] < gain["before"], case
+
+
+def test_no_effect_gives_none(paper_rig, seed):
+    d, record = _diagnose(paper_rig, [], seed)
+    assert record["verdict"] == "none", f"seed {seed}: false alarm {d.sentence}"
+    assert record["causes"] == []
+
+
+def test_a_hidden_vocabulary_effect_is_named(paper_rig, seed):
+    name = VOCABULARY[rng_for(seed).integers(len(VOCABULARY))]
+    effect = make_effect(name, rng_for(seed + 1), paper_rig.n)
+    case = f"seed {seed}: hidden {effect.describe()}"
+    d, record = _diagnose(paper_rig, [effect], seed)
+    assert record["verdict"] == name, f"{case}; diagnosed: {d.sentence}"
+    check_parameters(effect, record["causes"][0])
+    _assert_gain(record, case)
+
+
+def test_an_effect_outside_the_vocabulary_is_unnamed(paper_rig, seed):
+    name = OUTSIDE[rng_for(seed).integers(len(OUTSIDE))]
+    effect = make_effect(name, rng_for(seed + 1), paper_rig.n)
+    case = f"seed {seed}: hidden {effect.describe()}"
+    d, record = _diagnose(paper_rig, [effect], seed)
+    assert record["verdict"] == "unnamed", f"{case}; diagnosed: {d.sentence}"
+    # never a wrong name, not even as a second cause
+    assert {c["effect"] for c in record["causes"]} == {"unnamed"}, f"{case}: {d.sentence}"
+    assert record["causes"][0]["expression"]
+    _assert_gain(record, case)
+
+
+def test_two_hidden_effects_both_appear(paper_rig, seed):
+    rng = rng_for(seed)
+    names = [str(n) for n in rng.choice(VOCABULARY, size=2, replace=False)]
+    effects = [make_effect(n, rng_for(seed + 1 + k), paper_rig.n) for k, n in
+               enumerate(names)]
+    case = f"seed {seed}: hidden {[e.describe() for e in effects]}"
+    d, record = _diagnose(paper_rig, effects, seed)
+    found = {c["effect"] for c in record["causes"]}
+    assert set(names) <= found, f"{case}; diagnosed: {d.sentence}"
+    assert record["verdict"] in names
+    _assert_gain(record, case)
