@@ -32,6 +32,7 @@ from cdpr_pipeline.discovery.residuals import (
 from cdpr_pipeline.discovery.selection import Judgement, SelectionSettings, select_causes
 from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
 from cdpr_pipeline.discovery.validity import (
+    NoiseModel,
     block_bootstrap,
     correlation_tests,
     ljung_box_pvalue,
@@ -268,17 +269,34 @@ def _signatures(sig: RunSignals, nominal: Model, channel: str, i: int
     return out
 
 
-def discrepancies(nominal: Model, signals: list[RunSignals], settings: DiagnosisSettings
+def fit_noise(model: Model, nominal: Model, train: list[RunSignals]
+              ) -> dict[str, NoiseModel]:
+    """Per channel, the AR noise model of ``model``'s training residual (see
+    :class:`~cdpr_pipeline.discovery.validity.NoiseModel`)."""
+    res = residuals(model, nominal, train)
+    return {ch: NoiseModel().fit([r[ch] for r in res.by_run]) for ch in res.channels}
+
+
+def _innovations(res: Residuals, channel: str, noise: dict[str, NoiseModel]) -> np.ndarray:
+    return np.concatenate([noise[channel].whiten(r[channel]) for r in res.by_run])
+
+
+def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
+                  settings: DiagnosisSettings, noise: dict[str, NoiseModel]
                   ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """Per channel column: residual size, share, band, whiteness, what it follows, and the
-    correlation tests. Also returns plot data."""
+    """Per channel column of the nominal model: residual size, share, band, whiteness
+    (of the innovations), what it follows, and the correlation tests. Also returns plot
+    data, with what the extended model explains of each residual."""
     res = residuals(nominal, nominal, signals)
+    ext = residuals(extended, nominal, signals)
     out, plots = [], {}
+    longest = max(signals, key=lambda s: s.t.size)
     for ch in res.channels:
         stacked = res.stacked(ch)
+        innovations = _innovations(res, ch, noise)
         total = float(np.sum(stacked ** 2)) or 1.0
-        names = channel_names(ch, stacked.shape[1])
-        for i, name in enumerate(names):
+        full = _full_rate_residual(nominal, longest, ch)
+        for i, name in enumerate(channel_names(ch, stacked.shape[1])):
             r = stacked[:, i]
             sigs = {k: np.concatenate([s.rows(_signatures(s, nominal, ch, i)[k][:, None])[:, 0]
                                        for s in signals])
@@ -288,24 +306,23 @@ def discrepancies(nominal: Model, signals: list[RunSignals], settings: Diagnosis
             follows = sorted((k for k, v in corr.items()
                               if abs(v) >= settings.correlation_threshold),
                              key=lambda k: -abs(corr[k]))
-            # bands on the unfiltered full-rate residual of the longest run
-            longest = max(signals, key=lambda s: s.t.size)
-            full = _full_rate_residual(nominal, longest, ch)[:, i]
-            bands = _bands(full, longest.fs, settings.wavelet)
+            # bands of the unfiltered full-rate residual of the longest run
+            bands = _bands(full[:, i], longest.fs, settings.wavelet)
             top = max(bands, key=lambda b: b["share"])
-            speed = sigs["winch speed"]
-            inputs = speed if ch == "torque" else sigs.get("cable length", speed)
-            tests = correlation_tests(r, inputs, min(settings.max_lag, len(r) // 4))
+            inputs = sigs["winch speed"] if ch == "torque" else sigs["cable length"]
+            tests = correlation_tests(innovations[:, i], inputs,
+                                      min(settings.max_lag, len(r) // 4))
             out.append({"signal": ch, "channel": name, "rms": float(np.sqrt(np.mean(r ** 2))),
                         "share_of_error": float(np.sum(r ** 2) / total),
                         "band_hz": [top["lo_hz"], top["hi_hz"]],
                         "bands": bands,
-                        "whiteness_pvalue": ljung_box_pvalue(r, settings.max_lag),
+                        "whiteness_pvalue": ljung_box_pvalue(innovations[:, i],
+                                                             settings.max_lag),
                         "correlates_with": follows,
                         "correlations": corr,
                         "validity": tests.as_dict()})
-            plots[name] = {"residual": r, "signatures": sigs, "bands": bands,
-                           "tests": tests}
+            plots[name] = {"residual": r, "explained": r - ext.stacked(ch)[:, i],
+                           "signatures": sigs, "bands": bands, "tests": tests}
     return out, plots
 
 
@@ -347,9 +364,9 @@ def heldout_gain(before: Residuals, after: Residuals, held: list[RunSignals], ch
             "relative": float(est), "ci95": [float(lo), float(hi)], "by_channel": per_col}
 
 
-def _validity(res: Residuals, held: list[RunSignals], channel: str, max_lag: int
-              ) -> dict[str, Any]:
-    r = res.stacked(channel)
+def _validity(res: Residuals, held: list[RunSignals], channel: str, max_lag: int,
+              noise: dict[str, NoiseModel]) -> dict[str, Any]:
+    r = _innovations(res, channel, noise)
     speed = np.concatenate([s.rows(s.omega) for s in held])
     out = {}
     for i, name in enumerate(channel_names(channel, r.shape[1])):
@@ -419,24 +436,26 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     clock["signals"] = time.perf_counter() - start
 
     t0 = time.perf_counter()
-    found, plots = discrepancies(nominal, signals, settings)
-    nominal_metrics = model_metrics(nominal, nominal, train, held)
-    clock["discrepancies"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
     selection = select_causes(nominal, rig, train, held, settings.selection, settings.freeform,
                               log=log)
     extended = nominal.with_effects(selection.effects)
     clock["causes"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    noise = fit_noise(extended, nominal, train)
+    found, plots = discrepancies(nominal, extended, signals, settings, noise)
+    nominal_metrics = model_metrics(nominal, nominal, train, held)
+    clock["discrepancies"] = time.perf_counter() - t0
 
     channel = selection.causes[0].channel if selection.causes else "torque"
     before_held = residuals(nominal, nominal, held)
     after_held = residuals(extended, nominal, held)
     gain = heldout_gain(before_held, after_held, held, channel, settings.selection.block_s,
                         settings.selection.n_boot, settings.selection.seed)
-    validity = {"signal": channel,
-                "before": _validity(before_held, held, channel, settings.max_lag),
-                "after": _validity(after_held, held, channel, settings.max_lag)}
+    validity = {"signal": channel, "prewhitened": "AR noise model of the extended model's "
+                "training residual, order by BIC",
+                "before": _validity(before_held, held, channel, settings.max_lag, noise),
+                "after": _validity(after_held, held, channel, settings.max_lag, noise)}
     extended_metrics = model_metrics(extended, nominal, train, held)
 
     closed: dict[str, Any] = {"available": False}

@@ -64,10 +64,14 @@ def _explaining_plot(d: Diagnosis) -> str:
     x, r = data["signatures"][key], data["residual"]
     fig, ax = plt.subplots(figsize=(7, 3.6))
     ax.plot(x, r, ".", ms=2, alpha=0.35, color="C0", label="nominal residual (all runs)")
-    order = np.argsort(x)
-    k = max(5, len(x) // 60)
-    ax.plot(x[order], np.convolve(r[order], np.ones(k) / k, mode="same"), "C3", lw=2,
-            label="running mean")
+    if d.causes:
+        ax.plot(x, data["explained"], ".", ms=1.5, alpha=0.5, color="C3",
+                label="what the extended model explains")
+    else:
+        order = np.argsort(x)
+        k = max(5, len(x) // 60)
+        ax.plot(x[order], np.convolve(r[order], np.ones(k) / k, mode="same"), "C3", lw=2,
+                label="running mean")
     ax.set_xlabel(key)
     ax.set_ylabel(f"{entry['channel']} residual ({'N m' if entry['signal'] == 'torque' else 'm'})")
     ax.set_title(f"{entry['channel']}: residual against {key} (r = {corr[key]:+.2f})")
@@ -113,8 +117,8 @@ def _validity_plot(d: Diagnosis) -> str:
         ax.set_xticks([0, 1], ["nominal", "extended"], fontsize=8)
         ax.set_title(name, fontsize=9)
     axes[0].set_ylabel(f"max |correlation| ({col})")
-    fig.suptitle("correlation tests on held-out runs; dashed: 95 % band 1.96/sqrt(N)",
-                 fontsize=9)
+    fig.suptitle("correlation tests on held-out innovations (AR noise model); dashed: 95 % "
+                 "band 1.96/sqrt(N); green: passed", fontsize=9)
     return _png(fig)
 
 

@@ -4,7 +4,7 @@ Positions are low-passed and differentiated the way the identification does it
 (:class:`~cdpr_pipeline.identification.regressors.DerivativeFilter`). A model predicts
 the raw measured channels (motor torque, encoder length) from these smooth signals; the
 residual, measured minus predicted, then goes through the *same* parallel low-pass and
-is sampled on the *statistics rows*: trimmed at both ends and thinned to about 2.5 times
+is sampled on the *statistics rows*: trimmed at both ends and thinned to twice
 the cut-off, so neighbouring rows carry nearly independent noise and likelihood-ratio
 tests count honest degrees of freedom.
 """
@@ -28,8 +28,9 @@ from cdpr_pipeline.identification.regressors import (
 )
 from cdpr_pipeline.sim.plant import Plant
 
-#: statistics rows per cut-off period: rows are thinned to ``2.5 * cutoff_hz``
-ROWS_PER_CUTOFF = 2.5
+#: statistics rows per cut-off period: rows are thinned to ``2 * cutoff_hz`` (the
+#: low-pass band sampled at its Nyquist rate: band-limited white noise stays white)
+ROWS_PER_CUTOFF = 2.0
 #: low-pass of the platform acceleration behind the *static* cable-stretch model. The
 #: length residual carries the motion-capture noise of the position; an acceleration
 #: differentiated from the same noisy position within the same band would correlate
