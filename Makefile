@@ -8,7 +8,7 @@ PYTEST_ARGS ?=
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.cdpr-installed
 
-.PHONY: run test test-slow bench bench-models lint clean
+.PHONY: run test test-slow bench bench-models bench-detection lint clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -33,6 +33,12 @@ test-slow: $(STAMP)
 ## bench: benchmark scripts (figures quoted in the README)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_simulator.py
+	$(BIN)/python benchmarks/bench_diagnose.py
+
+## bench-detection: detection and false-alarm rates of `cdpr diagnose` and the smallest
+## magnitude of each hidden effect it detects reliably (about an hour on 2 cores)
+bench-detection: $(STAMP)
+	$(BIN)/python benchmarks/bench_detection.py
 
 ## bench-models: train every trajectory predictor on the default dataset (about an hour
 ## on 2 cores) and print the table quoted in the README

@@ -132,8 +132,9 @@ def asymmetric_viscous_friction(rig: Rig, scale: DataScale) -> list[Candidate]:
 def actuator_lag(rig: Rig, scale: DataScale) -> list[Candidate]:
     return [Candidate(
         "actuator_lag", "actuator_lag",
-        lambda x: [ActuatorLag(float(x[0]))] if x[0] > 0 else [],
-        [_arr(0.002), _arr(0.01)], _arr(0.0), _arr(0.2), _arr(0.005),
+        # below half a millisecond a lag is not resolved by any rig sampled here
+        lambda x: [ActuatorLag(float(x[0]))],
+        [_arr(0.002), _arr(0.01)], _arr(5e-4), _arr(0.2), _arr(0.005),
         names=["time_constant_s"], affects=TORQUE)]
 
 

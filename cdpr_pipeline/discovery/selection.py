@@ -8,9 +8,10 @@ judged by
   over channels (Gaussian channels with their own variance), with ``N_c`` the honest
   statistics rows (see :mod:`~cdpr_pipeline.discovery.signals`), against chi^2 with the
   candidate's parameter count, Bonferroni-corrected for the candidates of the step;
-* its held-out gain: the relative drop of the residual sum of squares on runs that took
-  no part in any fit, on the channel it explains best, with a block-bootstrap interval
-  (at the corrected level) that must exclude zero, and at least ``min_gain``;
+* its held-out gain: the drop of the residual sum of squares on runs that took no part
+  in any fit, on the channel it explains best, with a block-bootstrap interval (at the
+  corrected level) that must exclude zero, and at least ``min_gain`` of the *nominal*
+  model's held-out error on that channel;
 * BIC, ``LR - k log N``, to rank those that pass: fewer parameters win when two
   explain the data alike (a structural effect against re-fitting winch parameters).
 
@@ -47,8 +48,8 @@ class SelectionSettings:
     alpha : float
         Family-wise error rate of each step (Bonferroni over its candidates).
     min_gain : float
-        Smallest relative held-out drop of the residual sum of squares, on the channel
-        a cause explains best, that counts as a discrepancy explained (practical
+        Smallest share of the nominal model's held-out error (sum of squares, on the
+        channel a cause explains best) that a cause must explain (practical
         significance: with tens of thousands of rows, micro-metre artefacts of any model
         are "significant"; a rig engineer does not care about them).
     max_causes : int
@@ -118,6 +119,7 @@ class Judge:
     ctx: FitContext
     heldout: list[RunSignals]
     settings: SelectionSettings
+    nominal_held: dict[str, float] | None = None
     base_train: Residuals = field(init=False)
     base_held: Residuals = field(init=False)
 
@@ -140,6 +142,10 @@ class Judge:
         bic = lr - n_params * np.log(n_total)
         channel = max(per, key=per.get)
         gain = 1 - ho[channel][1] / ho[channel][0]
+        # practical significance against the *nominal* discrepancy: a later cause must
+        # explain a real share of what the user's model got wrong, not mop up a remainder
+        reference = (self.nominal_held or {}).get(channel, ho[channel][0])
+        explained = (ho[channel][0] - ho[channel][1]) / max(reference, 1e-300)
         level = 1 - 2 * self.settings.alpha / max(n_tests, 1)
         ci = self._interval(held, channel, level)
         names = self._channels_explained(train, chans, n_tests)
@@ -149,9 +155,9 @@ class Judge:
         total_after = sum(ho[c][1] * self.ctx.weights[c] ** 2 for c in chans)
         if pvalue >= self.settings.alpha / max(n_tests, 1):
             j.reason = f"not significant on training runs (p = {pvalue:.2g})"
-        elif gain < self.settings.min_gain:
-            j.reason = (f"held-out {channel} gain {100 * gain:.1f} % below "
-                        f"{100 * self.settings.min_gain:.0f} %")
+        elif explained < self.settings.min_gain:
+            j.reason = (f"explains {100 * explained:.1f} % of the nominal held-out {channel} "
+                        f"error, below {100 * self.settings.min_gain:.0f} %")
         elif ci[0] <= 0:
             j.reason = f"held-out gain interval includes zero ({100 * ci[0]:.1f} %)"
         elif total_after >= total_before:
@@ -217,6 +223,7 @@ class _Search:
     log: Any = None
     columns: np.ndarray | None = None
     steps: list[list[Judgement]] = field(default_factory=list)
+    nominal_held: dict[str, float] | None = None
 
     def context(self, kept: list[Effect]) -> tuple[FitContext, Judge]:
         base = FitContext(self.nominal, self.train, kept, {}, self.columns)
@@ -224,7 +231,11 @@ class _Search:
         base_res = base.residuals([])
         weights = {c: 1.0 / max(base_res.rms(c), 1e-300) for c in base_res.channels}
         ctx = FitContext(self.nominal, self.train, kept, weights, self.columns)
-        return ctx, Judge(ctx, self.heldout, self.settings)
+        if self.nominal_held is None:
+            held = FitContext(self.nominal, self.train, [], {}, self.columns).residuals(
+                [], self.heldout)
+            self.nominal_held = {c: held.sse(c) for c in held.channels}
+        return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held)
 
     def forward(self, kept: list[Effect], candidates: list[Candidate], freeform: bool,
                 max_steps: int) -> list[Judgement]:
