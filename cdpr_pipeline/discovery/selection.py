@@ -10,8 +10,8 @@ judged by
   candidate's parameter count, Bonferroni-corrected for the candidates of the step;
 * its held-out gain: the drop of the residual sum of squares on runs that took no part
   in any fit, on the channel it explains best, with a block-bootstrap interval (at the
-  corrected level) that must exclude zero, and at least ``min_gain`` of the *nominal*
-  model's held-out error on that channel;
+  corrected level) that must exclude zero, at least ``min_gain`` of the error of the
+  model it extends and ``min_share`` of the *nominal* model's error on that channel;
 * BIC, ``LR - k log N``, to rank those that pass: fewer parameters win when two
   explain the data alike (a structural effect against re-fitting winch parameters).
 
@@ -47,9 +47,13 @@ class SelectionSettings:
     ----------
     alpha : float
         Family-wise error rate of each step (Bonferroni over its candidates).
+    min_share : float
+        Smallest share of the *nominal* model's held-out error on that channel a later
+        cause must explain too, so it names a discrepancy of the user's model rather
+        than mopping up what an earlier cause left.
     min_gain : float
-        Smallest share of the nominal model's held-out error (sum of squares, on the
-        channel a cause explains best) that a cause must explain (practical
+        Smallest relative drop of the held-out residual sum of squares, on the channel a
+        cause explains best, against the model it extends (practical
         significance: with tens of thousands of rows, micro-metre artefacts of any model
         are "significant"; a rig engineer does not care about them).
     max_causes : int
@@ -67,11 +71,12 @@ class SelectionSettings:
 
     alpha: float = 0.05
     min_gain: float = 0.05
+    min_share: float = 0.01
     max_causes: int = 3
     block_s: float = 1.0
     n_boot: int = 400
     effects: list[str] | None = None
-    refit_winches: bool = True
+    refit_winches: bool = False
     seed: int = 0
 
 
@@ -155,9 +160,12 @@ class Judge:
         total_after = sum(ho[c][1] * self.ctx.weights[c] ** 2 for c in chans)
         if pvalue >= self.settings.alpha / max(n_tests, 1):
             j.reason = f"not significant on training runs (p = {pvalue:.2g})"
-        elif explained < self.settings.min_gain:
+        elif gain < self.settings.min_gain:
+            j.reason = (f"held-out {channel} gain {100 * gain:.1f} % below "
+                        f"{100 * self.settings.min_gain:.0f} %")
+        elif explained < self.settings.min_share:
             j.reason = (f"explains {100 * explained:.1f} % of the nominal held-out {channel} "
-                        f"error, below {100 * self.settings.min_gain:.0f} %")
+                        f"error, below {100 * self.settings.min_share:.0f} %")
         elif ci[0] <= 0:
             j.reason = f"held-out gain interval includes zero ({100 * ci[0]:.1f} %)"
         elif total_after >= total_before:
