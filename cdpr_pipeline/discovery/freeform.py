@@ -186,7 +186,7 @@ class GrammarGP:
     generations: int = 60
     max_height: int = 6
     top: int = 8
-    patience: int = 12
+    patience: int = 25
     seed: int = 0
 
     def _pset(self, speed_rms: float, angles: bool):

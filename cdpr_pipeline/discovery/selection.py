@@ -325,11 +325,15 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
         else:
             keep = []
             for c in extra:
+                # does c add beyond the unnamed part? The free-form terms are re-selected
+                # without c first, so they may take everything c would have explained
                 others = [o for o in extra if o is not c]
-                check = search.refit(c, _effects(named + others) + again.effects, n_tests)
+                free = search.refit(unnamed[0], _effects(named + others), n_tests)
+                check = search.refit(c, _effects(named + others) + free.effects, n_tests)
                 if check.passed:
                     keep.append(check)
-            causes = named + [unnamed[0]] + keep
+            final = search.refit(unnamed[0], _effects(named + keep), n_tests)
+            causes = named + keep + [final if final.freeform.terms else unnamed[0]]
     causes = sorted(causes, key=lambda c: -c.bic_drop)
     return Selection(_merge(causes), search.steps, _effects(causes))
 
