@@ -73,12 +73,15 @@ def predict(model: Model, nominal: Model, sig: RunSignals,
 def _load(model: Plant, sig: RunSignals, acceleration: np.ndarray):
     """:meth:`Plant.load_tensions` of a run, memoised on the run: most candidates leave
     geometry and mass alone, and the per-sample solves are the costliest part of a fit."""
-    key = (model.anchors.tobytes(), float(model.mass), float(model.gravity), id(acceleration))
+    # tensions are linear in the mass: cache them per unit mass, so fitting a payload
+    # error does not repeat the per-sample solves
+    key = (model.anchors.tobytes(), float(model.gravity), id(acceleration))
     if key not in sig.cache:
         if len(sig.cache) > 64:
             sig.cache.clear()
-        sig.cache[key] = model.load_tensions(sig.position, acceleration)
-    return sig.cache[key]
+        sig.cache[key] = model.replace(mass=1.0).load_tensions(sig.position, acceleration)
+    unit, g, units = sig.cache[key]
+    return float(model.mass) * unit, g, units
 
 
 def residual_rows(model: Model, nominal: Model, sig: RunSignals,

@@ -24,7 +24,7 @@ outside the vocabulary cannot borrow a name from a candidate that only partly mi
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -36,7 +36,7 @@ from cdpr_pipeline.discovery.freeform import FreeFormResult, FreeFormSearch
 from cdpr_pipeline.discovery.residuals import Model, Residuals, channel_names
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.discovery.validity import block_bootstrap, split_blocks
-from cdpr_pipeline.sim.effects import Effect
+from cdpr_pipeline.sim.effects import Effect, SymbolicWinchTorque
 
 
 @dataclass
@@ -98,6 +98,7 @@ class Judgement:
     ci: tuple[float, float]
     channels: list[str]
     fit: Fit | None = None
+    candidate: Candidate | None = None
     freeform: FreeFormResult | None = None
     passed: bool = False
     reason: str = ""
@@ -125,12 +126,13 @@ class Judge:
     heldout: list[RunSignals]
     settings: SelectionSettings
     nominal_held: dict[str, float] | None = None
+    base_effects: list[Effect] = field(default_factory=list)
     base_train: Residuals = field(init=False)
     base_held: Residuals = field(init=False)
 
     def __post_init__(self) -> None:
-        self.base_train = self.ctx.residuals([])
-        self.base_held = self.ctx.residuals([], self.heldout)
+        self.base_train = self.ctx.residuals(self.base_effects)
+        self.base_held = self.ctx.residuals(self.base_effects, self.heldout)
 
     def __call__(self, effect: str, label: str, effects: list[Effect], n_params: int,
                  n_tests: int) -> Judgement:
@@ -245,25 +247,50 @@ class _Search:
             self.nominal_held = {c: held.sse(c) for c in held.channels}
         return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held)
 
-    def forward(self, kept: list[Effect], candidates: list[Candidate], freeform: bool,
+    def joint_context(self, fixed: list[Effect], parts: list[tuple[Candidate, np.ndarray]]
+                      ) -> tuple[FitContext, Judge]:
+        """A context fitting on the nominal model directly (earlier causes are re-fitted
+        jointly with every new candidate) and a judge comparing with the current model."""
+        current = fixed + _build(parts)
+        base = FitContext(self.nominal, self.train, current, {}, self.columns)
+        self.columns = base.columns
+        base_res = base.residuals([])
+        weights = {c: 1.0 / max(base_res.rms(c), 1e-300) for c in base_res.channels}
+        self.context([])        # the nominal held-out reference
+        ctx = FitContext(self.nominal, self.train, fixed, weights, self.columns)
+        return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held,
+                          base_effects=_build(parts))
+
+    def forward(self, fixed: list[Effect], candidates: list[Candidate], freeform: bool,
                 max_steps: int) -> list[Judgement]:
-        """Add the best passing candidate (by BIC) until none passes."""
+        """Add the best passing candidate (by BIC) until none passes. Every candidate is
+        fitted jointly with the causes already kept (their parameters start where they
+        are and may move), so an earlier cause does not keep what a later one explains
+        better (a winch offset absorbing a payload error)."""
         causes: list[Judgement] = []
+        parts: list[tuple[Candidate, np.ndarray]] = []
         for _ in range(max_steps):
-            ctx, judge = self.context(kept)
+            ctx, judge = self.joint_context(fixed, parts)
             n_tests = len(candidates) + bool(freeform and self.freeform)
-            step = [_judge_candidate(c, ctx, judge, n_tests) for c in candidates]
+            step = [_judge_joint(parts, c, ctx, judge, n_tests) for c in candidates]
             if freeform and self.freeform is not None:
-                step.append(_judge_freeform(self.freeform, ctx, judge, self.scale,
-                                            self.kind, n_tests))
+                f_ctx, f_judge = self.context(fixed + _build(parts))
+                ff = _judge_freeform(self.freeform, f_ctx, f_judge, self.scale, self.kind,
+                                     n_tests)
+                step.append(ff)
             self.steps.append(step)
             self._log(step)
             passed = sorted((j for j in step if j.passed), key=lambda j: -j.bic_drop)
             if not passed:
                 break
             best = passed[0]
-            kept = kept + best.effects
+            if best.freeform is not None:
+                parts = parts + [_freeform_part(best.freeform)]
+            else:
+                parts = _split(parts, best)
             causes.append(best)
+            for cause, (cand, x) in zip(causes, parts, strict=True):
+                cause.effects = list(cand.build(x))        # re-fitted jointly
             freeform = freeform and best.effect != "unnamed"    # one free-form part
             # the same variant again adds nothing (winches are re-identified one by one)
             candidates = [c for c in candidates if c.label != best.label
@@ -277,7 +304,19 @@ class _Search:
             search = self.freeform.with_terms(judgement.freeform)
             return _judge_freeform(search, ctx, judge, self.scale, self.kind, n_tests,
                                    gp=False)
-        return _judge_candidate(judgement.fit.candidate, ctx, judge, n_tests)
+        return _judge_candidate(judgement.candidate, ctx, judge, n_tests)
+
+    def bic(self, effects: list[Effect], n_params: int) -> float:
+        """BIC of the nominal model extended by ``effects`` on the training runs (per
+        channel Gaussian likelihood; constant terms dropped)."""
+        ctx = FitContext(self.nominal, self.train, [], {}, self.columns)
+        res = ctx.residuals(effects)
+        return float(sum(res.count(c) * np.log(res.sse(c) / res.count(c))
+                         for c in res.channels) + n_params * self.log_n())
+
+    def log_n(self) -> float:
+        res = FitContext(self.nominal, self.train, [], {}, self.columns).residuals([])
+        return float(np.log(sum(res.count(c) for c in res.channels)))
 
     def _log(self, step: list[Judgement]) -> None:
         if self.log:
@@ -300,9 +339,12 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
     2. If it kept an unnamed part: forward selection over *named* candidates only on top
        of the named causes, then the free-form terms again on top of all of them. If
        they add nothing the named causes explain the discrepancy (the free-form terms
-       confirm them). Otherwise the unnamed part stays, and of the named causes added
-       in 2. only those that still pass on top of it are kept: a candidate that merely
-       mimics part of an unnamed effect never gets to name it.
+       confirm them). Otherwise the unnamed part stays, and a named cause added in 2.
+       is kept only if the model with it (and free-form terms re-selected around it)
+       has a BIC within one parameter's worth of the model without it (free-form terms
+       re-selected to take its place): a named effect wins a tie, a candidate that
+       merely mimics part of an unnamed effect costs parameters and never gets to name
+       it.
     """
     kind = "axes" if not hasattr(nominal, "anchors") else "cdpr"
     search = _Search(nominal, train, heldout, settings, freeform, _data_scale(train, kind),
@@ -325,24 +367,91 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
         else:
             keep = []
             for c in extra:
-                # does c add beyond the unnamed part? The free-form terms are re-selected
-                # without c first, so they may take everything c would have explained
-                others = [o for o in extra if o is not c]
-                free = search.refit(unnamed[0], _effects(named + others), n_tests)
-                check = search.refit(c, _effects(named + others) + free.effects, n_tests)
-                if check.passed:
-                    keep.append(check)
+                # is c a cause of its own, or a partial mimic of the unnamed part? Compare
+                # the free-form terms re-selected without c against c plus the free-form
+                # terms re-selected with it; a named effect wins ties (within one
+                # parameter's BIC), a mimic costs parameters and loses
+                others = named + [o for o in extra if o is not c]
+                without = search.refit(unnamed[0], _effects(others), n_tests)
+                with_c = search.refit(unnamed[0], _effects(others + [c]), n_tests)
+                if search.bic(_effects(others + [c]) + with_c.effects,
+                              c.n_params + with_c.n_params) <= \
+                        search.bic(_effects(others) + without.effects, without.n_params) \
+                        + search.log_n():
+                    keep.append(c)
             final = search.refit(unnamed[0], _effects(named + keep), n_tests)
-            causes = named + keep + [final if final.freeform.terms else unnamed[0]]
+            causes = named + keep + ([final] if final.passed else [])
     causes = sorted(causes, key=lambda c: -c.bic_drop)
     return Selection(_merge(causes), search.steps, _effects(causes))
+
+
+def _build(parts: Sequence[tuple[Candidate, np.ndarray]]) -> list[Effect]:
+    return [e for cand, x in parts for e in cand.build(x)]
+
+
+def _joint(parts: list[tuple[Candidate, np.ndarray]], new: Candidate) -> Candidate:
+    """One candidate whose parameters are the kept causes' (starting where they are)
+    followed by ``new``'s."""
+    sizes = [c.n_params for c, _ in parts]
+    x0 = np.concatenate([x for _, x in parts]) if parts else np.zeros(0)
+    bounds = np.cumsum([0, *sizes])
+
+    def build(x: np.ndarray) -> list[Effect]:
+        kept = [(c, x[bounds[k]:bounds[k + 1]]) for k, (c, _) in enumerate(parts)]
+        return _build(kept) + list(new.build(x[bounds[-1]:]))
+
+    cat = lambda attr: np.concatenate([getattr(c, attr) for c, _ in parts]  # noqa: E731
+                                      + [getattr(new, attr)])
+    affects = frozenset().union(new.affects, *(c.affects for c, _ in parts))
+    return replace(new, build=build, starts=[np.concatenate([x0, s]) for s in new.starts],
+                   lower=cat("lower"), upper=cat("upper"), x_scale=cat("x_scale"),
+                   linear=new.linear and all(c.linear for c, _ in parts), affects=affects,
+                   names=[n for c, _ in parts for n in c.names] + new.names)
+
+
+def _split(parts: list[tuple[Candidate, np.ndarray]], best: Judgement
+           ) -> list[tuple[Candidate, np.ndarray]]:
+    """The kept causes with their jointly re-fitted parameters, plus the new one."""
+    x = best.fit.x
+    out, k = [], 0
+    for cand, _ in parts:
+        out.append((cand, x[k:k + cand.n_params]))
+        k += cand.n_params
+    out.append((best.candidate, x[k:]))
+    return out
+
+
+def _freeform_part(result: FreeFormResult) -> tuple[Candidate, np.ndarray]:
+    """A kept free-form model as a linear candidate in its term coefficients."""
+    terms = [dict(t) for t in result.terms]
+    coef = np.array([t["coefficient"] for t in terms], float)
+
+    def build(x: np.ndarray) -> list[Effect]:
+        return [SymbolicWinchTorque([{**t, "coefficient": float(v)}
+                                     for t, v in zip(terms, x, strict=True)])]
+
+    inf = np.full(len(coef), np.inf)
+    return (Candidate("unnamed", "free-form", build, [coef], -inf, inf,
+                      np.maximum(np.abs(coef), 1e-6), linear=True,
+                      names=[t["expression"] for t in terms],
+                      affects=frozenset({"torque"})), coef)
+
+
+def _judge_joint(parts: list[tuple[Candidate, np.ndarray]], cand: Candidate, ctx: FitContext,
+                 judge: Judge, n_tests: int) -> Judgement:
+    fit = fit_candidate(_joint(parts, cand) if parts else cand, ctx)
+    j = judge(cand.effect, cand.label, fit.effects, cand.n_params, n_tests)
+    j.fit, j.candidate = fit, cand
+    if not fit.success and not fit.effects:
+        j.passed, j.reason = False, "fit failed"
+    return j
 
 
 def _judge_candidate(cand: Candidate, ctx: FitContext, judge: Judge, n_tests: int
                      ) -> Judgement:
     fit = fit_candidate(cand, ctx)
     j = judge(cand.effect, cand.label, fit.effects, fit.n_params, n_tests)
-    j.fit = fit
+    j.fit, j.candidate = fit, cand
     if not fit.success and not fit.effects:
         j.passed, j.reason = False, "fit failed"
     return j
@@ -352,7 +461,8 @@ def _judge_freeform(search: FreeFormSearch, ctx: FitContext, judge: Judge, scale
                     kind: str, n_tests: int, gp: bool = True) -> Judgement:
     torque = judge.base_train.stacked("torque")
     result = search.fit(ctx.train, torque, scale.speed_rms, kind == "cdpr", use_gp=gp)
-    j = judge("unnamed", "free-form", [result.effect] if result.terms else [],
+    j = judge("unnamed", "free-form",
+              judge.base_effects + ([result.effect] if result.terms else []),
               result.n_params, n_tests)
     j.freeform = result
     if not result.terms:

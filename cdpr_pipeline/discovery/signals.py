@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 from scipy.fft import next_fast_len
@@ -89,7 +89,7 @@ class RunSignals:
     slow_acceleration: np.ndarray | None = None
     cache: dict = field(default_factory=dict, repr=False, compare=False)
 
-    @property
+    @cached_property
     def fs(self) -> float:
         return 1.0 / float(np.median(np.diff(self.t)))
 

@@ -23,7 +23,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from cdpr_pipeline.sim.expressions import evaluate
+from cdpr_pipeline.sim.expressions import evaluate_cached
 from cdpr_pipeline.sim.plant import Plant, smooth_sign
 
 #: Effect classes by vocabulary name, filled by subclass registration.
@@ -414,8 +414,8 @@ class SymbolicWinchTorque(Effect):
             i = int(term["cable"]) - 1
             if not 0 <= i < plant.n:
                 raise ValueError(f"term for cable {term['cable']} on a {plant.n}-cable rig")
-            out[..., i] += float(term["coefficient"]) * evaluate(
-                term["expression"], {"omega": omega[..., i], "theta": theta[..., i]})
+            out[..., i] += float(term["coefficient"]) * evaluate_cached(
+                term["expression"], omega[..., i], theta[..., i])
         return out
 
     @classmethod

@@ -12,8 +12,10 @@ write, the simulator can run, and :func:`to_infix` prints it for people.
 from __future__ import annotations
 
 import ast
+from collections import OrderedDict
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -48,6 +50,7 @@ FUNCTIONS: dict[str, Function] = {
 }
 
 
+@lru_cache(maxsize=4096)
 def _parse(expression: str) -> ast.expr:
     try:
         return ast.parse(expression, mode="eval").body
@@ -108,3 +111,33 @@ def to_infix(expression: str, subscript: str = "") -> str:
         return ast.unparse(node)
 
     return walk(_parse(expression))
+
+
+_VALUES: OrderedDict[tuple, np.ndarray] = OrderedDict()
+
+
+def _fingerprint(x: np.ndarray) -> tuple:
+    flat = x.reshape(-1)
+    return (x.__array_interface__["data"][0], x.shape,
+            float(flat[0]), float(flat[len(flat) // 2]), float(flat[-1]))
+
+
+def evaluate_cached(expression: str, omega: np.ndarray, theta: np.ndarray,
+                    max_entries: int = 512) -> np.ndarray:
+    """:func:`evaluate` for large, long-lived arrays (a run's winch state), memoised:
+    fitting a free-form model re-evaluates the same terms on the same run hundreds of
+    times while only the coefficients change. Small arrays (a simulation step) are
+    evaluated directly. The key is the buffer plus sampled values, so a freed and
+    reused buffer with other content is not mistaken for the old one."""
+    if omega.size < 256:
+        return evaluate(expression, {"omega": omega, "theta": theta})
+    key = (expression, _fingerprint(omega), _fingerprint(theta))
+    value = _VALUES.get(key)
+    if value is None:
+        value = evaluate(expression, {"omega": omega, "theta": theta})
+        _VALUES[key] = value
+        if len(_VALUES) > max_entries:
+            _VALUES.popitem(last=False)
+    else:
+        _VALUES.move_to_end(key)
+    return value

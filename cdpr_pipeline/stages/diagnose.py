@@ -77,14 +77,27 @@ def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str) -> dict[str, P
 
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": out_dir / "diagnosis.json", "html": out_dir / "report.html",
-             "model": out_dir / "extended_model.yaml"}
+             "model": out_dir / "extended_model.yaml", "metrics": out_dir / "metrics.json"}
     record = d.as_json(paths["model"].name)
     record["dataset"] = str(dataset_path)
     paths["json"].write_text(json.dumps(_plain(record), indent=1))
+    paths["metrics"].write_text(json.dumps(_plain(summary_metrics(d)), indent=1))
     paths["html"].write_text(render(d))
     write_model(paths["model"], d.rig, d.effects, source=f"cdpr diagnose of {dataset_path}",
                 verdict=d.verdict, summary=d.sentence)
     return paths
+
+
+def summary_metrics(d: Diagnosis) -> dict[str, float]:
+    """Flat figures for ``dvc metrics show`` and MLflow."""
+    out = {"causes": len(d.causes), "gain_relative": d.gain["relative"],
+           "gain_before": d.gain["before"], "gain_after": d.gain["after"],
+           "time_total_s": d.timings["total"]}
+    for part in ("train", "heldout"):
+        out[f"nominal_{part}_relative_error_pct"] = d.nominal_metrics[part]["relative_error_pct"]
+        out[f"extended_{part}_relative_error_pct"] = \
+            d.extended_metrics[part]["relative_error_pct"]
+    return out
 
 
 def run_diagnosis(cfg: DictConfig) -> Diagnosis:

@@ -97,5 +97,5 @@ def test_two_hidden_effects_both_appear(paper_rig, seed):
     d, record = _diagnose(paper_rig, effects, seed)
     found = {c["effect"] for c in record["causes"]}
     assert set(names) <= found, f"{case}; diagnosed: {d.sentence}"
-    assert record["verdict"] in names
+    assert record["verdict"] in names, f"{case}; diagnosed: {d.sentence}"
     _assert_gain(record, case)
