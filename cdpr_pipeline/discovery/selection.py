@@ -48,9 +48,9 @@ class SelectionSettings:
     alpha : float
         Family-wise error rate of each step (Bonferroni over its candidates).
     min_share : float
-        Smallest share of the *nominal* model's held-out error on that channel a later
-        cause must explain too, so it names a discrepancy of the user's model rather
-        than mopping up what an earlier cause left.
+        Smallest share of the *nominal* model's held-out error on that channel a cause
+        must explain too (0: off; a large first effect would otherwise hide a clear
+        second one).
     min_gain : float
         Smallest relative drop of the held-out residual sum of squares, on the channel a
         cause explains best, against the model it extends (practical
@@ -70,8 +70,8 @@ class SelectionSettings:
     """
 
     alpha: float = 0.05
-    min_gain: float = 0.05
-    min_share: float = 0.01
+    min_gain: float = 0.10
+    min_share: float = 0.0
     max_causes: int = 3
     block_s: float = 1.0
     n_boot: int = 400
