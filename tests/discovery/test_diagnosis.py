@@ -64,6 +64,10 @@ def test_no_effect_gives_none(paper_rig, seed):
     d, record = _diagnose(paper_rig, [], seed)
     assert record["verdict"] == "none", f"seed {seed}: false alarm {d.sentence}"
     assert record["causes"] == []
+    assert record["gain"]["after"] == record["gain"]["before"]
+    from cdpr_pipeline.discovery.report import render
+
+    assert "Verdict: none." in render(d)
 
 
 def test_a_hidden_vocabulary_effect_is_named(paper_rig, seed):
