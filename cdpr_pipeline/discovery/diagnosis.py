@@ -298,9 +298,10 @@ def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
         full = _full_rate_residual(nominal, longest, ch)
         for i, name in enumerate(channel_names(ch, stacked.shape[1])):
             r = stacked[:, i]
-            sigs = {k: np.concatenate([s.rows(_signatures(s, nominal, ch, i)[k][:, None])[:, 0]
-                                       for s in signals])
-                    for k in _signatures(signals[0], nominal, ch, i)}
+            per_run = [_signatures(s, nominal, ch, i) for s in signals]
+            sigs = {k: np.concatenate([s.rows(sig[k][:, None])[:, 0]
+                                       for s, sig in zip(signals, per_run, strict=True)])
+                    for k in per_run[0]}
             corr = {k: float(np.corrcoef(v, r)[0, 1]) if np.std(v) > 0 and np.std(r) > 0
                     else 0.0 for k, v in sigs.items()}
             follows = sorted((k for k, v in corr.items()

@@ -22,7 +22,6 @@ import numpy as np
 
 from cdpr_pipeline.data.rig import CdprRig, Rig
 from cdpr_pipeline.discovery.signals import RunSignals
-from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.plant import Drives, Plant
 from cdpr_pipeline.sim.sensors import Sensors
 
@@ -40,10 +39,6 @@ def nominal_model(rig: Rig, sign_sharpness: float | None) -> Model:
         return Plant.from_rig(rig, sign_sharpness=np.inf if sign_sharpness is None
                               else sign_sharpness)
     return Drives(rig.nominal, sign_sharpness=sign_sharpness)
-
-
-def channels_of(rig: Rig) -> tuple[str, ...]:
-    return ("torque", "length") if isinstance(rig, CdprRig) else ("torque",)
 
 
 def channel_names(channel: str, n: int) -> list[str]:
@@ -133,6 +128,3 @@ def measured_rows(signals: Sequence[RunSignals], channel: str = "torque") -> np.
     parts = [s.rows(s.lengths) for s in signals]
     return np.concatenate([p - p.mean(axis=0) for p in parts])
 
-
-def with_effects(nominal: Model, effects: Sequence[Effect]) -> Model:
-    return nominal.with_effects(list(effects))

@@ -234,6 +234,7 @@ class _Search:
     columns: np.ndarray | None = None
     steps: list[list[Judgement]] = field(default_factory=list)
     nominal_held: dict[str, float] | None = None
+    _log_n: float | None = None
 
     def context(self, kept: list[Effect]) -> tuple[FitContext, Judge]:
         base = FitContext(self.nominal, self.train, kept, {}, self.columns)
@@ -315,8 +316,11 @@ class _Search:
                          for c in res.channels) + n_params * self.log_n())
 
     def log_n(self) -> float:
-        res = FitContext(self.nominal, self.train, [], {}, self.columns).residuals([])
-        return float(np.log(sum(res.count(c) for c in res.channels)))
+        """log of the number of training residual values (rows x columns x channels)."""
+        if self._log_n is None:
+            res = FitContext(self.nominal, self.train, [], {}, self.columns).residuals([])
+            self._log_n = float(np.log(sum(res.count(c) for c in res.channels)))
+        return self._log_n
 
     def _log(self, step: list[Judgement]) -> None:
         if self.log:

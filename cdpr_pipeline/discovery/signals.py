@@ -84,8 +84,6 @@ class RunSignals:
     velocity: np.ndarray | None = None
     acceleration: np.ndarray | None = None
     lengths: np.ndarray | None = None
-    desired: np.ndarray | None = None
-    raw_position: np.ndarray | None = None
     slow_acceleration: np.ndarray | None = None
     cache: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -142,10 +140,9 @@ def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
         slow_acc = slow.derivatives(traj.position, traj.t)[2]
         return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque,
                           settings, pos, vel, acc, np.asarray(traj.lengths, float),
-                          traj.desired, np.asarray(traj.position, float), slow_acc)
+                          slow_acc)
     theta, omega, alpha = filt.derivatives(np.asarray(traj.position, float), traj.t)
-    return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque, settings,
-                      desired=traj.desired, raw_position=np.asarray(traj.position, float))
+    return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque, settings)
 
 
 def dataset_signals(trajectories: Sequence[Trajectory], rig: Rig,
