@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 import sys
 
-#: subcommand -> module with a Hydra ``main``; later issues add train, identify, ...
+#: subcommand -> module with a Hydra ``main`` (or ``module:function``)
 SUBCOMMANDS = {
     "simulate": "cdpr_pipeline.stages.simulate",
     "validate": "cdpr_pipeline.stages.validate",
@@ -21,6 +21,11 @@ SUBCOMMANDS = {
     "reconstruct": "cdpr_pipeline.stages.reconstruct",
     "wavelet": "cdpr_pipeline.stages.wavelet",
     "diagnose": "cdpr_pipeline.stages.diagnose",
+    "dataset": "cdpr_pipeline.stages.dataset",
+    "report": "cdpr_pipeline.stages.report",
+    "params": "cdpr_pipeline.stages.pipeline:params_main",
+    "stage": "cdpr_pipeline.stages.pipeline:stage_main",
+    "repro": "cdpr_pipeline.stages.pipeline:repro_main",
 }
 
 USAGE = """usage: cdpr <subcommand> [key=value ...] [-m] [--cfg job] [--help]
@@ -38,6 +43,13 @@ subcommands:
   diagnose   what the simulation gets wrong, its cause, the extended model and the gain
              (data.path=DIR out_dir=OUT -> diagnosis.json, report.html, extended_model.yaml)
   convert    other recordings -> cdpr-measured/1 (format=emps src=PATH out_dir=DIR)
+  dataset    the pipeline's dataset: simulated (effects=[...]) or ingested (source=ingest path=DIR)
+  report     one page over a pipeline's results
+  repro      the staged pipeline: params.yaml from conf/, then `dvc repro` under one MLflow
+             parent run (profile=paper for the paper's sizes; dataset.source=ingest
+             dataset.path=DIR for your rig's data)
+  params     write params.yaml from conf/pipeline.yaml (what `repro` does first)
+  stage      run one stage of params.yaml (NAME or NAME.ITEM; what dvc.yaml calls)
 """
 
 
@@ -50,10 +62,11 @@ def main(argv: list[str] | None = None) -> None:
     if sub not in SUBCOMMANDS:
         sys.stderr.write(f"cdpr: unknown subcommand {sub!r}\n\n{USAGE}")
         raise SystemExit(2)
-    module = importlib.import_module(SUBCOMMANDS[sub])
+    module_name, _, func = SUBCOMMANDS[sub].partition(":")
+    entry = getattr(importlib.import_module(module_name), func or "main")
     # Hydra reads its overrides from sys.argv; present the rest as the app's own argv
     sys.argv = [f"cdpr {sub}", *argv[1:]]
-    module.main()
+    entry()
 
 
 if __name__ == "__main__":

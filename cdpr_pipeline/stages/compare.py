@@ -4,11 +4,14 @@ reference predictors as extra columns, as CSV, markdown and a figure.
 
 Runs are the latest finished ``train`` run per model on the same dataset (by content
 digest). Missing reference runs are fitted on the spot with the data settings of the
-compared runs, so the references always share their split.
+compared runs, so the references always share their split. With ``train_dirs=[...]``
+(the pipeline) the runs are read from those ``cdpr train`` output directories instead
+(``metrics.json`` and ``run.json``), so the tables depend on files DVC tracks.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 from dataclasses import dataclass
@@ -21,7 +24,7 @@ from omegaconf import DictConfig
 from cdpr_pipeline.config import CONFIG_DIR, compose_config
 from cdpr_pipeline.models.datamodule import dataset_digest
 from cdpr_pipeline.tables import to_markdown
-from cdpr_pipeline.tracking import finished_or_failed, latest_runs, make_logger
+from cdpr_pipeline.tracking import finished_or_failed, latest_runs, log_metrics, make_logger
 
 log = logging.getLogger(__name__)
 
@@ -160,6 +163,24 @@ def _fit_reference(cfg: DictConfig, ref: str, data_params: dict[str, str]) -> No
     train(compose_config("train", overrides))
 
 
+def runs_from_dirs(dirs: list[str | Path]) -> pd.DataFrame:
+    """The runs of ``cdpr train`` output directories, shaped like ``mlflow.search_runs``
+    (``run_id``, ``tags.model``, ``start_time``, ``metrics.<key>``)."""
+    rows = []
+    for d in map(Path, dirs):
+        for name in ("metrics.json", "run.json"):
+            if not (d / name).exists():
+                raise FileNotFoundError(f"{d / name}: not a `cdpr train` output directory "
+                                        f"(train_dirs entry {d})")
+        run = json.loads((d / "run.json").read_text())
+        metrics = json.loads((d / "metrics.json").read_text())
+        rows.append({"run_id": run["run_id"], "tags.model": run["model"],
+                     "tags.data_digest": run["data_digest"],
+                     "start_time": pd.Timestamp((d / "run.json").stat().st_mtime, unit="s"),
+                     **{f"metrics.{k}": v for k, v in metrics.items()}})
+    return pd.DataFrame(rows)
+
+
 def compare(cfg: DictConfig) -> Comparison:
     """Build the tables from MLflow (fitting missing references) and write them."""
     out = Path(cfg.out_dir)
@@ -169,6 +190,8 @@ def compare(cfg: DictConfig) -> Comparison:
     models, refs = list(cfg.models), list(cfg.references)
 
     def fetch() -> pd.DataFrame:
+        if cfg.get("train_dirs"):
+            return runs_from_dirs(list(cfg.train_dirs))
         return latest_runs(cfg.tracking.experiment, cfg.tracking.uri, "train", digest)
 
     runs = fetch()
@@ -177,7 +200,7 @@ def compare(cfg: DictConfig) -> Comparison:
         raise RuntimeError(f"no finished train runs of {models} on {path} in experiment "
                            f"{cfg.tracking.experiment!r}; run `cdpr train -m model=...` first")
     missing_refs = [r for r in refs if r not in found]
-    if missing_refs and cfg.fit_missing_references:
+    if missing_refs and cfg.fit_missing_references and not cfg.get("train_dirs"):
         first = runs[runs["tags.model"].isin(models)].iloc[0]
         data_params = {k: first[f"params.data.{k}"] for k in SHARED_DATA_PARAMS
                        if f"params.data.{k}" in first and not pd.isna(first[f"params.data.{k}"])}
@@ -197,6 +220,11 @@ def compare(cfg: DictConfig) -> Comparison:
         df.to_csv(out / f"{name}.csv")
         (out / f"{name}.md").write_text(to_markdown(df))
         files += [out / f"{name}.csv", out / f"{name}.md"]
+    # flat figures for `dvc metrics show`: each model's test RMSEs
+    (out / "metrics.json").write_text(json.dumps(
+        {m: {k: (None if pd.isna(v) else float(v)) for k, v in row.items()}
+         for m, row in summary.iterrows()}, indent=1))
+    files.append(out / "metrics.json")
     files.append(plot_comparison(t2, columns, out / "comparison.png"))
     (out / "runs.csv").write_text(runs[["run_id", "tags.model", "start_time"]].to_csv(index=False))
     files.append(out / "runs.csv")
@@ -205,6 +233,9 @@ def compare(cfg: DictConfig) -> Comparison:
                          tags={"cdpr_task": "compare", "data_digest": digest or ""})
     with finished_or_failed(logger):
         logger.log_hyperparams({"models": ",".join(columns), "data.path": str(path)})
+        log_metrics(logger.experiment, logger.run_id, {
+            f"{m}/{k}": v for m, row in summary.iterrows() for k, v in row.items()
+            if k in ("onestep_rmse", "freerun_1s_rmse", "freerun_run_rmse", "train_s")})
         for f in files:
             logger.experiment.log_artifact(logger.run_id, str(f))
     log.info("tables in %s", out)

@@ -132,6 +132,9 @@ def train(cfg: DictConfig) -> TrainResult:
         (out_dir / "split.json").write_text(json.dumps(dm.split.as_dict(), indent=1))
         (out_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
         (out_dir / "layout.yaml").write_text(yaml.safe_dump(dm.layout.as_dict()))
+        # what `cdpr compare train_dirs=[...]` reads besides metrics.json
+        (out_dir / "run.json").write_text(json.dumps(
+            {"run_id": run_id, "model": name, "data_digest": dm.data_digest}, indent=1))
         artifacts = [fc_path, out_dir / "metrics.json", out_dir / "split.json",
                      out_dir / "config.yaml"]
         if dm.runs_of("test"):

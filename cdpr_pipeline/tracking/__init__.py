@@ -2,13 +2,18 @@
 
 from cdpr_pipeline.tracking.mlflow import (
     DEFAULT_TRACKING_URI,
+    PARENT_RUN_ENV,
+    experiment_id,
     finished_or_failed,
     flatten_params,
     latest_runs,
     log_metrics,
+    log_params_once,
     make_logger,
+    stage_run,
     tracking_uri,
 )
 
-__all__ = ["DEFAULT_TRACKING_URI", "finished_or_failed", "flatten_params", "latest_runs",
-           "log_metrics", "make_logger", "tracking_uri"]
+__all__ = ["DEFAULT_TRACKING_URI", "PARENT_RUN_ENV", "experiment_id", "finished_or_failed",
+           "flatten_params", "latest_runs", "log_metrics", "log_params_once", "make_logger",
+           "stage_run", "tracking_uri"]

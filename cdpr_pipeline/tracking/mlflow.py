@@ -2,13 +2,19 @@
 
 The tracking URI is ``tracking.uri`` from the config if set, else ``MLFLOW_TRACKING_URI``,
 else ``sqlite:///mlflow.db`` in the project root (an embedded store, nothing to start).
+
+Pipeline stages run inside :func:`stage_run`: one MLflow run per stage, nested under the
+pipeline's parent run when ``CDPR_MLFLOW_PARENT_RUN_ID`` is set (``cdpr repro`` sets it
+for the ``dvc repro`` it starts). A stage that logs through :func:`make_logger` writes
+into that stage run instead of opening its own.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
+from contextvars import ContextVar
 from typing import Any
 
 import pandas as pd
@@ -16,6 +22,10 @@ import pandas as pd
 from cdpr_pipeline.config import PROJECT_ROOT
 
 DEFAULT_TRACKING_URI = f"sqlite:///{PROJECT_ROOT / 'mlflow.db'}"
+#: environment variable holding the pipeline's parent run (set by ``cdpr repro``)
+PARENT_RUN_ENV = "CDPR_MLFLOW_PARENT_RUN_ID"
+#: the open stage run the next :func:`make_logger` call writes into (claimed once)
+_STAGE_RUN: ContextVar[str | None] = ContextVar("cdpr_stage_run", default=None)
 
 
 def tracking_uri(configured: str | None = None) -> str:
@@ -41,9 +51,66 @@ def make_logger(experiment: str, run_name: str, uri: str | None = None,
     """Lightning's MLFlowLogger on the resolved URI; the run starts on first use."""
     from lightning.pytorch.loggers import MLFlowLogger
 
+    stage_run_id = _STAGE_RUN.get()
+    if stage_run_id is not None:
+        # inside a pipeline stage: write into its run (once; a nested call gets its own)
+        _STAGE_RUN.set(None)
+        logger = MLFlowLogger(tracking_uri=tracking_uri(uri), run_id=stage_run_id,
+                              log_model=False)
+        for key, value in (tags or {}).items():
+            logger.experiment.set_tag(stage_run_id, key, value)
+        return logger
     return MLFlowLogger(experiment_name=experiment, run_name=run_name,
                         tracking_uri=tracking_uri(uri), tags=dict(tags or {}),
                         log_model=False)
+
+
+def experiment_id(client, name: str) -> str:
+    """The id of experiment ``name``, created if missing."""
+    found = client.get_experiment_by_name(name)
+    return found.experiment_id if found is not None else client.create_experiment(name)
+
+
+@contextmanager
+def stage_run(name: str, experiment: str, uri: str | None = None,
+              tags: Mapping[str, str] | None = None) -> Iterator[tuple[object, str]]:
+    """Open one MLflow run for a pipeline stage; yields ``(client, run_id)``.
+
+    Nested under ``$CDPR_MLFLOW_PARENT_RUN_ID`` (in the parent's experiment) when set,
+    else a top-level run in ``experiment``. The run ends FINISHED, or FAILED if the block
+    raises. :func:`make_logger` called inside the block writes into this run."""
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(tracking_uri(uri))
+    parent = os.environ.get(PARENT_RUN_ENV)
+    all_tags = {"cdpr_stage": name, **(tags or {})}
+    if parent:
+        exp = client.get_run(parent).info.experiment_id
+        all_tags["mlflow.parentRunId"] = parent
+    else:
+        exp = experiment_id(client, experiment)
+    run = client.create_run(exp, run_name=name, tags=all_tags)
+    run_id = run.info.run_id
+    token = _STAGE_RUN.set(run_id)
+    try:
+        yield client, run_id
+    except BaseException:
+        client.set_terminated(run_id, "FAILED")
+        raise
+    finally:
+        _STAGE_RUN.reset(token)
+    client.set_terminated(run_id, "FINISHED")
+
+
+def log_params_once(client, run_id: str, params: Mapping[str, str]) -> None:
+    """Log params the run does not have yet (MLflow refuses to change a logged param);
+    values are cut to MLflow's 6000 characters."""
+    from mlflow.entities import Param
+
+    have = client.get_run(run_id).data.params
+    new = [Param(k, str(v)[:6000]) for k, v in params.items() if k not in have]
+    for lo in range(0, len(new), 100):
+        client.log_batch(run_id, params=new[lo:lo + 100])
 
 
 def log_metrics(client, run_id: str, metrics: Mapping[str, float], step: int = 0) -> None:
