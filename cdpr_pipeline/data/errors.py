@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Literal
 
 Severity = Literal["error", "warning"]
@@ -64,11 +65,15 @@ class DataValidationError(Exception):
     ----------
     problems : iterable of Problem
         Every problem found; the message lists all of them.
+    root : str or Path, optional
+        The dataset directory the problems' files are relative to; named in the message.
     """
 
-    def __init__(self, problems: Iterable[Problem]) -> None:
+    def __init__(self, problems: Iterable[Problem], root: str | Path | None = None) -> None:
         self.problems: list[Problem] = list(problems)
+        self.root = root
         errors = [p for p in self.problems if p.severity == "error"]
-        head = (f"{len(errors)} error(s), {len(self.problems) - len(errors)} warning(s) in the "
-                f"data ({ROW_NOTE}):")
+        where = f"dataset {root}" if root is not None else "the data"
+        head = (f"{len(errors)} error(s), {len(self.problems) - len(errors)} warning(s) in "
+                f"{where} ({ROW_NOTE}):")
         super().__init__("\n".join([head, *(f"  - {p}" for p in self.problems)]))

@@ -76,7 +76,7 @@ class ValidationReport:
     def raise_for_errors(self) -> None:
         """Raise :class:`DataValidationError` listing every problem if there is an error."""
         if self.errors:
-            raise DataValidationError(self.problems)
+            raise DataValidationError(self.problems, root=self.root)
 
     def __str__(self) -> str:
         head = (f"{self.root}: {len(self.errors)} error(s), {len(self.warnings)} warning(s)"

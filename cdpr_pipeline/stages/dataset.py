@@ -39,7 +39,7 @@ def ingest(src: str | Path, dest: Path) -> Path:
     for problem in report.warnings:
         log.warning("%s", problem)
     if not report.ok:
-        raise DataValidationError(report.errors)
+        raise DataValidationError(report.errors, root=src)
     shutil.copytree(src, dest, dirs_exist_ok=False)
     return dest
 

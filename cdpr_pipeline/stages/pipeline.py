@@ -381,8 +381,10 @@ def repro(cfg: DictConfig) -> int:
         if shown.returncode == 0 and shown.stdout.strip():
             log_metrics(client, run_id, dvc_metrics(json.loads(shown.stdout)))
         for name in PIPELINE_ARTIFACTS:
-            if Path(name).exists():
-                client.log_artifact(run_id, name)
+            if Path(name).exists():   # kept at their project paths (two report.html)
+                parent_dir = str(Path(name).parent)
+                client.log_artifact(run_id, name,
+                                    None if parent_dir == "." else parent_dir)
     finally:
         client.set_terminated(run_id, "FINISHED" if rc == 0 else "FAILED")
     if rc:

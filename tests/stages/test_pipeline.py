@@ -1,0 +1,197 @@
+"""The staged pipeline's machinery: params.yaml from conf/, dvc.yaml's shape, and the stage
+runner's promises (outputs swapped in whole, earlier outputs kept on failure with the
+input named, one writer per output directory, resume, a nested MLflow run per stage)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import mlflow
+import pytest
+import yaml
+from mlflow.tracking import MlflowClient
+
+from cdpr_pipeline.config import PROJECT_ROOT, compose_config
+from cdpr_pipeline.resources import foreign_rig_path
+from cdpr_pipeline.stages.dataset import build_dataset
+from cdpr_pipeline.stages.pipeline import (
+    PARAMS_FILE,
+    StageFailed,
+    hydra_literal,
+    output_lock,
+    partial_dir,
+    pipeline_params,
+    rebase_paths,
+    run_stage,
+    stage_overrides,
+    write_params,
+)
+from cdpr_pipeline.tracking import PARENT_RUN_ENV
+
+TINY_DATASET = ["trajectory=tiny", "trajectory.duration_s=1.0", "quiet=true"]
+
+
+@pytest.fixture(scope="module")
+def default_params():
+    return pipeline_params(compose_config("pipeline"))
+
+
+def test_committed_params_file_is_generated_from_conf(default_params):
+    committed = yaml.safe_load((PROJECT_ROOT / PARAMS_FILE).read_text())
+    assert committed == json.loads(json.dumps(default_params)), \
+        "params.yaml is stale: run `cdpr params` and commit it"
+
+
+def test_every_dvc_stage_runs_its_own_section_and_writes_fixed_paths(default_params):
+    dvc = yaml.safe_load((PROJECT_ROOT / "dvc.yaml").read_text())["stages"]
+    out_dirs = []
+    for name, stage in dvc.items():
+        items = stage.get("foreach", [None])
+        body = stage.get("do", stage)
+        for item in items:
+            key = f"{name}.{item}" if item else name
+            expand = (lambda s, item=item: s.replace("${item}", item) if item else s)
+            assert expand(body["cmd"]) == f"cdpr stage {key}"
+            assert [expand(p) for p in body["params"]] == [key]  # only its own section
+            section = default_params[name][item] if item else default_params[name]
+            out_dir = section["config"]["out_dir"]
+            out_dirs.append(out_dir)
+            declared = [expand(next(iter(o)) if isinstance(o, dict) else o)
+                        for kind in ("outs", "metrics", "plots") for o in body.get(kind, [])]
+            assert declared, f"{key} declares no outputs"
+            assert all(p == out_dir or p.startswith(out_dir + "/") for p in declared), \
+                (key, out_dir, declared)
+            # inputs it reads are deps (data paths of the section)
+            data_path = (section["config"].get("data") or {}).get("path")
+            if data_path:
+                deps = [expand(d) for d in body["deps"]]
+                assert any(data_path == d or data_path.startswith(d + "/") for d in deps), key
+    assert len(out_dirs) == len(set(out_dirs)), "two stages share an output directory"
+
+
+def test_one_param_changes_only_the_sections_that_read_it(default_params):
+    changed = pipeline_params(compose_config("pipeline", ["virtual_model=arx"]))
+    differ = {k for k in default_params if default_params[k] != changed[k]}
+    assert differ == {"pipeline", "virtual"}
+    seed = pipeline_params(compose_config("pipeline", ["dataset.seed=7"]))
+    assert {k for k in default_params if default_params[k] != seed[k]} == {"dataset"}
+    paper = pipeline_params(compose_config("pipeline", ["profile=paper"]))
+    assert paper["dataset"]["config"]["trajectory"]["counts"]["flat_circle"] == 50
+    assert default_params["dataset"]["config"]["trajectory"]["counts"]["flat_circle"] == 6
+    assert paper["identify"] == default_params["identify"]
+
+
+def test_overrides_are_hydra_literals():
+    assert hydra_literal(None) == "null"
+    assert hydra_literal(True) == "true"
+    assert hydra_literal(["a", 2]) == "[a,2]"
+    assert hydra_literal("a b") == "'a b'"
+    spec = {"values": {"seed": 3, "path": None}, "overrides": ["model={item}"]}
+    profile = {"overrides": {"train": ["trainer.max_epochs=1"]}}
+    assert stage_overrides(spec, profile, "train", "tcn") == [
+        "seed=3", "path=null", "model=tcn", "trainer.max_epochs=1"]
+
+
+def test_rebase_moves_only_paths_under_the_output():
+    tree = {"out_dir": "results/x", "ckpt": {"dirpath": "results/x/checkpoints"},
+            "other": "results/xy", "data": ["data/lab"]}
+    assert rebase_paths(tree, "results/x", "results/x.partial") == {
+        "out_dir": "results/x.partial", "ckpt": {"dirpath": "results/x.partial/checkpoints"},
+        "other": "results/xy", "data": ["data/lab"]}
+
+
+def test_partial_output_is_kept_for_the_same_params_only(tmp_path):
+    out = tmp_path / "out"
+    p = partial_dir(out, "aaa")
+    (p / "checkpoint").write_text("epoch 3")
+    assert (partial_dir(out, "aaa") / "checkpoint").read_text() == "epoch 3"   # resume
+    assert not (partial_dir(out, "bbb") / "checkpoint").exists()             # new params
+
+
+def test_a_second_writer_of_an_output_directory_is_refused(tmp_path):
+    with output_lock(tmp_path / "out"):
+        with pytest.raises(RuntimeError, match="being written by pid"):
+            with output_lock(tmp_path / "out"):
+                pass
+    with output_lock(tmp_path / "out"):   # released
+        pass
+
+
+def _section_file(tmp_path, name, config, function="cdpr_pipeline.stages.dataset.build_dataset"):
+    from omegaconf import OmegaConf
+
+    path = tmp_path / "params.yaml"
+    params = yaml.safe_load(path.read_text()) if path.exists() else {}
+    params[name] = {"function": function,
+                    "config": OmegaConf.to_container(config, resolve=True)}
+    write_params(params, path)
+    return path
+
+
+def _dataset_config(tmp_path, *extra):
+    return compose_config("dataset", [*TINY_DATASET, f"out_dir={tmp_path / 'ds'}", *extra])
+
+
+def test_stage_runs_as_a_nested_mlflow_run_and_swaps_its_output_in(tmp_path, monkeypatch):
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
+    client = MlflowClient(uri)
+    exp = client.create_experiment("pipe")
+    parent = client.create_run(exp, run_name="pipeline").info.run_id
+    monkeypatch.setenv(PARENT_RUN_ENV, parent)
+    params = _section_file(tmp_path, "dataset", _dataset_config(tmp_path))
+    summary = run_stage("dataset", params)
+    out = tmp_path / "ds"
+    assert summary["runs"] == 5 and summary["source"] == "simulate"
+    assert (out / "lab" / "rig.yaml").exists() and (out / "dataset.json").exists()
+    assert not any(p.name.endswith((".partial", ".lock", ".old")) for p in tmp_path.iterdir())
+    mlflow.set_tracking_uri(uri)
+    runs = client.search_runs([exp], f"tags.mlflow.parentRunId = '{parent}'")
+    assert [r.info.run_name for r in runs] == ["dataset"]
+    run = runs[0]
+    assert run.info.status == "FINISHED"
+    assert run.data.params["source"] == "simulate"
+    assert run.data.metrics["dataset/runs"] == 5
+    assert {a.path for a in client.list_artifacts(run.info.run_id)} >= {"dataset.json"}
+
+
+def test_failing_stage_keeps_the_previous_output_and_names_the_input(tmp_path, monkeypatch):
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path / 'mlflow.db'}")
+    monkeypatch.delenv(PARENT_RUN_ENV, raising=False)
+    good = tmp_path / "foreign"
+    shutil.copytree(foreign_rig_path(), good)
+    params = _section_file(tmp_path, "dataset", _dataset_config(
+        tmp_path, "source=ingest", f"path={good}"))
+    first = run_stage("dataset", params)
+    assert first["source"] == "ingest"
+    before = (tmp_path / "ds" / "dataset.json").read_text()
+
+    bad = tmp_path / "broken"
+    shutil.copytree(foreign_rig_path(), bad)
+    csv = sorted((bad / "trajectories").glob("*.csv"))[0]
+    lines = csv.read_text().splitlines()
+    header = lines[0].split(",")
+    row = lines[3].split(",")
+    row[1] = "oops"
+    lines[3] = ",".join(row)
+    csv.write_text("\n".join(lines) + "\n")
+    params = _section_file(tmp_path, "dataset", _dataset_config(
+        tmp_path, "source=ingest", f"path={bad}"))
+    with pytest.raises(StageFailed) as failed:
+        run_stage("dataset", params)
+    message = str(failed.value)
+    assert csv.name in message and header[1] in message          # file and column
+    assert f"caused by input path={bad}" in message
+    assert (tmp_path / "ds" / "dataset.json").read_text() == before  # untouched
+    assert (tmp_path / "ds" / "lab").is_dir()
+
+
+def test_ingest_copies_data_written_by_others(tmp_path):
+    summary = build_dataset(compose_config("dataset", [
+        "source=ingest", f"path={foreign_rig_path()}", f"out_dir={tmp_path}"]))
+    assert summary["kind"] == "cdpr" and summary["runs"] == 2
+    src = sorted(Path(foreign_rig_path(), "trajectories").iterdir())
+    dst = sorted((tmp_path / "lab" / "trajectories").iterdir())
+    assert [p.read_bytes() for p in src] == [p.read_bytes() for p in dst]
