@@ -145,8 +145,11 @@ def evaluate(fc: Forecaster, train_runs: list[RunArrays], test_runs: list[RunArr
     return out
 
 
-def plot_predictions(fc: Forecaster, runs: list[RunArrays], path: str | Path) -> Path:
-    """Measured vs one-step vs whole-run free-run position, one test run per family."""
+def plot_predictions(fc: Forecaster, runs: list[RunArrays], path: str | Path,
+                     horizon: int | None = None) -> Path:
+    """Measured vs one-step vs free-run position, one test run per family. The free run
+    starts at the first full window and lasts ``horizon`` samples (``None``: to the end
+    of the run, which costs one network call per sample)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -159,7 +162,13 @@ def plot_predictions(fc: Forecaster, runs: list[RunArrays], path: str | Path) ->
     npos = fc.layout.n_position
     fig, axes = plt.subplots(len(picks), npos, figsize=(4 * npos, 2.4 * len(picks)),
                              squeeze=False, sharex="row")
-    rolled = free_run_pairs(fc, picks, None)          # one batched rollout for all
+    if horizon is None:
+        rolled = free_run_pairs(fc, picks, None)      # one batched rollout per length
+    else:
+        first = fc.window + 1
+        h = min(horizon, min(r.n_samples for r in picks) - first - 1)
+        pred = fc.free_run(picks, [first] * len(picks), h)[..., :npos]
+        rolled = [(None, pred[j:j + 1]) for j in range(len(picks))]
     for i, (r, (_, sim)) in enumerate(zip(picks, rolled, strict=True)):
         ends, one, _ = fc.one_step(r)
         t_sim = r.t[fc.window + 2:fc.window + 2 + sim.shape[1]]   # free run from window+2

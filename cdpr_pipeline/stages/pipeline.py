@@ -85,10 +85,14 @@ def hydra_literal(value: Any) -> str:
 def stage_overrides(spec: Mapping[str, Any], profile: Mapping[str, Any], name: str,
                     item: str | None) -> list[str]:
     """A stage's Hydra overrides: its ``values`` (as literals), its ``overrides``, then
-    the profile's; ``{item}`` replaced in ``foreach`` stages."""
+    the profile's for the stage and for ``NAME.ITEM``; ``{item}`` replaced in ``foreach``
+    stages."""
+    extra = profile.get("overrides") or {}
     out = [f"{k}={hydra_literal(v)}" for k, v in (spec.get("values") or {}).items()]
     out += list(spec.get("overrides") or [])
-    out += list((profile.get("overrides") or {}).get(name) or [])
+    out += list(extra.get(name) or [])
+    if item is not None:
+        out += list(extra.get(f"{name}.{item}") or [])
     return [o.replace("{item}", item) for o in out] if item is not None else out
 
 

@@ -80,7 +80,9 @@ def _train_network(cfg: DictConfig, net: torch.nn.Module, dm: TrajectoryDataModu
     ckpt = str(last) if cfg.resume and last.exists() else None
     if ckpt:
         log.info("resuming from %s", ckpt)
-    trainer.fit(module, datamodule=dm, ckpt_path=ckpt)
+    # our own checkpoint: its hyper-parameters hold Hydra partials, which torch's
+    # weights-only loading refuses
+    trainer.fit(module, datamodule=dm, ckpt_path=ckpt, weights_only=False if ckpt else None)
     best = Path(trainer.checkpoint_callback.best_model_path) \
         if trainer.checkpoint_callback and trainer.checkpoint_callback.best_model_path else None
     if best and best.exists():
@@ -121,8 +123,8 @@ def train(cfg: DictConfig) -> TrainResult:
 
         fc = Forecaster(net, dm.layout, dm.scaler, dm.window, net_config)
         start = time.perf_counter()
-        metrics = evaluate(fc, dm.runs_of("train"), dm.runs_of("test"),
-                           instantiate(cfg.evaluation))
+        settings = instantiate(cfg.evaluation)
+        metrics = evaluate(fc, dm.runs_of("train"), dm.runs_of("test"), settings)
         summary["time/eval_s"] = time.perf_counter() - start
         metrics |= summary
         log_metrics(client, run_id, metrics)
@@ -138,8 +140,11 @@ def train(cfg: DictConfig) -> TrainResult:
         artifacts = [fc_path, out_dir / "metrics.json", out_dir / "split.json",
                      out_dir / "config.yaml"]
         if dm.runs_of("test"):
+            # the plot's free run is as long as the scored ones (a whole run only if scored)
+            horizon = None if settings.whole_run else \
+                max(1, int(round(2 * settings.freerun_horizon_s * dm.layout.sample_rate_hz)))
             artifacts.append(plot_predictions(fc, dm.runs_of("test"),
-                                              out_dir / "predictions.png"))
+                                              out_dir / "predictions.png", horizon))
         if best is not None and best.exists():
             artifacts.append(best)
         for path in artifacts:

@@ -15,6 +15,7 @@ import os
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from contextvars import ContextVar
+from pathlib import Path
 from typing import Any
 
 import pandas as pd
@@ -31,6 +32,16 @@ _STAGE_RUN: ContextVar[str | None] = ContextVar("cdpr_stage_run", default=None)
 def tracking_uri(configured: str | None = None) -> str:
     """The tracking URI to use (see the module docstring for the order)."""
     return configured or os.environ.get("MLFLOW_TRACKING_URI") or DEFAULT_TRACKING_URI
+
+
+def artifact_location(uri: str) -> str | None:
+    """Where new experiments keep artifacts: beside a local SQLite store (``mlruns/``
+    next to the ``.db`` file), not in whatever directory the code happens to run in;
+    ``None`` (the server decides) for a tracking server."""
+    prefix = "sqlite:///"
+    if uri.startswith(prefix):
+        return (Path(uri[len(prefix):]).resolve().parent / "mlruns").as_uri()
+    return None
 
 
 def flatten_params(tree: Mapping[str, Any], prefix: str = "") -> dict[str, str]:
@@ -60,15 +71,19 @@ def make_logger(experiment: str, run_name: str, uri: str | None = None,
         for key, value in (tags or {}).items():
             logger.experiment.set_tag(stage_run_id, key, value)
         return logger
+    resolved = tracking_uri(uri)
     return MLFlowLogger(experiment_name=experiment, run_name=run_name,
-                        tracking_uri=tracking_uri(uri), tags=dict(tags or {}),
-                        log_model=False)
+                        tracking_uri=resolved, tags=dict(tags or {}), log_model=False,
+                        artifact_location=artifact_location(resolved))
 
 
 def experiment_id(client, name: str) -> str:
     """The id of experiment ``name``, created if missing."""
     found = client.get_experiment_by_name(name)
-    return found.experiment_id if found is not None else client.create_experiment(name)
+    if found is not None:
+        return found.experiment_id
+    return client.create_experiment(name, artifact_location=artifact_location(
+        client.tracking_uri))
 
 
 @contextmanager

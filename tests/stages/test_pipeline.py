@@ -195,3 +195,40 @@ def test_ingest_copies_data_written_by_others(tmp_path):
     src = sorted(Path(foreign_rig_path(), "trajectories").iterdir())
     dst = sorted((tmp_path / "lab" / "trajectories").iterdir())
     assert [p.read_bytes() for p in src] == [p.read_bytes() for p in dst]
+
+
+def test_an_interrupted_training_stage_resumes_from_its_checkpoint(
+        tmp_path, monkeypatch, small_lab, caplog):
+    """A training stage that dies after its epochs (here: in the evaluation) leaves its
+    checkpoints in the partial output; rerun with the same params it resumes from them
+    instead of training again."""
+    import cdpr_pipeline.stages.train as train_module
+
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path / 'mlflow.db'}")
+    monkeypatch.delenv(PARENT_RUN_ENV, raising=False)
+    config = compose_config("train", [
+        "model=tcn", f"data.path={small_lab}", "trainer.max_epochs=2", "data.window=16",
+        "data.train_windows=256", "data.val_windows=128", "data.batch_size=64",
+        "evaluation.max_train_runs=2", "evaluation.whole_run=false", "quiet=true",
+        "data.test_fraction=0.34", f"out_dir={tmp_path / 'tcn'}"])
+    params = _section_file(tmp_path, "train", config, "cdpr_pipeline.stages.train.train")
+    real_evaluate = train_module.evaluate
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt("power cut")
+
+    monkeypatch.setattr(train_module, "evaluate", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run_stage("train", params)
+    partial = tmp_path / "tcn.partial"
+    assert (partial / "checkpoints" / "last.ckpt").exists()
+    assert not (tmp_path / "tcn").exists()                    # nothing half-written
+
+    monkeypatch.setattr(train_module, "evaluate", real_evaluate)
+    caplog.set_level("INFO")
+    result = run_stage("train", params)
+    assert "resuming from" in caplog.text
+    assert result.metrics["epochs"] == 2
+    # the epochs were done before: the resumed fit only restores them
+    assert result.metrics["time/train_s"] < 5
+    assert (tmp_path / "tcn" / "forecaster.pt").exists() and not partial.exists()

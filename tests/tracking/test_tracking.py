@@ -1,0 +1,28 @@
+"""Tracking helpers: where runs and their artifacts go."""
+
+from __future__ import annotations
+
+from mlflow.tracking import MlflowClient
+
+from cdpr_pipeline.tracking import experiment_id, tracking_uri
+from cdpr_pipeline.tracking.mlflow import DEFAULT_TRACKING_URI, artifact_location
+
+
+def test_uri_order(monkeypatch):
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    assert tracking_uri() == DEFAULT_TRACKING_URI
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", "http://127.0.0.1:5000")
+    assert tracking_uri() == "http://127.0.0.1:5000"
+    assert tracking_uri("sqlite:///x.db") == "sqlite:///x.db"
+
+
+def test_artifacts_live_beside_a_local_store_wherever_the_code_runs(tmp_path, monkeypatch):
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    (tmp_path / "store").mkdir()
+    client = MlflowClient(f"sqlite:///{tmp_path / 'store' / 'mlflow.db'}")
+    exp = client.get_experiment(experiment_id(client, "x"))
+    assert exp.artifact_location == (tmp_path / "store" / "mlruns").as_uri()
+    assert experiment_id(client, "x") == exp.experiment_id          # found, not re-created
+    assert artifact_location("http://host:5000") is None            # a server decides
