@@ -52,7 +52,10 @@ def test_every_dvc_stage_runs_its_own_section_and_writes_fixed_paths(default_par
         body = stage.get("do", stage)
         for item in items:
             key = f"{name}.{item}" if item else name
-            expand = (lambda s, item=item: s.replace("${item}", item) if item else s)
+
+            def expand(s, item=item):
+                return s.replace("${item}", item) if item else s
+
             assert expand(body["cmd"]) == f"cdpr stage {key}"
             assert [expand(p) for p in body["params"]] == [key]  # only its own section
             section = default_params[name][item] if item else default_params[name]
