@@ -31,7 +31,8 @@ def stage_times(uri: str, experiment: str = "cdpr-pipeline") -> tuple[float, lis
     """(parent duration, [(stage, seconds, status)]) of the latest pipeline run."""
     client = MlflowClient(uri)
     exp = client.get_experiment_by_name(experiment)
-    parent = client.search_runs([exp.experiment_id], "tags.cdpr_task = 'pipeline'",
+    parent = client.search_runs([exp.experiment_id], "tags.cdpr_task = 'pipeline' and "
+                                "attributes.status = 'FINISHED'",
                                 order_by=["attributes.start_time DESC"], max_results=1)[0]
     children = client.search_runs([exp.experiment_id],
                                   f"tags.mlflow.parentRunId = '{parent.info.run_id}'",
@@ -44,8 +45,9 @@ def stage_times(uri: str, experiment: str = "cdpr-pipeline") -> tuple[float, lis
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--profile", default="default")
-    ap.add_argument("--project", type=Path, help="read the latest run of this project "
-                    "instead of running one")
+    ap.add_argument("--project", type=Path, help="read the latest finished run of this "
+                    "project instead of running one")
+    ap.add_argument("--keep", action="store_true", help="keep the scratch project")
     args = ap.parse_args()
     if args.project:
         uri = f"sqlite:///{args.project.resolve() / 'mlflow.db'}"
@@ -62,11 +64,16 @@ def main() -> None:
         subprocess.run([sys.executable, "-m", "dvc", "init", "--no-scm", "-q"], cwd=work,
                        env=env, check=True)
         start = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "cdpr_pipeline.cli", "repro",
+        # the installed `cdpr` (its conf/); the copy is what DVC hashes as code deps
+        subprocess.run([str(Path(sys.executable).parent / "cdpr"), "repro",
                         f"profile={args.profile}"], cwd=work, env=env, check=True)
         wall = time.perf_counter() - start
-        print(f"scratch project: {work}")
     parent_s, rows = stage_times(uri)
+    if not args.project:
+        if args.keep:
+            print(f"scratch project: {work}")
+        else:
+            shutil.rmtree(work)
     print(f"{'stage':28s} {'seconds':>8s}  status")
     for name, seconds, status in rows:
         print(f"{name:28s} {seconds:8.1f}  {status}")

@@ -191,7 +191,12 @@ def compare(cfg: DictConfig) -> Comparison:
 
     def fetch() -> pd.DataFrame:
         if cfg.get("train_dirs"):
-            return runs_from_dirs(list(cfg.train_dirs))
+            runs = runs_from_dirs(list(cfg.train_dirs))
+            other = runs[runs["tags.data_digest"] != digest] if digest else runs.iloc[:0]
+            if not other.empty:
+                raise ValueError(f"train_dirs {list(other['tags.model'])} were trained on "
+                                 f"another dataset than data.path={path}")
+            return runs
         return latest_runs(cfg.tracking.experiment, cfg.tracking.uri, "train", digest)
 
     runs = fetch()

@@ -72,6 +72,18 @@ def test_every_dvc_stage_runs_its_own_section_and_writes_fixed_paths(default_par
                 deps = [expand(d) for d in body["deps"]]
                 assert any(data_path == d or data_path.startswith(d + "/") for d in deps), key
     assert len(out_dirs) == len(set(out_dirs)), "two stages share an output directory"
+    # the lists written in several places agree: dvc.yaml's foreach, conf/pipeline.yaml's
+    # sections, compare's train_dirs and deps, the report's identify dirs
+    for name, stage in dvc.items():
+        if "foreach" in stage:
+            assert stage["foreach"] == list(default_params[name]), name
+    trained = list(dvc["train"]["foreach"])
+    compare = default_params["compare"]["config"]
+    assert compare["models"] + compare["references"] == trained
+    assert compare["train_dirs"] == [f"results/train/{m}" for m in trained]
+    assert {f"results/train/{m}/{f}" for m in trained for f in ("metrics.json", "run.json")} \
+        <= set(dvc["compare"]["deps"])
+    assert list(default_params["report"]["config"]["identify"]) == dvc["identify"]["foreach"]
 
 
 def test_one_param_changes_only_the_sections_that_read_it(default_params):
@@ -91,6 +103,11 @@ def test_overrides_are_hydra_literals():
     assert hydra_literal(True) == "true"
     assert hydra_literal(["a", 2]) == "[a,2]"
     assert hydra_literal("a b") == "'a b'"
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parser = OverridesParser.create()
+    for text in ("a b", "C:\\x", "données/x", "x#y", "it's", "end\\", "/tmp/a-b/c.d", "null"):
+        assert parser.parse_override(f"k={hydra_literal(text)}").value() == text, text
     spec = {"values": {"seed": 3, "path": None}, "overrides": ["model={item}"]}
     profile = {"overrides": {"train": ["trainer.max_epochs=1"]}}
     assert stage_overrides(spec, profile, "train", "tcn") == [
@@ -149,7 +166,9 @@ def test_stage_runs_as_a_nested_mlflow_run_and_swaps_its_output_in(tmp_path, mon
     out = tmp_path / "ds"
     assert summary["runs"] == 5 and summary["source"] == "simulate"
     assert (out / "lab" / "rig.yaml").exists() and (out / "dataset.json").exists()
-    assert not any(p.name.endswith((".partial", ".lock", ".old")) for p in tmp_path.iterdir())
+    # nothing half-done is left (the lock file stays, unlocked: see output_lock)
+    assert not any(p.name.endswith((".partial", ".partial.params", ".old"))
+                   for p in tmp_path.iterdir())
     mlflow.set_tracking_uri(uri)
     runs = client.search_runs([exp], f"tags.mlflow.parentRunId = '{parent}'")
     assert [r.info.run_name for r in runs] == ["dataset"]
@@ -230,7 +249,9 @@ def test_an_interrupted_training_stage_resumes_from_its_checkpoint(
     monkeypatch.setattr(train_module, "evaluate", real_evaluate)
     caplog.set_level("INFO")
     result = run_stage("train", params)
-    assert "resuming from" in caplog.text
+    # the training function itself picked up the checkpoint (not only the runner)
+    assert any(r.name == "cdpr_pipeline.stages.train" and "last.ckpt" in r.getMessage()
+               for r in caplog.records)
     assert result.metrics["epochs"] == 2
     # the epochs were done before: the resumed fit only restores them
     assert result.metrics["time/train_s"] < 5

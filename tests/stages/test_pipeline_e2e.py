@@ -22,7 +22,7 @@ pytestmark = pytest.mark.slow
 
 
 def _cdpr(cwd: Path, *args: str, env: dict) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cdpr_pipeline.cli", *args], cwd=cwd, env=env,
+    return subprocess.run([str(Path(sys.executable).parent / "cdpr"), *args], cwd=cwd, env=env,
                           text=True, capture_output=True, check=False)
 
 

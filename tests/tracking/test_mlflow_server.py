@@ -5,7 +5,6 @@ Lightning training run), everything read back over plain HTTP (the REST API the 
 from __future__ import annotations
 
 import json
-import os
 import socket
 import subprocess
 import sys
@@ -45,11 +44,12 @@ def _post(base: str, path: str, body: dict) -> dict:
 def mlflow_server(tmp_path):
     port = _free_port()
     base = f"http://127.0.0.1:{port}"
+    server_log = open(tmp_path / "server.log", "w")  # noqa: SIM115 (closed below)
     proc = subprocess.Popen(
         [sys.executable, "-m", "mlflow", "server", "--host", "127.0.0.1", "--port", str(port),
          "--workers", "1", "--backend-store-uri", f"sqlite:///{tmp_path / 'server.db'}",
          "--artifacts-destination", str(tmp_path / "artifacts")],
-        stdout=subprocess.DEVNULL, stderr=open(tmp_path / "server.log", "w"))  # noqa: SIM115
+        stdout=subprocess.DEVNULL, stderr=server_log)
     try:
         deadline = time.time() + 120
         while True:
@@ -67,6 +67,7 @@ def mlflow_server(tmp_path):
     finally:
         proc.terminate()
         proc.wait(timeout=30)
+        server_log.close()
 
 
 def test_pipeline_runs_read_back_from_a_tracking_server(tmp_path, monkeypatch, mlflow_server):
@@ -123,4 +124,3 @@ def test_pipeline_runs_read_back_from_a_tracking_server(tmp_path, monkeypatch, m
         assert json.loads(r.read())["runs"] == sum(counts.values())
     got = _get(base, "/api/2.0/mlflow/runs/get", run_id=parent)["run"]
     assert got["info"]["status"] == "FINISHED"
-    assert os.environ["MLFLOW_TRACKING_URI"] == base
