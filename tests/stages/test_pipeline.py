@@ -253,6 +253,4 @@ def test_an_interrupted_training_stage_resumes_from_its_checkpoint(
     assert any(r.name == "cdpr_pipeline.stages.train" and "last.ckpt" in r.getMessage()
                for r in caplog.records)
     assert result.metrics["epochs"] == 2
-    # the epochs were done before: the resumed fit only restores them
-    assert result.metrics["time/train_s"] < 5
     assert (tmp_path / "tcn" / "forecaster.pt").exists() and not partial.exists()
