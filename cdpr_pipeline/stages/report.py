@@ -104,7 +104,7 @@ def build_report(cfg: DictConfig) -> dict:
           f"({dataset['source']}{', hidden: ' + '; '.join(hidden) if hidden else ''}).\n",
           f"**Diagnosis**: {diagnosis['summary']}\n",
           "## Trajectory predictors (test runs)\n", summary_md,
-          "## Identification (Table III)\n", to_markdown(table3.reset_index()),
+          "## Identification (Table III)\n", to_markdown(table3),
           "## Reconstruction (Table IV)\n",
           (Path(cfg.reconstruct) / "table4.md").read_text()
           if (Path(cfg.reconstruct) / "table4.md").exists() else ""]
