@@ -264,9 +264,10 @@ def _blame(err: BaseException, inputs: Mapping[str, str]) -> str:
 
 def _repoint_text_outputs(out_dir: Path, old: str, new: str) -> None:
     """Small text outputs that recorded where they were written (a config.yaml) name the
-    final directory, not the partial one."""
+    final directory, not the partial one. Data files (CSV, arrays) never record paths and
+    are not read again."""
     for path in out_dir.rglob("*"):
-        if (path.is_file() and path.suffix in (".yaml", ".json", ".md", ".csv")
+        if (path.is_file() and path.suffix in (".yaml", ".json", ".md")
                 and path.stat().st_size <= MAX_ARTIFACT_BYTES):
             text = path.read_text(errors="surrogateescape")
             if old in text:
