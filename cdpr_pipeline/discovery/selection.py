@@ -356,6 +356,17 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
     candidates = candidates_for(rig, search.scale, settings.effects, settings.refit_winches)
     causes = search.forward([], candidates, freeform is not None, settings.max_causes)
     unnamed = [c for c in causes if c.effect == "unnamed"]
+    if unnamed and len(causes) > 1:
+        # the named causes were fitted jointly with the unnamed part, which can take over
+        # what one of their parameters should carry (a near-constant term and a winch
+        # offset splitting a constant between them); fitted afresh without it, do the
+        # named causes leave anything for free-form terms to explain?
+        fresh = search.forward([], candidates, False, settings.max_causes)
+        if fresh and not search.refit(unnamed[0], _effects(fresh),
+                                      len(candidates) + 1).passed:
+            for c in fresh:
+                c.confirmed_by = unnamed[0].freeform.describe()
+            causes, unnamed = fresh, []
     if unnamed:
         named = [c for c in causes if c.effect != "unnamed"]
         taken = {c.label for c in named if c.effect != "winch_parameter_error"}
