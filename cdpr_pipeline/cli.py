@@ -1,7 +1,8 @@
 """The ``cdpr`` console command: ``cdpr <subcommand> [key=value ...] [-m]``.
 
 Every subcommand is a Hydra app (overrides, ``-m`` multirun, ``--cfg job``, ``--help``)
-whose work is a plain function in :mod:`cdpr_pipeline.stages`.
+whose work is a plain function in :mod:`cdpr_pipeline.stages`; ``params``, ``stage`` and
+``repro`` run the staged pipeline (:mod:`cdpr_pipeline.pipeline`).
 """
 
 from __future__ import annotations
@@ -23,9 +24,9 @@ SUBCOMMANDS = {
     "diagnose": "cdpr_pipeline.stages.diagnose",
     "dataset": "cdpr_pipeline.stages.dataset",
     "report": "cdpr_pipeline.stages.report",
-    "params": "cdpr_pipeline.stages.pipeline:params_main",
-    "stage": "cdpr_pipeline.stages.pipeline:stage_main",
-    "repro": "cdpr_pipeline.stages.pipeline:repro_main",
+    "params": "cdpr_pipeline.pipeline.commands:params_main",
+    "stage": "cdpr_pipeline.pipeline.commands:stage_main",
+    "repro": "cdpr_pipeline.pipeline.commands:repro_main",
 }
 
 USAGE = """usage: cdpr <subcommand> [key=value ...] [-m] [--cfg job] [--help]

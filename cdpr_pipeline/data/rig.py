@@ -16,6 +16,13 @@ FORMAT = "cdpr-measured/1"
 WINCH_KEYS = ("inertia", "viscous", "coulomb", "offset")
 
 
+def coulomb_law_dict(sharpness: float | None) -> str | dict[str, float]:
+    """The ``coulomb_law`` entry of rig.yaml for a Coulomb sharpness (None: hard sign)."""
+    if sharpness is None or not np.isfinite(sharpness):
+        return "sign"
+    return {"tanh": float(sharpness)}
+
+
 @dataclass(frozen=True)
 class WinchParams:
     """Per-winch (or per-axis) model ``I q'' + F_v q' + F_c sign(q') + d``.
@@ -90,6 +97,9 @@ class CdprRig:
     controller: ControllerSpec | None = None
     virtual: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
+    #: the stated Coulomb law: ``None`` the hard ``sign`` (the spec's default), else ``k``
+    #: of ``F_c tanh(k theta')``; rig.yaml's ``winch_nominal.coulomb_law``
+    coulomb_sharpness: float | None = None
 
     kind = "cdpr"
 
@@ -133,6 +143,8 @@ class CdprRig:
             "anchors_m": [[float(c) for c in a] for a in self.anchors_m],
             "winch_nominal": self.winch_nominal.as_dict(),
         }
+        if self.coulomb_sharpness is not None:
+            out["winch_nominal"]["coulomb_law"] = coulomb_law_dict(self.coulomb_sharpness)
         if self.controller is not None:
             out["controller"] = self.controller.as_dict()
         if self.virtual:
@@ -154,6 +166,8 @@ class AxesRig:
     controller: dict[str, Any] | None = None
     virtual: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
+    #: the stated Coulomb law (see :class:`CdprRig`); rig.yaml's ``nominal.coulomb_law``
+    coulomb_sharpness: float | None = None
 
     kind = "axes"
 
@@ -173,6 +187,8 @@ class AxesRig:
             "axes": list(self.axes),
             "nominal": self.nominal.as_dict(),
         }
+        if self.coulomb_sharpness is not None:
+            out["nominal"]["coulomb_law"] = coulomb_law_dict(self.coulomb_sharpness)
         if self.controller is not None:
             out["controller"] = dict(self.controller)
         if self.virtual:

@@ -8,9 +8,14 @@ import numpy as np
 
 
 def family_of(name: str) -> str:
-    """Trajectory family from a file stem: the part after the first ``_``."""
-    _, sep, rest = name.partition("_")
-    return rest if sep and rest else name
+    """Trajectory family from a file stem: the part after the first ``_``.
+
+    A time block's suffix (``000_spiral@7.5-10.0s``, see :mod:`cdpr_pipeline.data.split`)
+    is not part of it; ``@`` cannot occur in a dataset's file names.
+    """
+    stem = name.split("@", 1)[0]
+    _, sep, rest = stem.partition("_")
+    return rest if sep and rest else stem
 
 
 @dataclass

@@ -157,6 +157,19 @@ class _RigChecker:
             return None
         return WinchParams(**values)
 
+    def coulomb_law(self, key: str) -> float | None:
+        """``<key>.coulomb_law``: ``sign`` (also when absent) -> None, ``{tanh: k}`` -> k."""
+        block = self.raw.get(key)
+        law = block.get("coulomb_law") if isinstance(block, Mapping) else None
+        if law is None or law == "sign":
+            return None
+        if isinstance(law, Mapping) and set(law) == {"tanh"}:
+            k = self.number(f"{key}.coulomb_law.tanh", law["tanh"], positive=True)
+            return k
+        self.error(f"{key}.coulomb_law", f"must be 'sign' or {{tanh: k}} with k > 0 in s/rad, "
+                   f"got {law!r}", "rig_type")
+        return None
+
     def header(self) -> str | None:
         """Check ``format`` and ``kind``; return the kind, or None if unusable."""
         fmt = self.raw.get("format")
@@ -184,6 +197,7 @@ class _RigChecker:
         if radius is not None:
             radius = self.vector("drum_radius_m", radius, n, what, positive=True)
         winch = self.winch("winch_nominal", n, what)
+        law = self.coulomb_law("winch_nominal")
         controller = self._controller(rate)
         extra = {k: v for k, v in raw.items() if k not in _CDPR_KEYS}
         self._frame(extra)
@@ -193,7 +207,8 @@ class _RigChecker:
             return None
         return CdprRig(sample_rate_hz=rate, platform_mass_kg=mass, drum_radius_m=radius,
                        anchors_m=anchors, winch_nominal=winch, gravity=gravity,
-                       controller=controller, virtual=virtual, extra=extra)
+                       controller=controller, virtual=virtual, extra=extra,
+                       coulomb_sharpness=law)
 
     def axes(self, rate: float | None) -> AxesRig | None:
         names = self.required("axes")
@@ -208,6 +223,7 @@ class _RigChecker:
                 names = None
         n = None if names is None else len(names)
         nominal = self.winch("nominal", n, f"axes lists {n} " + ("axis" if n == 1 else "axes"))
+        law = self.coulomb_law("nominal")
         controller = self.raw.get("controller")
         if controller is not None and not isinstance(controller, Mapping):
             self.error("controller", "must be a mapping", "rig_shape")
@@ -217,7 +233,7 @@ class _RigChecker:
             return None
         return AxesRig(sample_rate_hz=rate, axes=tuple(names), nominal=nominal,
                        controller=None if controller is None else dict(controller),
-                       virtual=virtual, extra=extra)
+                       virtual=virtual, extra=extra, coulomb_sharpness=law)
 
     def _anchors(self) -> np.ndarray | None:
         raw = self.required("anchors_m")

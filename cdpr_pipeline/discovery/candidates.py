@@ -2,9 +2,16 @@
 
 A :class:`Candidate` turns a parameter vector into simulator effects (the plug-ins of
 :mod:`cdpr_pipeline.sim.effects`, so fitting, extension and simulation share one
-physics) and says where the search starts and which values are physical. Discrete
-choices (which cable, which direction) become separate variants; the diagnosis corrects
-its tests for how many it tried.
+physics) and says where the search starts and which values are physical. The variants
+belong to the effect classes (:meth:`~cdpr_pipeline.sim.effects.Effect.candidates`);
+this module only collects them, so adding an effect is one class and one config file.
+Discrete choices that hold for the whole rig (which cable's anchor) become separate
+variants; the diagnosis corrects its tests for how many it tried.
+
+Winch-side torque effects have one magnitude per winch (and per-winch shape parameters
+and directions where the physics has them): such a candidate carries a
+:class:`WinchForm`, and :func:`~cdpr_pipeline.discovery.fitting.fit_winches` lets the
+data choose its winches before it is judged (see there).
 
 Some candidates come in a second variant that re-identifies the winch parameters too
 (``refit_winches``): on a real rig the nominal I_m, F_v, F_c, d are themselves fitted to
@@ -16,21 +23,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from cdpr_pipeline.data.rig import CdprRig, Rig
-from cdpr_pipeline.sim.effects import (
-    ActuatorLag,
-    AnchorOffset,
-    AsymmetricViscousFriction,
-    CableElasticity,
-    DrumRadiusError,
-    Effect,
-    PayloadMassError,
-    StribeckFriction,
-    WinchParameterError,
-)
+from cdpr_pipeline.data.rig import CdprRig, Rig, WinchParams
+from cdpr_pipeline.sim.effects import EFFECTS, Effect
 
 #: effects that act on the winch side only
 TORQUE = frozenset({"torque"})
@@ -38,11 +36,57 @@ TORQUE = frozenset({"torque"})
 
 @dataclass(frozen=True)
 class DataScale:
-    """Typical magnitudes of the measured motion, to place starting points and bounds."""
+    """Typical magnitudes of the measured motion, to place starting points and bounds,
+    and the nominal winch parameters (per-winch magnitude bounds)."""
 
     speed_rms: float
     n: int
     kind: str
+    winch: WinchParams | None = None
+
+
+class WinchPart(NamedTuple):
+    """A winch-separable effect on one winch: the discrete ``variant`` (a direction, or
+    None), the ``magnitude`` (linear in the torque) and the ``shape`` parameter (a
+    Stribeck velocity, or None)."""
+
+    variant: Any
+    magnitude: float
+    shape: float | None
+
+
+@dataclass(frozen=True)
+class WinchForm:
+    """How a winch-side effect acts on each winch separately: on winch ``i`` an extra
+    torque ``m_i f(theta_i, omega_i; s_i, v_i)``, linear in the magnitude ``m_i``.
+
+    Attributes
+    ----------
+    make : callable
+        ``{winch (1-based): WinchPart}`` -> effects acting on exactly those winches.
+    magnitude : callable
+        Winch index (0-based) -> physical bounds of its magnitude.
+    typical : callable
+        Winch index -> typical magnitude (conditions the optimiser).
+    variants : tuple
+        Discrete per-winch choices (each winch takes the one that fits it best).
+    shape : (float, float) or None
+        Bounds of the per-winch shape parameter (None: the effect has none).
+    names : (str, str)
+        Names of the magnitude and of the shape parameter or variant, for reports.
+    """
+
+    make: Callable[[dict[int, WinchPart]], list[Effect]]
+    magnitude: Callable[[int], tuple[float, float]]
+    typical: Callable[[int], float]
+    variants: tuple[Any, ...] = (None,)
+    shape: tuple[float, float] | None = None
+    names: tuple[str, str] = ("magnitude", "shape")
+
+    @property
+    def k(self) -> int:
+        """Free parameters per winch."""
+        return 1 if self.shape is None else 2
 
 
 @dataclass
@@ -70,6 +114,10 @@ class Candidate:
         with elastic cables in the model, tension changes reach the lengths too).
     linear : bool
         Residuals are linear in the parameters (one Gauss-Newton step is exact).
+    form : WinchForm or None
+        Set for winch-separable effects: the variant is a template whose winches (and
+        starting point) the data choose before it is fitted
+        (:func:`~cdpr_pipeline.discovery.fitting.fit_winches`).
     """
 
     effect: str
@@ -83,127 +131,113 @@ class Candidate:
     linear: bool = False
     names: list[str] = field(default_factory=list)
     affects: frozenset[str] = frozenset({"torque", "length"})
+    form: WinchForm | None = None
 
     @property
     def n_params(self) -> int:
         return len(self.lower)
 
 
-def _arr(*x: float) -> np.ndarray:
-    return np.asarray(x, dtype=float)
+def on_winches(template: Candidate, parts: dict[int, WinchPart]) -> Candidate:
+    """The winch-separable ``template`` acting on the winches of ``parts`` only, starting
+    at their values: per kept winch its magnitude, then its shape parameter; the
+    per-winch variants are fixed. Only the kept winches' parameters count."""
+    form = template.form
+    cables = sorted(parts)
+    x0, lower, upper, x_scale, names = [], [], [], [], []
+    for c in cables:
+        part = parts[c]
+        lo, hi = form.magnitude(c - 1)
+        x0.append(float(np.clip(part.magnitude, lo, hi)))
+        lower.append(lo)
+        upper.append(hi)
+        x_scale.append(max(abs(part.magnitude), 0.1 * abs(form.typical(c - 1)), 1e-9))
+        names.append(f"{form.names[0]}[winch {c}]")
+        if form.shape is not None:
+            x0.append(float(np.clip(part.shape, *form.shape)))
+            lower.append(form.shape[0])
+            upper.append(form.shape[1])
+            x_scale.append(0.3 * x0[-1])
+            names.append(f"{form.names[1]}[winch {c}]")
+    step = form.k
+
+    def build(x: np.ndarray) -> list[Effect]:
+        return form.make({c: WinchPart(parts[c].variant, float(x[step * j]),
+                                       float(x[step * j + 1]) if step == 2 else None)
+                          for j, c in enumerate(cables)})
+
+    return replace(template, build=build, starts=[np.asarray(x0, float)],
+                   lower=np.asarray(lower, float), upper=np.asarray(upper, float),
+                   x_scale=np.asarray(x_scale, float), names=names, form=None,
+                   linear=form.shape is None)
 
 
-def winch_parameter_error(rig: Rig, scale: DataScale) -> list[Candidate]:
-    """Re-identify one winch (four parameters)."""
-    out = []
-    for cable in range(1, scale.n + 1):
-        out.append(Candidate(
-            "winch_parameter_error", f"winch_parameter_error[winch {cable}]",
-            lambda x, c=cable: [WinchParameterError(c, float(x[0]), float(x[1]),
-                                                    float(x[2]), float(x[3]))],
-            [_arr(1, 1, 1, 0)], _arr(0.0, -np.inf, -np.inf, -np.inf),
-            _arr(np.inf, np.inf, np.inf, np.inf), _arr(0.1, 0.1, 0.1, 0.1), linear=True,
-            names=["inertia_scale", "viscous_scale", "coulomb_scale", "offset_delta"],
-            affects=TORQUE))
-    return out
+def winch_candidate(effect: str, label: str, make: Callable[[dict[int, WinchPart]],
+                                                            list[Effect]],
+                    n: int, magnitude: Callable[[int], tuple[float, float]],
+                    typical: Callable[[int], float], variants: tuple[Any, ...] = (None,),
+                    shape: tuple[float, float] | None = None,
+                    names: tuple[str, str] = ("magnitude", "shape")) -> Candidate:
+    """A winch-separable candidate (torque side): one magnitude per winch, a per-winch
+    shape parameter when ``shape`` gives its bounds, and per-winch ``variants``.
+
+    As returned it acts on every winch with zero magnitude and the first variant; the
+    diagnosis lets the data choose its winches, variants and starting point first
+    (:func:`~cdpr_pipeline.discovery.fitting.fit_winches`)."""
+    form = WinchForm(make, magnitude, typical, tuple(variants), shape, names)
+    middle = None if shape is None else float(np.sqrt(shape[0] * shape[1]))
+    template = Candidate(effect, label, lambda x: [], [np.zeros(0)], np.zeros(0),
+                         np.zeros(0), np.zeros(0), affects=TORQUE, form=form)
+    every = on_winches(template, {i + 1: WinchPart(variants[0], 0.0, middle)
+                                  for i in range(n)})
+    return replace(every, form=form)
 
 
-def stribeck_friction(rig: Rig, scale: DataScale) -> list[Candidate]:
-    w = scale.speed_rms
-    return [Candidate(
-        "stribeck_friction", "stribeck_friction",
-        lambda x: [StribeckFriction(float(x[0]), float(x[1]))],
-        # friction *rises* at low speed: a ratio below one is another effect, not this one
-        [_arr(1.5, f * w) for f in (0.05, 0.2, 0.6)], _arr(1.0, 0.005 * w),
-        _arr(20.0, 5.0 * w), _arr(0.5, 0.2 * w),
-        names=["static_ratio", "stribeck_velocity"], affects=TORQUE)]
+def nominal_winch(rig: Rig) -> WinchParams:
+    """The rig's nominal winch (or axis) parameters."""
+    return rig.winch_nominal if isinstance(rig, CdprRig) else rig.nominal
 
 
-def asymmetric_viscous_friction(rig: Rig, scale: DataScale) -> list[Candidate]:
-    return [Candidate(
-        "asymmetric_viscous_friction", f"asymmetric_viscous_friction[{word}]",
-        lambda x, d=direction: [AsymmetricViscousFriction(float(x[0]), d)],
-        [_arr(0.0)], _arr(-0.95), _arr(10.0), _arr(0.3), linear=True, names=["ratio"],
-        affects=TORQUE)
-        for direction, word in ((1, "reeling in" if scale.kind == "cdpr" else "positive"),
-                                (-1, "paying out" if scale.kind == "cdpr" else "negative"))]
-
-
-def actuator_lag(rig: Rig, scale: DataScale) -> list[Candidate]:
-    return [Candidate(
-        "actuator_lag", "actuator_lag",
-        # below half a millisecond a lag is not resolved by any rig sampled here
-        lambda x: [ActuatorLag(float(x[0]))],
-        [_arr(0.002), _arr(0.01)], _arr(5e-4), _arr(0.2), _arr(0.005),
-        names=["time_constant_s"], affects=TORQUE)]
-
-
-def payload_mass_error(rig: Rig, scale: DataScale) -> list[Candidate]:
-    return [Candidate(
-        "payload_mass_error", "payload_mass_error",
-        lambda x: [PayloadMassError(float(x[0]))],
-        [_arr(0.0)], _arr(-0.9), _arr(5.0), _arr(0.1), names=["relative"])]
-
-
-def cable_elasticity(rig: Rig, scale: DataScale) -> list[Candidate]:
-    # fitted as compliance 1/EA (nearly linear in the length residual); 0 is rigid
-    return [Candidate(
-        "cable_elasticity", "cable_elasticity",
-        lambda x: [CableElasticity(ea_n=1.0 / float(x[0]))] if x[0] > 0 else [],
-        [_arr(1e-6)], _arr(0.0), _arr(1e-2), _arr(1e-5), names=["compliance_per_n"],
-        affects=frozenset({"length"}))]
-
-
-def anchor_offset(rig: Rig, scale: DataScale) -> list[Candidate]:
-    return [Candidate(
-        "anchor_offset", f"anchor_offset[cable {cable}]",
-        lambda x, c=cable: [AnchorOffset(c, [float(v) for v in x])],
-        [_arr(0, 0, 0)], _arr(-0.5, -0.5, -0.5), _arr(0.5, 0.5, 0.5),
-        _arr(0.01, 0.01, 0.01), names=["dx_m", "dy_m", "dz_m"])
-        for cable in range(1, scale.n + 1)]
-
-
-def drum_radius_error(rig: Rig, scale: DataScale) -> list[Candidate]:
-    return [Candidate(
-        "drum_radius_error", "drum_radius_error",
-        lambda x: [DrumRadiusError(float(x[0]))],
-        [_arr(0.0)], _arr(-0.5), _arr(0.5), _arr(0.01), names=["relative"])]
-
-
-#: vocabulary name -> variants for a rig; the table can grow, names keep their meaning
-CANDIDATES: dict[str, Callable[[Rig, DataScale], list[Candidate]]] = {
-    "winch_parameter_error": winch_parameter_error,
-    "stribeck_friction": stribeck_friction,
-    "asymmetric_viscous_friction": asymmetric_viscous_friction,
-    "cable_elasticity": cable_elasticity,
-    "anchor_offset": anchor_offset,
-    "drum_radius_error": drum_radius_error,
-    "payload_mass_error": payload_mass_error,
-    "actuator_lag": actuator_lag,
-}
-
-#: torque-side effects that also get a variant with the winch parameters re-identified
-REFIT_WITH = ("stribeck_friction", "asymmetric_viscous_friction", "actuator_lag",
-              "payload_mass_error")
+def candidate_effects(kind: str | None = None) -> list[str]:
+    """Vocabulary effects that have candidates (for rigs of ``kind``)."""
+    return [name for name, cls in EFFECTS.items()
+            if cls.in_vocabulary and cls.candidates.__func__ is not Effect.candidates.__func__
+            and (kind is None or kind in cls.kinds)]
 
 
 def candidates_for(rig: Rig, scale: DataScale, names: list[str] | None = None,
                    refit_winches: bool = True) -> list[Candidate]:
     """Every variant of the named effects (all of the vocabulary by default) that
-    applies to this kind of rig."""
-    from cdpr_pipeline.sim.effects import EFFECTS
-
+    applies to this kind of rig, as the effect classes define them."""
     kind = "cdpr" if isinstance(rig, CdprRig) else "axes"
+    if scale.winch is None:
+        scale = replace(scale, winch=nominal_winch(rig))
+    known = candidate_effects()
     out: list[Candidate] = []
-    for name in names or list(CANDIDATES):
-        if name not in CANDIDATES:
-            raise KeyError(f"no candidate for effect {name!r}; known: {sorted(CANDIDATES)}")
-        if kind not in EFFECTS[name].kinds:
+    for name in names or known:
+        if name not in known:
+            raise KeyError(f"no candidate for effect {name!r}; known: {sorted(known)}")
+        cls = EFFECTS[name]
+        if kind not in cls.kinds:
             continue
-        variants = CANDIDATES[name](rig, scale)
+        variants = cls.candidates(rig, scale)
         out.extend(variants)
-        if refit_winches and name in REFIT_WITH:
+        if refit_winches and cls.refit_variant:
             for v in variants:
                 out.append(replace(v, label=v.label + "+winches", refit_winches=True,
                                    affects=v.affects | TORQUE))
+    return out
+
+
+def vocabulary_shapes(rig: Rig, scale: DataScale, names: list[str] | None = None
+                      ) -> list[str]:
+    """Free-form expressions with the shape of a candidate effect: the free-form search
+    leaves such terms to the named candidates (spec: a term with a vocabulary effect's
+    shape is reported under its name)."""
+    kind = "cdpr" if isinstance(rig, CdprRig) else "axes"
+    out: list[str] = []
+    for name in names or candidate_effects(kind):
+        cls = EFFECTS[name]
+        if kind in cls.kinds:
+            out += [e for e in cls.shapes(scale.speed_rms) if e not in out]
     return out

@@ -8,6 +8,7 @@ runs judge.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Sequence
@@ -18,6 +19,7 @@ import numpy as np
 
 from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.data.rig import CdprRig
+from cdpr_pipeline.data.split import Split, heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
 from cdpr_pipeline.discovery.freeform import FreeFormSearch
@@ -29,7 +31,13 @@ from cdpr_pipeline.discovery.residuals import (
     nominal_model,
     residuals,
 )
-from cdpr_pipeline.discovery.selection import Judgement, SelectionSettings, select_causes
+from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
+from cdpr_pipeline.discovery.selection import (
+    Judge,
+    Judgement,
+    SelectionSettings,
+    select_causes,
+)
 from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
 from cdpr_pipeline.discovery.validity import (
     NoiseModel,
@@ -38,7 +46,8 @@ from cdpr_pipeline.discovery.validity import (
     ljung_box_pvalue,
     split_blocks,
 )
-from cdpr_pipeline.identification.regressors import RegressionSettings
+from cdpr_pipeline.identification.pipeline import min_block_samples
+from cdpr_pipeline.identification.regressors import RegressionSettings, resolve_settings
 from cdpr_pipeline.sim.effects import Effect, WinchParameterError
 from cdpr_pipeline.sim.plant import smooth_sign
 from cdpr_pipeline.wavelet.split import WaveletSplit, band_energies
@@ -74,26 +83,33 @@ class DiagnosisSettings:
     max_lag: int = 20
     wavelet: WaveletSplit = field(default_factory=lambda: WaveletSplit("db4", 5))
     correlation_threshold: float = 0.3
+    #: training relative torque error (%) above which the stated model is unusable and
+    #: every winch is re-identified before causes are named
+    unusable_error_pct: float = 100.0
+
+
+def diagnosis_split(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Split:
+    """The training and held-out runs :func:`diagnose` uses
+    (:func:`~cdpr_pipeline.data.split.heldout_split`).
+
+    ``settings.heldout`` entries match a run name or family; by default families
+    ``spiral`` or ``pulses`` are held out, else the last file. A single run holds out its
+    last block (25 %, at least 3 s while half the run is left to train on); a block too
+    short for the regression's trims and 100 rows raises.
+    """
+    settings = settings or DiagnosisSettings()
+    regression = resolve_settings(settings.regression, dataset.trajectories, dataset.rig)
+    return heldout_split(dataset.trajectories, settings.heldout,
+                         default_families=HELDOUT_FAMILIES, unknown="raise",
+                         min_samples=min_block_samples(regression, dataset.rig.sample_rate_hz),
+                         source=str(dataset.root))
 
 
 def split_runs(trajectories: Sequence[Trajectory], heldout: Sequence[str] | None = None
                ) -> tuple[list[str], list[str]]:
-    """Training and held-out run names. ``heldout`` entries match a run name or family;
-    by default families ``spiral`` or ``pulses`` are held out, else the last file."""
-    names = [tr.name for tr in trajectories]
-    if heldout:
-        wanted = set(heldout)
-        held = [tr.name for tr in trajectories if tr.name in wanted or tr.family in wanted]
-        unknown = wanted - {tr.name for tr in trajectories} - {tr.family for tr in trajectories}
-        if unknown:
-            raise ValueError(f"split.heldout: no run or family named {sorted(unknown)}; "
-                             f"runs: {names}")
-    else:
-        held = [tr.name for tr in trajectories if tr.family in HELDOUT_FAMILIES] or names[-1:]
-    train = [n for n in names if n not in held]
-    if not train:
-        raise ValueError(f"every run is held out ({held}); diagnosis needs training runs")
-    return train, held
+    """Training and held-out run (or time block) names, as :func:`diagnosis_split`."""
+    split = heldout_split(trajectories, heldout, default_families=HELDOUT_FAMILIES)
+    return list(split.train), list(split.heldout)
 
 
 @dataclass
@@ -119,6 +135,8 @@ class Diagnosis:
     timings: dict[str, float]
     plots: dict[str, Any]
     extension: list[Effect] = field(default_factory=list)
+    #: set when the stated model was grossly wrong and re-identified first
+    unusable: dict[str, Any] | None = None
 
     @property
     def verdict(self) -> str:
@@ -134,7 +152,8 @@ class Diagnosis:
             "format": FORMAT,
             "dataset": self.dataset,
             "split": {"train": self.train, "heldout": self.heldout},
-            "nominal": {"params": self.rig_params(), "metrics": self.nominal_metrics},
+            "nominal": {"params": self.rig_params(), "metrics": self.nominal_metrics,
+                        **({"unusable": self.unusable} if self.unusable else {})},
             "discrepancies": self.discrepancies,
             "causes": [cause_record(c, self.nominal) for c in self.causes],
             "verdict": self.verdict,
@@ -171,7 +190,8 @@ def cause_params(effects: Sequence[Effect], nominal: Model) -> dict[str, Any]:
     changes = [_winch_change(e, nominal) for e in effects if isinstance(e, WinchParameterError)]
     for e in effects:
         if not isinstance(e, WinchParameterError):
-            out.update(e.params())
+            # per-winch sizes both absolute and relative to the nominal parameters
+            out.update({**e.params(), **e.derived(nominal)})
     if changes:
         out["winches" if all(isinstance(e, WinchParameterError) for e in effects)
             else "refit_winches"] = changes
@@ -210,7 +230,7 @@ def describe_cause(j: Judgement, nominal: Model) -> str:
             if diffs:
                 parts.append(f"winch {e.cable}: " + ", ".join(diffs))
         else:
-            parts.append(e.describe())
+            parts.append(e.describe(nominal))
     return "; ".join(parts) if parts else j.label
 
 
@@ -424,11 +444,16 @@ def blackbox_share(nominal: Model, extended: Model, train: list[RunSignals],
 def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Diagnosis:
     """Diagnose a ``cdpr-measured/1`` dataset against its nominal model."""
     settings = settings or DiagnosisSettings()
+    # filter, decimation and Coulomb law chosen once, from the whole dataset and its rig
+    settings = dataclasses.replace(settings, regression=resolve_settings(
+        settings.regression, dataset.trajectories, dataset.rig))
     clock: dict[str, float] = {}
     start = time.perf_counter()
     rig = dataset.rig
-    trajectories = list(dataset.trajectories)
-    train_names, held_names = split_runs(trajectories, settings.heldout)
+    # whole runs, or time blocks of a single run, cut before any filtering
+    split = diagnosis_split(dataset, settings)
+    trajectories = split.cut_all(dataset.trajectories)
+    train_names, held_names = list(split.train), list(split.heldout)
     signals = dataset_signals(trajectories, rig, settings.regression)
     by_name = {s.name: s for s in signals}
     train = [by_name[n] for n in train_names]
@@ -437,10 +462,54 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     clock["signals"] = time.perf_counter() - start
 
     t0 = time.perf_counter()
-    selection = select_causes(nominal, rig, train, held, settings.selection, settings.freeform,
+    # a stated model that is grossly wrong is re-identified first: effects are judged
+    # against a model that at least fits, and the report says the stated one was unusable
+    first, unusable = _reidentify_if_unusable(nominal, train, held, settings)
+    base = nominal.with_effects(first.effects) if first else nominal
+    selection = select_causes(base, rig, train, held, settings.selection, settings.freeform,
                               log=log)
-    extended = nominal.with_effects(selection.effects)
+    causes = ([first] if first else []) + list(selection.causes)
     clock["causes"] = time.perf_counter() - t0
+
+    # never worse: the causes are kept only while the extended model's held-out gain has
+    # a 95 % interval above zero; the weakest cause goes first until it has
+    before_held = residuals(nominal, nominal, held)
+    withdrawn: list[str] = []
+    # and every cause must still add to the others: causes were fitted jointly as they
+    # were added, so one found early can end with nothing left to explain
+    for c in sorted(causes, key=lambda c: c.bic_drop):
+        if len(causes) < 2:
+            break
+        others = [o for o in causes if o is not c]
+        ch = c.channel
+        without = residuals(nominal.with_effects([e for o in others for e in o.effects]),
+                            nominal, held).sse(ch)
+        with_c = residuals(nominal.with_effects([e for o in causes for e in o.effects]),
+                           nominal, held).sse(ch)
+        if with_c > (1 - settings.selection.min_gain) * without:
+            causes.remove(c)
+            withdrawn.append(c.label)
+            log.info("never worse: %s withdrawn (adds %.1f %% to the other causes on the "
+                     "held-out %s)", c.label, 100 * (1 - with_c / max(without, 1e-300)), ch)
+    while True:
+        extension = [e for c in causes for e in c.effects]
+        extended = nominal.with_effects(extension)
+        channel = causes[0].channel if causes else "torque"
+        after_held = residuals(extended, nominal, held)
+        gain = heldout_gain(before_held, after_held, held, channel,
+                            settings.selection.block_s, settings.selection.n_boot,
+                            settings.selection.seed)
+        if not causes or gain["ci95"][0] > 0:
+            break
+        dropped = causes.pop()
+        withdrawn.append(dropped.label)
+        log.info("never worse: %s withdrawn (held-out gain %.1f %%, 95 %% CI %.1f to %.1f %%)",
+                 dropped.label, 100 * gain["relative"], 100 * gain["ci95"][0],
+                 100 * gain["ci95"][1])
+    if withdrawn:
+        gain["withdrawn"] = withdrawn
+    if unusable:
+        unusable["kept"] = bool(causes and causes[0] is first)
 
     t0 = time.perf_counter()
     noise = fit_noise(extended, nominal, train)
@@ -448,11 +517,6 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     nominal_metrics = model_metrics(nominal, nominal, train, held)
     clock["discrepancies"] = time.perf_counter() - t0
 
-    channel = selection.causes[0].channel if selection.causes else "torque"
-    before_held = residuals(nominal, nominal, held)
-    after_held = residuals(extended, nominal, held)
-    gain = heldout_gain(before_held, after_held, held, channel, settings.selection.block_s,
-                        settings.selection.n_boot, settings.selection.seed)
     validity = {"signal": channel, "prewhitened": "AR noise model of the extended model's "
                 "training residual, order by BIC",
                 "before": _validity(before_held, held, channel, settings.max_lag, noise),
@@ -461,10 +525,15 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
 
     closed: dict[str, Any] = {"available": False}
     why_not = can_resimulate(rig, trajectories) if settings.closed_loop else "disabled"
+    if why_not is None and split.blocks:
+        # a block inside a run does not start at rest, where the re-simulation starts
+        why_not = ("the runs are cut into time blocks; the closed loop re-simulates whole "
+                   "runs from rest")
+        log.info("closed loop not re-simulated: %s", why_not)
     if why_not is None:
         t0 = time.perf_counter()
         closed = _closed_loop(nominal, extended, rig, trajectories, held_names, found,
-                              bool(selection.causes))
+                              bool(causes))
         plots["closed_loop"] = closed.pop("_plot")
         clock["closed_loop"] = time.perf_counter() - t0
     else:
@@ -477,24 +546,60 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         clock["blackbox"] = time.perf_counter() - t0
     clock["total"] = time.perf_counter() - start
 
-    sentence = summary_sentence(selection.causes, nominal, gain)
+    sentence = summary_sentence(causes, nominal, gain, unusable, withdrawn)
     plots["before_after"] = {"before": before_held.stacked(channel),
                              "after": after_held.stacked(channel), "channel": channel,
                              "t": np.concatenate([s.row_times() for s in held])}
     return Diagnosis(str(dataset.root), rig, train_names, held_names, nominal, extended,
-                     selection.causes, selection.steps, found, nominal_metrics,
+                     causes, selection.steps, found, nominal_metrics,
                      extended_metrics, gain, validity, closed, blackbox, sentence, clock, plots,
-                     list(selection.effects))
+                     extension, unusable)
 
 
-def summary_sentence(causes: list[Judgement], nominal: Model, gain: dict[str, Any]) -> str:
+def _reidentify_if_unusable(nominal: Model, train: list[RunSignals], held: list[RunSignals],
+                            settings: DiagnosisSettings
+                            ) -> tuple[Judgement | None, dict[str, Any] | None]:
+    """A ``winch_parameter_error`` cause re-identifying every winch (linear least squares
+    of I_m, F_v, F_c, d) when the stated model's training relative error exceeds
+    ``settings.unusable_error_pct``; else ``(None, None)``."""
+    rel = model_metrics(nominal, nominal, train, held)["train"]["relative_error_pct"]
+    if not rel > settings.unusable_error_pct:
+        return None, None
+    ctx = FitContext(nominal, train, [], {})
+    base = ctx.residuals([])
+    effects = refit_effects(ctx.winch_refit(base.stacked("torque")))
+    weights = {c: 1.0 / max(base.rms(c), 1e-300) for c in base.channels}
+    judge = Judge(FitContext(nominal, train, [], weights, ctx.columns), held,
+                  settings.selection)
+    first = judge("winch_parameter_error", "winch_parameter_error[every winch re-identified]",
+                  effects, 4 * nominal.n, 1)
+    log.warning("the stated model is unusable: %.0f %% relative torque error on the training "
+                "runs (over %.0f %%); every winch re-identified before naming causes", rel,
+                settings.unusable_error_pct)
+    return first, {"relative_error_pct": rel, "threshold_pct": settings.unusable_error_pct,
+                   "reidentified": nominal.with_effects(effects).winch.as_dict()}
+
+
+def summary_sentence(causes: list[Judgement], nominal: Model, gain: dict[str, Any],
+                     unusable: dict[str, Any] | None = None,
+                     withdrawn: Sequence[str] = ()) -> str:
+    prefix = ""
+    if unusable:
+        prefix = (f"The stated model was unusable ({unusable['relative_error_pct']:.0f} % "
+                  f"relative torque error on the training runs): every winch was "
+                  f"re-identified before naming causes. ")
+    if withdrawn:
+        prefix += (f"Never worse: {', '.join(withdrawn)} did not improve the held-out runs "
+                   f"(with 95 % confidence, or beyond the other causes) and "
+                   f"{'was' if len(withdrawn) == 1 else 'were'} withdrawn. ")
     if not causes:
-        return ("The nominal model explains the measurements: no candidate effect beats "
-                "chance on the held-out runs (verdict: none).")
+        return prefix + ("The nominal model explains the measurements as well as anything "
+                         "tried: no candidate effect improves the held-out runs beyond "
+                         "chance (verdict: none).")
     top = causes[0]
     name = "an effect outside the vocabulary (unnamed)" if top.effect == "unnamed" \
         else top.effect.replace("_", " ")
-    text = (f"Most likely cause: {name}: {describe_cause(top, nominal)}. Extending the model "
+    text = prefix + (f"Most likely cause: {name}: {describe_cause(top, nominal)}. Extending the model "
             f"lowers the held-out {gain['signal']} RMSE by {100 * gain['relative']:.1f} % "
             f"(95 % CI {100 * gain['ci95'][0]:.1f} to {100 * gain['ci95'][1]:.1f} %).")
     if len(causes) > 1:

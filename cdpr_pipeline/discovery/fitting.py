@@ -11,11 +11,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
 
-from cdpr_pipeline.discovery.candidates import Candidate
+from cdpr_pipeline.discovery.candidates import TORQUE, Candidate, WinchPart, on_winches
 from cdpr_pipeline.discovery.residuals import Model, Residuals, residual_rows, residuals
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.sim.effects import Effect, WinchParameterError
@@ -86,6 +87,104 @@ class FitContext:
         return np.concatenate(parts)
 
 
+#: golden-section ratio, and its steps refining a per-winch shape between grid points
+_GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
+_GOLDEN_STEPS = 12
+#: log-spaced grid of a per-winch shape parameter over its bounds
+_SHAPE_GRID = 16
+
+
+def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
+                base: Residuals, min_gain: float = 0.05) -> Candidate:
+    """Let the data choose where a winch-separable effect acts, and where its fit starts.
+
+    A torque-side effect on winch ``i`` changes only winch ``i``'s torque residual, by
+    ``m_i`` times a unit column that depends on the winch's shape parameter and variant
+    only. So every winch is fitted on its own by variable projection: for a shape and
+    variant, the best magnitude is a bounded one-dimensional least-squares solution; the
+    shape is found on a log grid refined by golden sections, all winches at once (one
+    model evaluation gives every winch's column, each at its own trial shape). The unit
+    columns are differences of the model's own residuals (lags and filters included).
+
+    Winch ``i`` is kept when its likelihood-ratio gain on its own column,
+    ``N log(SSE0_i / SSE1_i)``, beats BIC's ``k log N`` (``k`` its free parameters) and
+    its column's residual drops by at least ``min_gain`` (practical significance: with
+    thousands of rows a winch's share of a model artefact is "significant"); the best
+    winch is kept if none is, so the candidate is still judged.
+
+    Parameters
+    ----------
+    template : Candidate
+        A candidate with a :class:`~cdpr_pipeline.discovery.candidates.WinchForm`.
+    ctx : FitContext
+        The step's fitting context.
+    current : list of Effect
+        Effects of the model being extended beyond ``ctx.base``.
+    base : Residuals
+        Training residuals of that model.
+    min_gain : float
+        Smallest relative drop of a kept winch's own residual sum of squares.
+
+    Returns
+    -------
+    Candidate
+        Acting on the kept winches only, starting at their projected fit.
+    """
+    form = template.form
+    r0 = base.stacked("torque")
+    rows, n = r0.shape
+    sse0 = np.maximum(np.sum(r0 ** 2, axis=0), 1e-300)
+    bounds = np.array([form.magnitude(i) for i in range(n)], float)
+
+    def project(variant: Any, shapes: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Best magnitude (n,) and SSE (n,) of every winch at the given shapes."""
+        parts = {i + 1: WinchPart(variant, 1.0, None if shapes is None else float(shapes[i]))
+                 for i in range(n)}
+        res = ctx.training_residuals([*current, *form.make(parts)], TORQUE)
+        col = r0 - res.stacked("torque")      # what a unit magnitude explains
+        den = np.sum(col ** 2, axis=0)
+        m = np.where(den > 0, np.sum(col * r0, axis=0) / np.where(den > 0, den, 1.0), 0.0)
+        m = np.clip(m, bounds[:, 0], bounds[:, 1])
+        return m, np.sum((r0 - m * col) ** 2, axis=0)
+
+    best_sse = np.full(n, np.inf)
+    best: list[WinchPart | None] = [None] * n
+
+    def keep_best(variant: Any, shapes: np.ndarray | None) -> np.ndarray:
+        m, sse = project(variant, shapes)
+        for i in np.flatnonzero(sse < best_sse):
+            best_sse[i] = sse[i]
+            best[i] = WinchPart(variant, float(m[i]),
+                                None if shapes is None else float(shapes[i]))
+        return sse
+
+    for variant in form.variants:
+        if form.shape is None:
+            keep_best(variant, None)
+            continue
+        grid = np.log(np.geomspace(*form.shape, _SHAPE_GRID))
+        table = np.array([keep_best(variant, np.full(n, np.exp(g))) for g in grid])
+        k = np.argmin(table, axis=0)
+        a, b = grid[np.maximum(k - 1, 0)], grid[np.minimum(k + 1, len(grid) - 1)]
+        c, d = b - _GOLDEN * (b - a), a + _GOLDEN * (b - a)
+        fc, fd = keep_best(variant, np.exp(c)), keep_best(variant, np.exp(d))
+        for _ in range(_GOLDEN_STEPS):
+            left = fc < fd         # the minimum lies in [a, d]
+            b = np.where(left, d, b)
+            a = np.where(left, a, c)
+            new = np.where(left, b - _GOLDEN * (b - a), a + _GOLDEN * (b - a))
+            fnew = keep_best(variant, np.exp(new))
+            c, d = np.where(left, new, d), np.where(left, c, new)
+            fc, fd = np.where(left, fnew, fd), np.where(left, fc, fnew)
+
+    lr = rows * np.log(sse0 / np.maximum(best_sse, 1e-300))
+    margin = lr - form.k * np.log(rows)
+    kept = [i for i in range(n) if margin[i] > 0 and best_sse[i] <= (1 - min_gain) * sse0[i]]
+    if not kept:
+        kept = [int(np.argmax(margin))]
+    return on_winches(template, {i + 1: best[i] for i in kept})
+
+
 @dataclass
 class Fit:
     """A fitted candidate: its parameters and the effects that extend the model."""
@@ -96,6 +195,17 @@ class Fit:
     n_params: int
     cost: float
     success: bool
+
+
+def fit_at_start(candidate: Candidate, ctx: FitContext) -> Fit:
+    """The candidate at its (only) starting point, already the optimum: a
+    winch-separable effect fitted alone by variable projection
+    (:func:`fit_winches`) needs no further search."""
+    x = np.asarray(candidate.starts[0], float)
+    effects = list(candidate.build(x))
+    res = ctx.training_residuals(effects, candidate.affects)
+    cost = 0.5 * float(np.sum(ctx.vector(res, candidate.refit_winches) ** 2))
+    return Fit(candidate, x, effects, candidate.n_params, cost, True)
 
 
 def refit_effects(delta: np.ndarray) -> list[Effect]:

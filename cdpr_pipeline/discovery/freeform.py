@@ -8,13 +8,22 @@ Two strategies, both passed as objects:
   ``exp(-(w/s)^2)``, ...) and angle harmonics (``sin(k theta)``), so every term is an
   expression of :mod:`cdpr_pipeline.sim.expressions` that the simulator can run. A
   term's fitness is the share of the current torque residual it explains.
+  Transcendental functions (``exp``, ``tanh``, ``sin``, ``cos``) only ever take a plain
+  variable (no ``exp`` of an ``exp``): terms stay short and readable.
 * :class:`L0Regression` selects a sparse set of terms per winch: forward selection with
   backward elimination under an l0 penalty (BIC), an estimator with ``fit/predict/score``.
 
 :class:`FreeFormSearch` puts them together: a fixed library enumerated from the grammar
-at depth one, plus the best terms the GP finds within a time budget, then the sparse
-regression. The result becomes a :class:`~cdpr_pipeline.sim.effects.SymbolicWinchTorque`
-effect, judged on held-out runs like every named candidate.
+at depth one, plus the best terms the GP finds within its evaluation budget, then the sparse
+regression, at most :data:`MAX_TERMS_PER_CHANNEL` terms per winch. The result becomes a
+:class:`~cdpr_pipeline.sim.effects.SymbolicWinchTorque` effect, judged on held-out runs
+like every named candidate.
+
+Terms with the shape of a vocabulary effect (``exp(-(w/s)^2) sign(w)`` is Stribeck's,
+``max(w, 0)`` asymmetric viscous friction's, ``w``, ``sign(w)`` and a constant a winch
+parameter's) can be excluded (``exclude``, from
+:meth:`~cdpr_pipeline.sim.effects.Effect.shapes`): the named candidates explain them, and
+a free-form part holds only what the vocabulary cannot say.
 """
 
 from __future__ import annotations
@@ -22,27 +31,115 @@ from __future__ import annotations
 import ast
 import operator
 import random
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from functools import lru_cache, partial
+from functools import partial
 
 import numpy as np
 
 from cdpr_pipeline.discovery.signals import RunSignals
+from cdpr_pipeline.evolution import MaxTree, deap_random
 from cdpr_pipeline.sim.effects import SymbolicWinchTorque
 from cdpr_pipeline.sim.expressions import FUNCTIONS, evaluate, to_infix
 
+#: the most free-form terms per winch (spec: short, readable expressions)
+MAX_TERMS_PER_CHANNEL = 3
+#: functions that may only take a plain variable
+TRANSCENDENTAL = frozenset({"gauss", "softsign", "sin_k", "cos_k"})
+#: cosine similarity (on the data) above which a term has a vocabulary shape
+SHAPE_MATCH = 0.998
+#: values of the winch state the shape comparison uses at most
+_SHAPE_SAMPLES = 8000
+
 
 # ------------------------------------------------------------------ term evaluation
+def readable(expression: str) -> bool:
+    """True if no function is nested inside a transcendental one (``exp``, ``tanh``,
+    ``sin``, ``cos`` of a plain variable only), and a term holds at most one
+    transcendental function of each variable (``exp(-(w/a)^2) tanh(w/b)`` is a shape
+    nobody reads; ``|w| sin(3 theta)`` is fine).
+
+    Examples
+    --------
+    >>> readable("mul(gauss(omega, 0.1), sign_(omega))")
+    True
+    >>> readable("gauss(gauss(omega, 0.1), 0.5)")
+    False
+    >>> readable("mul(gauss(omega, 0.1), softsign(omega, 0.2))")
+    False
+    """
+    seen: set[str] = set()
+    for node in ast.walk(ast.parse(expression, mode="eval")):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
+                and node.func.id in TRANSCENDENTAL and node.args:
+            if not isinstance(node.args[0], ast.Name) or node.args[0].id in seen:
+                return False
+            seen.add(node.args[0].id)
+    return True
+
+
+def row_state(signals: Sequence[RunSignals]) -> dict[str, np.ndarray]:
+    """The winch state at the statistics rows' times, unfiltered (rows, n): what terms
+    are ranked and compared on (an order of magnitude cheaper than filtering them)."""
+    rows = [s.row_index() for s in signals]
+    return {"omega": np.concatenate([s.omega[i] for s, i in zip(signals, rows, strict=True)]),
+            "theta": np.concatenate([s.theta[i] for s, i in zip(signals, rows, strict=True)])}
+
+
+class ShapeFilter:
+    """Recognises terms with one of the given shapes on the data: a term matches when its
+    cosine similarity with a shape's values, over the winch state of the data, reaches
+    :data:`SHAPE_MATCH` (proportional terms match exactly; a Stribeck term between two
+    of the family's widths matches its neighbours).
+
+    Parameters
+    ----------
+    shapes : list of str
+        Expressions (vocabulary shapes).
+    state : dict
+        ``omega`` and ``theta`` arrays of the data (any shape, same for both).
+    """
+
+    def __init__(self, shapes: Sequence[str], state: dict[str, np.ndarray]) -> None:
+        size = np.asarray(state["omega"]).size
+        self._take = np.unique(np.linspace(0, size - 1, min(size, _SHAPE_SAMPLES)).astype(int))
+        self._state = {k: np.asarray(v, float).reshape(-1)[self._take] for k, v in
+                       state.items()}
+        cols = [evaluate(e, self._state) for e in shapes]
+        norms = [np.linalg.norm(c) for c in cols]
+        self._basis = np.array([c / v for c, v in zip(cols, norms, strict=True) if v > 0])
+
+    def matches_values(self, values: np.ndarray) -> bool:
+        """Whether a term's values on the whole state have a vocabulary shape."""
+        if not len(self._basis):
+            return False
+        col = np.asarray(values, float).reshape(-1)[self._take]
+        norm = np.linalg.norm(col)
+        return bool(norm > 0 and np.max(np.abs(self._basis @ col)) >= SHAPE_MATCH * norm)
+
+    def matches(self, expression: str) -> bool:
+        """Whether ``expression`` has a vocabulary shape on the data."""
+        if not len(self._basis):
+            return False
+        col = evaluate(expression, self._state)
+        norm = np.linalg.norm(col)
+        return bool(norm > 0 and np.max(np.abs(self._basis @ col)) >= SHAPE_MATCH * norm)
+
+
 def term_columns(expressions: Sequence[str], signals: Sequence[RunSignals]) -> np.ndarray:
     """Each expression evaluated per winch on the winch state, parallel-filtered onto
-    the statistics rows: (rows, n, terms)."""
+    the statistics rows: (rows, n, terms). Columns are kept with the run (the library is
+    re-selected many times on the same runs while the residual changes)."""
     out = []
     for sig in signals:
-        cols = np.stack([evaluate(e, {"omega": sig.omega, "theta": sig.theta})
-                         for e in expressions], axis=-1)
-        out.append(sig.rows(cols))
+        known = sig.cache.setdefault("term_columns", {})
+        missing = [e for e in dict.fromkeys(expressions) if e not in known]
+        if missing:
+            cols = np.stack([evaluate(e, {"omega": sig.omega, "theta": sig.theta})
+                             for e in missing], axis=-1)
+            for e, col in zip(missing, np.moveaxis(sig.rows(cols), -1, 0), strict=True):
+                known[e] = col
+        out.append(np.stack([known[e] for e in expressions], axis=-1))
     return np.concatenate(out)
 
 
@@ -73,6 +170,10 @@ class L0Regression:
         Largest subset considered.
     penalty : float or None
         Cost of one term in log-likelihood units; ``None`` is BIC's ``log(N)``.
+    max_overlap : float
+        Largest absolute cosine between a term and one already selected: near-duplicate
+        terms would enter as a difference with large opposite coefficients, a fragile
+        numerical derivative nobody can read.
 
     Examples
     --------
@@ -86,6 +187,7 @@ class L0Regression:
 
     max_terms: int = 6
     penalty: float | None = None
+    max_overlap: float = 0.99
     support_: list[int] = field(default_factory=list)
     coef_: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
@@ -101,9 +203,14 @@ class L0Regression:
         y = np.asarray(y, float)
         support: list[int] = []
         best = self._criterion(X, y, support)
+        norms = np.linalg.norm(X, axis=0)
+        unit = X / np.where(norms > 0, norms, 1.0)
         while len(support) < self.max_terms:
+            overlap = (np.max(np.abs(unit[:, support].T @ unit), axis=0) if support
+                       else np.zeros(X.shape[1]))
             trials = [(self._criterion(X, y, support + [j]), j)
-                      for j in range(X.shape[1]) if j not in support]
+                      for j in range(X.shape[1])
+                      if j not in support and overlap[j] <= self.max_overlap]
             if not trials:
                 break
             value, j = min(trials)
@@ -136,6 +243,10 @@ class L0Regression:
 
 
 # ------------------------------------------------------------------ grammar-guided GP
+class Var:
+    """Grammar type: the plain winch speed (what a transcendental function may take)."""
+
+
 class Speed:
     """Grammar type: a function of the winch speed."""
 
@@ -156,13 +267,13 @@ class Scale(float):
     """Grammar type: a speed scale."""
 
 
-def _draw_scale(speed_rms: float) -> Scale:
-    # log-uniform between 3 % and 2x the speed RMS (DEAP's seeded ``random``)
-    return Scale(round(speed_rms * 10 ** random.uniform(-1.5, 0.3), 6))
+def _draw_scale(speed_rms: float, rng: random.Random) -> Scale:
+    # log-uniform between 3 % and 2x the speed RMS
+    return Scale(round(speed_rms * 10 ** rng.uniform(-1.5, 0.3), 6))
 
 
-def _draw_harmonic() -> Harmonic:
-    return Harmonic(random.randint(1, 24))
+def _draw_harmonic(rng: random.Random) -> Harmonic:
+    return Harmonic(rng.randint(1, 24))
 
 
 @dataclass
@@ -172,7 +283,10 @@ class GrammarGP:
     Parameters
     ----------
     population, generations : int
-        Size and length of the evolution (stopped early by ``time_budget_s``).
+        Size and length of the evolution.
+    max_evaluations : int
+        Distinct terms evaluated at most (the search's budget: counted, never timed, so
+        the verdict does not depend on the machine's speed).
     max_height : int
         Tree height limit (bloat control).
     top : int
@@ -184,28 +298,34 @@ class GrammarGP:
 
     population: int = 150
     generations: int = 60
+    max_evaluations: int = 3000
     max_height: int = 6
     top: int = 8
     patience: int = 25
     seed: int = 0
 
-    def _pset(self, speed_rms: float, angles: bool):
+    def _pset(self, speed_rms: float, angles: bool, rng: random.Random):
         from deap import gp
 
-        pset = gp.PrimitiveSetTyped("term", [Speed, Angle], Term)
+        pset = gp.PrimitiveSetTyped("term", [Var, Angle], Term)
         pset.renameArguments(ARG0="omega", ARG1="theta")
         ident = "ident"
         pset.addPrimitive(lambda a: a, [Speed], Term, name=ident)
         pset.addPrimitive(FUNCTIONS["mul"].fn, [Term, Term], Term, name="mul")
         pset.addPrimitive(FUNCTIONS["mul"].fn, [Speed, Speed], Speed, name="mul")
-        for name in ("abs_", "sign_", "square", "pos", "negpart"):
-            pset.addPrimitive(FUNCTIONS[name].fn, [Speed], Speed, name=name)
-        pset.addPrimitive(FUNCTIONS["gauss"].fn, [Speed, Scale], Speed, name="gauss")
-        pset.addPrimitive(FUNCTIONS["softsign"].fn, [Speed, Scale], Speed, name="softsign")
+        # functions of the plain speed only: products build the rest, and no function
+        # nests inside another (one-sided terms are asymmetric viscous friction's)
+        pset.addPrimitive(lambda a: a, [Var], Speed, name="speed")
+        pset.addPrimitive(lambda a: a, [Var], Var, name="var")
+        pset.addTerminal(1.0, Speed, name="speed_omega")
+        for name in ("abs_", "sign_", "square"):
+            pset.addPrimitive(FUNCTIONS[name].fn, [Var], Speed, name=name)
+        pset.addPrimitive(FUNCTIONS["gauss"].fn, [Var, Scale], Speed, name="gauss")
+        pset.addPrimitive(FUNCTIONS["softsign"].fn, [Var, Scale], Speed, name="softsign")
         pset.addPrimitive(lambda s: s, [Scale], Scale, name="scale")
         pset.addPrimitive(lambda k: k, [Harmonic], Harmonic, name="harmonic")
-        pset.addEphemeralConstant("speed_scale", partial(_draw_scale, speed_rms), Scale)
-        pset.addEphemeralConstant("harmonic_k", _draw_harmonic, Harmonic)
+        pset.addEphemeralConstant("speed_scale", partial(_draw_scale, speed_rms, rng), Scale)
+        pset.addEphemeralConstant("harmonic_k", partial(_draw_harmonic, rng), Harmonic)
         if angles:
             pset.addPrimitive(FUNCTIONS["sin_k"].fn, [Angle, Harmonic], Term, name="sin_k")
             pset.addPrimitive(FUNCTIONS["cos_k"].fn, [Angle, Harmonic], Term, name="cos_k")
@@ -216,29 +336,35 @@ class GrammarGP:
     @staticmethod
     def expression(tree) -> str:
         """A DEAP tree as an expression of :mod:`cdpr_pipeline.sim.expressions`."""
-        return _expression(str(tree))
+        return _tree_expression(tree)
 
     def search(self, signals: Sequence[RunSignals], residual: np.ndarray, speed_rms: float,
-               angles: bool, time_budget_s: float) -> list[tuple[str, float]]:
+               angles: bool, exclude: Sequence[str] = ()) -> list[tuple[str, float]]:
         """Best distinct terms ``(expression, explained share)`` for the stacked torque
-        residual (rows, n) of ``signals``."""
-        from deap import base, creator, gp, tools
+        residual (rows, n) of ``signals``; terms with a shape of ``exclude`` (see
+        :class:`ShapeFilter`) score nothing. The same inputs and seed give the same terms
+        on any machine (a private generator; budgets in generations and evaluations)."""
+        rng = random.Random(self.seed)
+        with deap_random(rng):
+            return self._search(signals, residual, speed_rms, angles, rng, exclude)
 
-        pset = self._pset(speed_rms, angles)
-        if not hasattr(creator, "FreeFormFitness"):
-            creator.create("FreeFormFitness", base.Fitness, weights=(1.0,))
-            creator.create("FreeFormTree", gp.PrimitiveTree, fitness=creator.FreeFormFitness)
+    def _search(self, signals: Sequence[RunSignals], residual: np.ndarray, speed_rms: float,
+                angles: bool, rng: random.Random, exclude: Sequence[str] = ()
+                ) -> list[tuple[str, float]]:
+        from deap import base, gp, tools
+
+        pset = self._pset(speed_rms, angles, rng)
         toolbox = base.Toolbox()
         toolbox.register("expr", gp.genHalfAndHalf, pset=pset, min_=1, max_=3)
-        toolbox.register("individual", tools.initIterate, creator.FreeFormTree, toolbox.expr)
+        toolbox.register("individual", tools.initIterate, MaxTree, toolbox.expr)
         toolbox.register("population", tools.initRepeat, list, toolbox.individual)
         toolbox.register("select", tools.selTournament, tournsize=3)
-        toolbox.register("mate", _one_point_crossover)
+        toolbox.register("mate", _one_point_crossover, rng=rng)
         toolbox.register("expr_mut", gp.genGrow, min_=0, max_=2)
         mutations = (partial(gp.mutUniform, expr=toolbox.expr_mut, pset=pset),
                      partial(gp.mutNodeReplacement, pset=pset),
                      partial(gp.mutInsert, pset=pset), gp.mutShrink)
-        toolbox.register("mutate", lambda ind: random.choice(mutations)(ind))
+        toolbox.register("mutate", lambda ind: rng.choice(mutations)(ind))
         limit = gp.staticLimit(key=operator.attrgetter("height"), max_value=self.max_height)
         toolbox.decorate("mate", limit)
         toolbox.decorate("mutate", limit)
@@ -248,20 +374,23 @@ class GrammarGP:
         # fitness ranks terms on the winch state at the row times, unfiltered: an order
         # of magnitude cheaper than the parallel filter, and the terms are smooth
         # functions of smooth signals; the final sparse regression filters properly
-        rows = [s.row_index() for s in signals]
-        state = {"omega": np.concatenate([s.omega[i] for s, i in zip(signals, rows,
-                                                                      strict=True)]),
-                 "theta": np.concatenate([s.theta[i] for s, i in zip(signals, rows,
-                                                                     strict=True)])}
+        state = row_state(signals)
+        vocabulary = ShapeFilter(exclude, state)
 
         def fitness(ind) -> tuple[float]:
             expr = self.expression(ind)
+            if expr not in cache and not readable(expr):
+                cache[expr] = 0.0          # not a term to report: the search looks elsewhere
             if expr not in cache:
                 try:
                     col = evaluate(expr, state)
                 except (ValueError, FloatingPointError, ZeroDivisionError):
                     cache[expr] = 0.0
                 else:
+                    if vocabulary.matches_values(col):
+                        # a named candidate's shape: its to explain, not the search's
+                        cache[expr] = 0.0
+                        return (-1e-3 * len(ind),)
                     # each winch its own coefficient: explained share of the residual
                     num = np.sum(col * residual, axis=0) ** 2
                     den = np.sum(col * col, axis=0)
@@ -270,22 +399,20 @@ class GrammarGP:
                     cache[expr] = share if np.isfinite(share) else 0.0
             return (cache[expr] - 1e-3 * len(ind),)   # parsimony pressure
 
-        random.seed(self.seed)
-        start = time.perf_counter()
         pop = toolbox.population(n=self.population)
         for ind in pop:
             ind.fitness.values = fitness(ind)
         best, stalled = -np.inf, 0
         for _ in range(self.generations):
-            if time.perf_counter() - start > time_budget_s or stalled >= self.patience:
+            if stalled >= self.patience or len(cache) >= self.max_evaluations:
                 break
             offspring = [toolbox.clone(i) for i in toolbox.select(pop, len(pop))]
             for a, b in zip(offspring[::2], offspring[1::2], strict=False):
-                if random.random() < 0.5:
+                if rng.random() < 0.5:
                     toolbox.mate(a, b)
                     del a.fitness.values, b.fitness.values
             for m in offspring:
-                if random.random() < 0.3:
+                if rng.random() < 0.3:
                     toolbox.mutate(m)
                     del m.fitness.values
             # diversity: a duplicate expression is replaced by a newcomer, so the
@@ -319,14 +446,34 @@ def _nodes(expression: str) -> int:
                for n in ast.walk(ast.parse(expression, mode="eval")))
 
 
-@lru_cache(maxsize=65536)
-def _expression(text: str) -> str:
-    # the grammar's identity wrappers carry types only
-    text = _strip_calls(text, ("ident", "scale", "harmonic", "angle"))
-    return text.replace("unit", "one(omega)")
+#: the grammar's identity wrappers carry types only
+_WRAPPERS = frozenset({"ident", "scale", "harmonic", "angle", "speed", "var"})
+#: terminals named for DEAP, as expressions
+_TERMINALS = {"unit": "one(omega)", "speed_omega": "omega"}
 
 
-def _one_point_crossover(a, b):
+def _tree_expression(tree) -> str:
+    """A DEAP tree (prefix order) written as an expression, wrappers left out: built
+    node by node like DEAP's own ``str`` (fitness calls it for every individual, so no
+    parsing)."""
+    text, stack = "", []
+    for node in tree:
+        stack.append((node, []))
+        while len(stack[-1][1]) == stack[-1][0].arity:
+            prim, args = stack.pop()
+            if prim.arity == 0:
+                text = _TERMINALS.get(prim.name) or prim.format()
+            elif prim.name in _WRAPPERS:
+                text = args[0]
+            else:
+                text = prim.format(*args)
+            if not stack:
+                break
+            stack[-1][1].append(text)
+    return text
+
+
+def _one_point_crossover(a, b, rng: random.Random):
     """Swap random subtrees of the same grammar type. Written out (rather than DEAP's
     ``cxOnePoint``) so the type is chosen from a *sorted* list: a set of classes iterates
     in an order that changes between processes, and the search must be reproducible."""
@@ -340,25 +487,11 @@ def _one_point_crossover(a, b):
     common = sorted(set(where_a) & set(where_b), key=lambda t: t.__name__)
     if not common:
         return a, b
-    kind = random.choice(common)
-    sa = a.searchSubtree(random.choice(where_a[kind]))
-    sb = b.searchSubtree(random.choice(where_b[kind]))
+    kind = rng.choice(common)
+    sa = a.searchSubtree(rng.choice(where_a[kind]))
+    sb = b.searchSubtree(rng.choice(where_b[kind]))
     a[sa], b[sb] = b[sb], a[sa]
     return a, b
-
-
-def _strip_calls(text: str, names: Sequence[str]) -> str:
-    """Replace every call ``name(x)`` with ``x`` for the given one-argument wrappers."""
-
-    class Strip(ast.NodeTransformer):
-        def visit_Call(self, node: ast.Call) -> ast.AST:
-            self.generic_visit(node)
-            if isinstance(node.func, ast.Name) and node.func.id in names:
-                return node.args[0]
-            return node
-
-    tree = Strip().visit(ast.parse(text, mode="eval"))
-    return ast.unparse(tree)
 
 
 # ------------------------------------------------------------------ the search
@@ -388,8 +521,6 @@ class FreeFormSearch:
     gp : GrammarGP or None
         Term generator (None: the fixed library only).
     regression : L0Regression
-    time_budget_s : float
-        Wall-clock budget of the GP.
     harmonics : int
         Angle harmonics in the fixed library.
     max_nodes : int
@@ -398,7 +529,6 @@ class FreeFormSearch:
 
     gp: GrammarGP | None = field(default_factory=GrammarGP)
     regression: L0Regression = field(default_factory=L0Regression)
-    time_budget_s: float = 5.0
     harmonics: int = 16
     max_nodes: int = 8
     extra_terms: list[str] = field(default_factory=list)
@@ -409,20 +539,27 @@ class FreeFormSearch:
         return replace(self, extra_terms=list(dict.fromkeys(self.extra_terms + extra)))
 
     def fit(self, signals: Sequence[RunSignals], residual: np.ndarray, speed_rms: float,
-            angles: bool, use_gp: bool = True) -> FreeFormResult:
-        """Sparse torque terms explaining ``residual`` (stacked rows, n) of ``signals``."""
+            angles: bool, use_gp: bool = True, exclude: Sequence[str] = ()
+            ) -> FreeFormResult:
+        """Sparse torque terms explaining ``residual`` (stacked rows, n) of ``signals``,
+        at most :data:`MAX_TERMS_PER_CHANNEL` per winch, none with a shape of
+        ``exclude`` (the vocabulary's, see :class:`ShapeFilter`)."""
         library = base_library(speed_rms, angles, self.harmonics)
         library += [e for e in self.extra_terms if e not in library]
         found: list[tuple[str, float]] = []
-        if use_gp and self.gp is not None and self.time_budget_s > 0:
-            found = self.gp.search(signals, residual, speed_rms, angles, self.time_budget_s)
+        if use_gp and self.gp is not None:
+            found = self.gp.search(signals, residual, speed_rms, angles, exclude)
             # a term a person can read: bloated trees explain noise and nothing else
             found = [(e, v) for e, v in found if _nodes(e) <= self.max_nodes]
             library += [e for e, _ in found if e not in library]
+        vocabulary = ShapeFilter(exclude, row_state(signals))
+        library = [e for e in library if readable(e) and not vocabulary.matches(e)]
         X = term_columns(library, signals)
         terms = []
+        max_terms = min(self.regression.max_terms, MAX_TERMS_PER_CHANNEL)
         for i in range(residual.shape[1]):
-            reg = L0Regression(self.regression.max_terms, self.regression.penalty)
+            reg = L0Regression(max_terms, self.regression.penalty,
+                               self.regression.max_overlap)
             reg.fit(X[:, i, :], residual[:, i])
             for j in reg.support_:
                 # a residual r = u - u_model is explained by extra resisting torque +c f

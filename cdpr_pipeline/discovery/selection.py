@@ -30,8 +30,19 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from cdpr_pipeline.discovery.candidates import Candidate, DataScale, candidates_for
-from cdpr_pipeline.discovery.fitting import Fit, FitContext, fit_candidate
+from cdpr_pipeline.discovery.candidates import (
+    Candidate,
+    DataScale,
+    candidates_for,
+    vocabulary_shapes,
+)
+from cdpr_pipeline.discovery.fitting import (
+    Fit,
+    FitContext,
+    fit_at_start,
+    fit_candidate,
+    fit_winches,
+)
 from cdpr_pipeline.discovery.freeform import FreeFormResult, FreeFormSearch
 from cdpr_pipeline.discovery.residuals import Model, Residuals, channel_names
 from cdpr_pipeline.discovery.signals import RunSignals
@@ -66,6 +77,10 @@ class SelectionSettings:
         Candidate effects (all of the vocabulary when None).
     refit_winches : bool
         Also try torque-side effects with the winch parameters re-identified.
+    min_winch_gain : float
+        Smallest relative drop of a winch's own torque residual for a per-winch effect
+        to act on that winch (besides BIC, see
+        :func:`~cdpr_pipeline.discovery.fitting.fit_winches`).
     seed : int
     """
 
@@ -77,6 +92,7 @@ class SelectionSettings:
     n_boot: int = 400
     effects: list[str] | None = None
     refit_winches: bool = False
+    min_winch_gain: float = 0.05
     seed: int = 0
 
 
@@ -214,9 +230,10 @@ class Selection:
     effects: list[Effect]
 
 
-def _data_scale(signals: Sequence[RunSignals], kind: str) -> DataScale:
+def _data_scale(signals: Sequence[RunSignals], kind: str, nominal: Model) -> DataScale:
     omega = np.concatenate([s.omega for s in signals])
-    return DataScale(float(np.sqrt(np.mean(omega ** 2))) or 1.0, omega.shape[1], kind)
+    return DataScale(float(np.sqrt(np.mean(omega ** 2))) or 1.0, omega.shape[1], kind,
+                     nominal.winch)
 
 
 @dataclass
@@ -234,6 +251,7 @@ class _Search:
     columns: np.ndarray | None = None
     steps: list[list[Judgement]] = field(default_factory=list)
     nominal_held: dict[str, float] | None = None
+    shapes: list[str] = field(default_factory=list)
     _log_n: float | None = None
 
     def context(self, kept: list[Effect]) -> tuple[FitContext, Judge]:
@@ -277,7 +295,7 @@ class _Search:
             if freeform and self.freeform is not None:
                 f_ctx, f_judge = self.context(fixed + _build(parts))
                 ff = _judge_freeform(self.freeform, f_ctx, f_judge, self.scale, self.kind,
-                                     n_tests)
+                                     n_tests, shapes=self.shapes)
                 step.append(ff)
             self.steps.append(step)
             self._log(step)
@@ -304,7 +322,7 @@ class _Search:
         if judgement.freeform is not None:
             search = self.freeform.with_terms(judgement.freeform)
             return _judge_freeform(search, ctx, judge, self.scale, self.kind, n_tests,
-                                   gp=False)
+                                   gp=False, shapes=self.shapes)
         return _judge_candidate(judgement.candidate, ctx, judge, n_tests)
 
     def bic(self, effects: list[Effect], n_params: int) -> float:
@@ -337,65 +355,51 @@ def _effects(causes: Sequence[Judgement]) -> list[Effect]:
 def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[RunSignals],
                   settings: SelectionSettings, freeform: FreeFormSearch | None,
                   log=None) -> Selection:
-    """Forward selection of causes, then the named-replacement check (module docstring).
+    """Named causes first, then what only free-form terms explain (module docstring).
 
-    1. Forward selection over named candidates and the free-form search.
-    2. If it kept an unnamed part: forward selection over *named* candidates only on top
-       of the named causes, then the free-form terms again on top of all of them. If
-       they add nothing the named causes explain the discrepancy (the free-form terms
-       confirm them). Otherwise the unnamed part stays, and a named cause added in 2.
-       is kept only if the model with it (and free-form terms re-selected around it)
-       has a BIC within one parameter's worth of the model without it (free-form terms
-       re-selected to take its place): a named effect wins a tie, a candidate that
-       merely mimics part of an unnamed effect costs parameters and never gets to name
-       it.
+    1. Forward selection over the named candidates, alone and in combination.
+    2. The free-form search (GP and library, none of its terms with a candidate's shape)
+       on what the named causes leave.
+    3. Each named cause is kept only if the model with it (and free-form terms
+       re-selected around it) has a BIC within one parameter's worth of the model
+       without it (free-form terms re-selected to take its place): a named effect wins a
+       tie, a candidate that merely mimics part of an effect outside the vocabulary
+       costs parameters and never gets to name it.
+    4. The free-form terms, re-selected on top of the named causes kept, are the
+       ``unnamed`` cause if they pass the tests every candidate passes (they add
+       significantly, and on held-out runs, beyond the named causes).
     """
     kind = "axes" if not hasattr(nominal, "anchors") else "cdpr"
-    search = _Search(nominal, train, heldout, settings, freeform, _data_scale(train, kind),
-                     kind, log)
+    search = _Search(nominal, train, heldout, settings, freeform,
+                     _data_scale(train, kind, nominal), kind, log)
     candidates = candidates_for(rig, search.scale, settings.effects, settings.refit_winches)
-    causes = search.forward([], candidates, freeform is not None, settings.max_causes)
-    unnamed = [c for c in causes if c.effect == "unnamed"]
-    if unnamed and len(causes) > 1:
-        # the named causes were fitted jointly with the unnamed part, which can take over
-        # what one of their parameters should carry (a near-constant term and a winch
-        # offset splitting a constant between them); fitted afresh without it, do the
-        # named causes leave anything for free-form terms to explain?
-        fresh = search.forward([], candidates, False, settings.max_causes)
-        if fresh and not search.refit(unnamed[0], _effects(fresh),
-                                      len(candidates) + 1).passed:
-            for c in fresh:
-                c.confirmed_by = unnamed[0].freeform.describe()
-            causes, unnamed = fresh, []
-    if unnamed:
-        named = [c for c in causes if c.effect != "unnamed"]
-        taken = {c.label for c in named if c.effect != "winch_parameter_error"}
-        rest = [c for c in candidates if c.label not in taken]
-        extra = search.forward(_effects(named), rest, False,
-                               max(1, settings.max_causes - len(named)))
-        n_tests = len(rest) + 1
-        again = search.refit(unnamed[0], _effects(named + extra), n_tests)
-        if not again.passed:
-            for c in extra:
-                c.confirmed_by = unnamed[0].freeform.describe()
-            causes = named + extra
-        else:
-            keep = []
-            for c in extra:
-                # is c a cause of its own, or a partial mimic of the unnamed part? Compare
-                # the free-form terms re-selected without c against c plus the free-form
-                # terms re-selected with it; a named effect wins ties (within one
-                # parameter's BIC), a mimic costs parameters and loses
-                others = named + [o for o in extra if o is not c]
-                without = search.refit(unnamed[0], _effects(others), n_tests)
-                with_c = search.refit(unnamed[0], _effects(others + [c]), n_tests)
-                if search.bic(_effects(others + [c]) + with_c.effects,
-                              c.n_params + with_c.n_params) <= \
-                        search.bic(_effects(others) + without.effects, without.n_params) \
-                        + search.log_n():
-                    keep.append(c)
-            final = search.refit(unnamed[0], _effects(named + keep), n_tests)
-            causes = named + keep + ([final] if final.passed else [])
+    # free-form terms with a candidate's shape are that candidate's to explain
+    search.shapes = vocabulary_shapes(rig, search.scale, settings.effects)
+    causes = search.forward([], candidates, False, settings.max_causes)
+    if freeform is not None:
+        n_tests = len(candidates) + 1
+        ctx, judge = search.context(_effects(causes))
+        rest = _judge_freeform(freeform, ctx, judge, search.scale, kind, n_tests,
+                               shapes=search.shapes)
+        search.steps.append([rest])
+        search._log([rest])
+        keep = []
+        for c in causes if rest.freeform.terms else []:
+            others = [o for o in causes if o is not c]
+            without = search.refit(rest, _effects(others), n_tests)
+            with_c = search.refit(rest, _effects(others + [c]), n_tests)
+            if search.bic(_effects(others + [c]) + with_c.effects,
+                          c.n_params + with_c.n_params) <= \
+                    search.bic(_effects(others) + without.effects, without.n_params) \
+                    + search.log_n():
+                keep.append(c)
+            elif log:
+                log.info("  %s dropped: free-form terms explain it as well (%s)", c.label,
+                         without.freeform.describe())
+        if rest.freeform.terms:
+            final = rest if len(keep) == len(causes) else \
+                search.refit(rest, _effects(keep), n_tests)
+            causes = keep + ([final] if final.passed else [])
     causes = sorted(causes, key=lambda c: -c.bic_drop)
     return Selection(_merge(causes), search.steps, _effects(causes))
 
@@ -452,9 +456,24 @@ def _freeform_part(result: FreeFormResult) -> tuple[Candidate, np.ndarray]:
                       affects=frozenset({"torque"})), coef)
 
 
+def _on_winches(cand: Candidate, ctx: FitContext, judge: Judge) -> Candidate:
+    """A winch-separable candidate acting where the data put it (on the model being
+    extended); any other candidate as it is."""
+    if cand.form is None:
+        return cand
+    return fit_winches(cand, ctx, judge.base_effects, judge.base_train,
+                       judge.settings.min_winch_gain)
+
+
 def _judge_joint(parts: list[tuple[Candidate, np.ndarray]], cand: Candidate, ctx: FitContext,
                  judge: Judge, n_tests: int) -> Judgement:
-    fit = fit_candidate(_joint(parts, cand) if parts else cand, ctx)
+    projected = cand.form is not None and not cand.refit_winches
+    cand = _on_winches(cand, ctx, judge)
+    if projected and not parts:
+        # fitted alone on the model it extends, variable projection found the optimum
+        fit = fit_at_start(cand, ctx)
+    else:
+        fit = fit_candidate(_joint(parts, cand) if parts else cand, ctx)
     j = judge(cand.effect, cand.label, fit.effects, cand.n_params, n_tests)
     j.fit, j.candidate = fit, cand
     if not fit.success and not fit.effects:
@@ -464,6 +483,7 @@ def _judge_joint(parts: list[tuple[Candidate, np.ndarray]], cand: Candidate, ctx
 
 def _judge_candidate(cand: Candidate, ctx: FitContext, judge: Judge, n_tests: int
                      ) -> Judgement:
+    cand = _on_winches(cand, ctx, judge)
     fit = fit_candidate(cand, ctx)
     j = judge(cand.effect, cand.label, fit.effects, fit.n_params, n_tests)
     j.fit, j.candidate = fit, cand
@@ -473,9 +493,11 @@ def _judge_candidate(cand: Candidate, ctx: FitContext, judge: Judge, n_tests: in
 
 
 def _judge_freeform(search: FreeFormSearch, ctx: FitContext, judge: Judge, scale: DataScale,
-                    kind: str, n_tests: int, gp: bool = True) -> Judgement:
+                    kind: str, n_tests: int, gp: bool = True, shapes: Sequence[str] = ()
+                    ) -> Judgement:
     torque = judge.base_train.stacked("torque")
-    result = search.fit(ctx.train, torque, scale.speed_rms, kind == "cdpr", use_gp=gp)
+    result = search.fit(ctx.train, torque, scale.speed_rms, kind == "cdpr", use_gp=gp,
+                        exclude=shapes)
     j = judge("unnamed", "free-form",
               judge.base_effects + ([result.effect] if result.terms else []),
               result.n_params, n_tests)

@@ -278,12 +278,18 @@ class GeneticAlgorithm:
              ) -> tuple[np.ndarray, list[float]]:
         import random
 
-        from deap import base, creator, tools
+        from cdpr_pipeline.evolution import deap_random
 
-        if not hasattr(creator, "CdprFitnessMin"):
-            creator.create("CdprFitnessMin", base.Fitness, weights=(-1.0,))
-            creator.create("CdprIndividual", list, fitness=creator.CdprFitnessMin)
         rnd = random.Random(seed)
+        with deap_random(rnd):      # DEAP's tournament and blend draw from rnd too
+            return self._evolve(G, h, c, rnd)
+
+    def _evolve(self, G: np.ndarray, h: np.ndarray, c: float, rnd
+                ) -> tuple[np.ndarray, list[float]]:
+        from deap import base, tools
+
+        from cdpr_pipeline.evolution import MinVector
+
         lo, hi = self.bounds[:, 0], self.bounds[:, 1]
         width = hi - lo
         tb = base.Toolbox()
@@ -298,7 +304,7 @@ class GeneticAlgorithm:
             for ind, f in zip(pop, sse(pop), strict=True):
                 ind.fitness.values = (float(f),)
 
-        pop = [creator.CdprIndividual([lo[k] + rnd.random() * width[k] for k in range(4)])
+        pop = [MinVector([lo[k] + rnd.random() * width[k] for k in range(4)])
                for _ in range(self.population)]
         assign(pop)
         best_track = []
@@ -306,7 +312,7 @@ class GeneticAlgorithm:
         for g in range(self.generations):
             sigma = self.mutation_sigma * shrink ** g
             elite = tools.selBest(pop, 2)
-            off = [creator.CdprIndividual(x) for x in tb.select(pop, len(pop) - 2)]
+            off = [MinVector(x) for x in tb.select(pop, len(pop) - 2)]
             for a, b in zip(off[::2], off[1::2], strict=False):
                 if rnd.random() < self.crossover:
                     tb.mate(a, b)
@@ -316,7 +322,7 @@ class GeneticAlgorithm:
                         ind[k] += rnd.gauss(0.0, sigma * width[k])
                 for k in range(4):          # keep genes within the bounds
                     ind[k] = min(max(ind[k], lo[k]), hi[k])
-            pop = [creator.CdprIndividual(x) for x in elite] + off
+            pop = [MinVector(x) for x in elite] + off
             assign(pop)
             best_track.append(min(ind.fitness.values[0] for ind in pop))
         best = tools.selBest(pop, 1)[0]

@@ -1,5 +1,6 @@
-"""Identification of a dataset: choose runs, build the regression, low-pass it with the
-wavelet split, fit with an identifier, score on the fit runs and on held-out runs."""
+"""Identification of a dataset: choose runs (or time blocks of a single run), build the
+regression, low-pass it with the wavelet split, fit with an identifier, score on the fit
+runs and on held-out runs."""
 
 from __future__ import annotations
 
@@ -13,30 +14,54 @@ import yaml
 
 from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.data.rig import WINCH_KEYS
+from cdpr_pipeline.data.split import Split, heldout_split
 from cdpr_pipeline.identification.identifiers import Estimate, fit_metrics
 from cdpr_pipeline.identification.regressors import (
     RegressionSettings,
     WinchRegression,
     dataset_regression,
+    resolve_settings,
 )
 from cdpr_pipeline.sim.lab import truth_path_for
 from cdpr_pipeline.wavelet import WaveletSplit
 
+#: fewest regression rows of a time block, after trimming and decimation: five per
+#: winch parameter
+MIN_BLOCK_ROWS = 20
 
-def split_fit_holdout(dataset: Dataset, holdout: Sequence[str] = (),
+
+def min_block_samples(settings: RegressionSettings, sample_rate_hz: float) -> int:
+    """Fewest samples of a useful time block: both filter trims and ``MIN_BLOCK_ROWS``
+    regression rows."""
+    trim = int(round(settings.filter.trim_s * sample_rate_hz))
+    return 2 * trim + MIN_BLOCK_ROWS * max(1, int(settings.decimate))
+
+
+def identification_split(dataset: Dataset, holdout: Sequence[str] | None = None,
+                         runs: Sequence[str] | None = None,
+                         settings: RegressionSettings | None = None) -> Split:
+    """Runs (or time blocks) to fit on (``train``) and to hold out (``heldout``).
+
+    :func:`~cdpr_pipeline.data.split.heldout_split`: ``holdout`` holds families or run
+    names; empty: families ``spiral``/``pulses``, else the last file; a single run holds
+    out its last block (25 %, at least 3 s while that leaves half the run to fit on).
+    Names that match no run are logged and ignored, so ``holdout=[spiral]`` also runs on
+    a dataset without spirals. ``runs``: fit only on these.
+    """
+    # block lengths need the trim and decimation in numbers, not "auto"
+    settings = resolve_settings(settings or RegressionSettings(), dataset.trajectories,
+                                dataset.rig)
+    return heldout_split(dataset.trajectories, holdout, train_runs=runs, unknown="warn",
+                         min_samples=min_block_samples(settings, dataset.rig.sample_rate_hz),
+                         source=str(dataset.root))
+
+
+def split_fit_holdout(dataset: Dataset, holdout: Sequence[str] | None = (),
                       runs: Sequence[str] | None = None) -> tuple[list[str], list[str]]:
-    """Run names to fit on and to hold out. ``holdout`` holds families or run names."""
-    held = [tr.name for tr in dataset if tr.name in holdout or tr.family in holdout]
-    if runs:
-        unknown = [r for r in runs if r not in dataset.names]
-        if unknown:
-            raise KeyError(f"runs {unknown} not in {dataset.root}")
-        fit = [r for r in runs if r not in held]
-    else:
-        fit = [n for n in dataset.names if n not in held]
-    if not fit:
-        raise ValueError(f"{dataset.root}: no runs left to fit on after holding out {holdout}")
-    return fit, held
+    """Names of the runs (or blocks) to fit on and to hold out
+    (:func:`identification_split`)."""
+    split = identification_split(dataset, holdout, runs)
+    return list(split.train), list(split.heldout)
 
 
 def lowpass_regression(reg: WinchRegression, split: WaveletSplit | None) -> WinchRegression:
@@ -79,18 +104,21 @@ class Identification:
     heldout_runs: list[str]
     metrics: dict[str, Any] = field(default_factory=dict)
     extra_runs: dict[str, list[str]] = field(default_factory=dict)
+    split: Split | None = None
 
     def as_json(self) -> dict[str, Any]:
         out = self.estimate.as_json()
         out["metrics"] = self.metrics
         out["fit_runs"], out["heldout_runs"] = self.fit_runs, self.heldout_runs
+        if self.split is not None:
+            out["split"] = self.split.as_dict()     # with the blocks, if runs were cut
         if self.extra_runs:
             out["extra_runs"] = self.extra_runs      # other datasets fitted whole
         return out
 
 
 def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
-                     split: WaveletSplit | None, holdout: Sequence[str] = (),
+                     split: WaveletSplit | None, holdout: Sequence[str] | None = (),
                      runs: Sequence[str] | None = None,
                      truth: np.ndarray | None = None,
                      extra: Sequence[Dataset] = ()) -> Identification:
@@ -100,17 +128,25 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
     full-band regression of the fit runs (what the model must explain), the same with the
     ``heldout_`` prefix on held-out runs, and ``truth_error_pct`` (parameter error against
     the simulator's truth) when a truth is given. ``extra`` datasets (e.g. virtual runs
-    of the same rig) are added, whole, to the fit.
+    of the same rig) are added, whole, to the fit. Fit and held-out runs come from
+    :func:`identification_split` (``holdout``, ``runs``); with a single run they are
+    time blocks of it.
     """
-    fit_names, held_names = split_fit_holdout(dataset, holdout, runs)
-    fit_reg = dataset_regression(dataset.select(fit_names), dataset.rig, settings)
+    # filter, decimation and Coulomb law chosen once from the whole dataset, so the fit
+    # and the held-out runs see the same regression
+    settings = resolve_settings(settings, dataset.trajectories, dataset.rig)
+    data_split = identification_split(dataset, holdout, runs, settings)
+    fit_names, held_names = list(data_split.train), list(data_split.heldout)
+    fit_reg = dataset_regression(data_split.trajectories("train", dataset), dataset.rig,
+                                 settings)
     parts = [fit_reg] + [dataset_regression(d, d.rig, settings) for d in extra]
     if extra:
         fit_reg = WinchRegression.concatenate(parts)
     est = identifier.fit(lowpass_regression(fit_reg, split))
     metrics: dict[str, Any] = dict(fit_metrics(fit_reg, est.theta))
     if held_names:
-        held_reg = dataset_regression(dataset.select(held_names), dataset.rig, settings)
+        held_reg = dataset_regression(data_split.trajectories("heldout", dataset),
+                                      dataset.rig, settings)
         metrics |= {f"heldout_{k}": v for k, v in fit_metrics(held_reg, est.theta).items()
                     if k != "condition_number"}
     if truth is not None:
@@ -121,4 +157,4 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
                                       for i, k in enumerate(WINCH_KEYS)}
     metrics["samples"] = len(fit_reg)
     return Identification(est, fit_names, held_names, metrics,
-                          {str(d.root): d.names for d in extra})
+                          {str(d.root): d.names for d in extra}, data_split)

@@ -15,16 +15,33 @@ samples that carry no new information.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-from dataclasses import dataclass
+import logging
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
-from scipy.signal import butter, decimate, sosfiltfilt
+from scipy.signal import butter, decimate, periodogram, sosfiltfilt
 
 from cdpr_pipeline.data.rig import AxesRig, CdprRig, Rig
 from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.sim.plant import SIGN_SHARPNESS, cable_geometry, smooth_sign, tensions_for_force
+from cdpr_pipeline.sim.plant import cable_geometry, smooth_sign, tensions_for_force
+
+log = logging.getLogger(__name__)
+
+#: settings chosen from the data (:func:`resolve_settings`)
+AUTO = "auto"
+#: ``sign_sharpness`` that takes the Coulomb law rig.yaml states
+RIG = "rig"
+#: Butterworth cut-off per hertz of motion bandwidth, and the share of the measured
+#: velocity's power that defines that bandwidth (see :func:`motion_bandwidth_hz`)
+CUTOFF_PER_BANDWIDTH = 25.0
+BANDWIDTH_POWER_SHARE = 0.99
+#: highest cut-off as a fraction of the sample rate (0.4 fs: 80 % of Nyquist)
+MAX_CUTOFF_FRACTION = 0.4
+#: edge trim in periods of the cut-off: a zero-phase Butterworth's edge transient has
+#: decayed after a few periods of its cut-off
+TRIM_PERIODS = 5.0
 
 #: regressor columns, in ``WinchParams`` order (inertia, viscous, coulomb, offset)
 COLUMNS = ("a", "b", "c", "1")
@@ -49,11 +66,14 @@ class DerivativeFilter:
         Seconds dropped at both ends, where filtering edge effects live.
     """
 
-    cutoff_hz: float = 15.0
+    cutoff_hz: float | str = 15.0
     order: int = 4
-    trim_s: float = 0.3
+    trim_s: float | str = 0.3
 
     def smooth(self, x: np.ndarray, fs: float) -> np.ndarray:
+        if isinstance(self.cutoff_hz, str):
+            raise ValueError("the derivative filter's cut-off is 'auto': choose it from the "
+                             "data first (resolve_settings)")
         return sosfiltfilt(_butter_sos(self.order, self.cutoff_hz, fs), x, axis=0)
 
     def derivatives(self, x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray,
@@ -73,21 +93,31 @@ class RegressionSettings:
     Parameters
     ----------
     filter : DerivativeFilter
-        Low-pass and trimming for the derivatives.
-    decimate : int
+        Low-pass and trimming for the derivatives; ``cutoff_hz`` and ``trim_s`` may be
+        ``"auto"`` (chosen from the data by :func:`resolve_settings`).
+    decimate : int or "auto"
         Decimation factor after parallel filtering (1: none; the Butterworth then does
         the parallel filtering).
-    sign_sharpness : float or None
-        ``tanh(k b)`` for the Coulomb column, or the hard ``sign(b)`` when ``None``.
-    zero_order_hold : bool
+    sign_sharpness : float, None or "rig"
+        ``tanh(k b)`` for the Coulomb column, the hard ``sign(b)`` when ``None``, the law
+        rig.yaml states (``coulomb_law``) when ``"rig"``.
+    zero_order_hold : bool or "auto"
         Treat each recorded torque as held until the next sample (see
-        :func:`winch_regression`).
+        :func:`winch_regression`); ``"auto"``: when rig.yaml states a digital controller
+        (``controller.rate_hz``), whose commands are held over its period.
     """
 
     filter: DerivativeFilter = DerivativeFilter()
-    decimate: int = 1
-    sign_sharpness: float | None = SIGN_SHARPNESS
-    zero_order_hold: bool = True
+    decimate: int | str = 1
+    sign_sharpness: float | str | None = RIG
+    zero_order_hold: bool | str = True
+
+    @property
+    def resolved(self) -> bool:
+        """Whether nothing is left to choose from the data."""
+        return not any(isinstance(v, str) for v in (
+            self.filter.cutoff_hz, self.filter.trim_s, self.decimate, self.sign_sharpness,
+            self.zero_order_hold))
 
 
 @dataclass
@@ -136,6 +166,99 @@ class WinchRegression:
                                np.concatenate([p.target for p in parts]), np.concatenate(runs))
 
 
+def motion_bandwidth_hz(trajectories: Sequence[Trajectory]) -> float:
+    """The measured motion's bandwidth: the frequency below which
+    :data:`BANDWIDTH_POWER_SHARE` of the velocity's power lies (median over runs).
+
+    Velocity power is the position periodogram (Hann window, linear trend removed) times
+    ``(2 pi f)^2``, after subtracting the white measurement-noise floor read off the top
+    quarter of the band (motion has no power there; differentiated noise would otherwise
+    dominate). Positions are the encoder lengths of a cable robot (cleaner than motion
+    capture) and the axis positions of drive axes.
+    """
+    found = []
+    for tr in trajectories:
+        q = tr.lengths if tr.lengths is not None else tr.position
+        q = np.asarray(q, float).reshape(len(tr.t), -1)
+        fs = 1.0 / float(np.median(np.diff(tr.t)))
+        f, p = periodogram(q, fs=fs, window="hann", detrend="linear", axis=0)
+        p = p.sum(axis=1)
+        floor = float(np.median(p[f > 0.75 * fs / 2])) if len(f) > 8 else 0.0
+        power = np.clip(p - floor, 0.0, None) * (2 * np.pi * f) ** 2
+        if not power.sum() > 0:
+            continue
+        share = np.cumsum(power) / power.sum()
+        found.append(float(f[min(np.searchsorted(share, BANDWIDTH_POWER_SHARE), len(f) - 1)]))
+    if not found:
+        raise ValueError("no run moves: cannot choose the derivative filter from the data")
+    return float(np.median(found))
+
+
+def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajectory],
+                     rig: Rig) -> RegressionSettings:
+    """``settings`` with every ``"auto"``/``"rig"`` entry chosen from the data and the rig,
+    each choice logged with its reason.
+
+    The rules follow the IDIM practice of robot identification (Gautier; Janot et al.):
+
+    - derivative filter: zero-phase Butterworth at ``25 x`` the motion bandwidth
+      (:func:`motion_bandwidth_hz`), at most ``0.4 fs``, so neither its gain nor its
+      phase touch the motion while noise above it is removed;
+    - decimation ``q = floor(fs / cut-off)``: the decimation's own anti-alias pass band,
+      ``0.8 fs / (2 q)``, stays at ``0.4 x`` the cut-off (10x the motion bandwidth) and the
+      rows left are about as many as the filtered signal carries information;
+    - edge trim: :data:`TRIM_PERIODS` periods of the cut-off;
+    - Coulomb law: rig.yaml's ``coulomb_law`` (hard ``sign`` when absent, the spec);
+    - zero-order hold of the recorded torques when rig.yaml states a digital controller
+      rate (the command is held over a control period).
+
+    On the EMPS benchmark (1 kHz, 3.7 Hz motion bandwidth) these give the published
+    protocol (Butterworth about 100 Hz, decimation by 10).
+    """
+    if settings.resolved:
+        return settings
+    filt = settings.filter
+    fs = float(rig.sample_rate_hz)
+    cutoff = filt.cutoff_hz
+    if cutoff == AUTO:
+        bw = motion_bandwidth_hz(trajectories)
+        cutoff = min(CUTOFF_PER_BANDWIDTH * bw, MAX_CUTOFF_FRACTION * fs)
+        log.info("derivative filter: cut-off %.3g Hz = min(%g x motion bandwidth %.3g Hz "
+                 "(%g %% of the velocity power), %g x sample rate %g Hz)", cutoff,
+                 CUTOFF_PER_BANDWIDTH, bw, 100 * BANDWIDTH_POWER_SHARE,
+                 MAX_CUTOFF_FRACTION, fs)
+    trim = filt.trim_s
+    if trim == AUTO:
+        trim = TRIM_PERIODS / float(cutoff)
+        log.info("edge trim: %.3g s (%g periods of the cut-off)", trim, TRIM_PERIODS)
+    q = settings.decimate
+    if q == AUTO:
+        q = max(1, int(fs // float(cutoff)))
+        log.info("decimation: by %d (sample rate %g Hz / cut-off %.3g Hz; parallel filtering "
+                 "band %.3g Hz)", q, fs, cutoff, 0.4 * fs / q if q > 1 else float(cutoff))
+    law = settings.sign_sharpness
+    if law == RIG:
+        law = rig.coulomb_sharpness
+        log.info("Coulomb law: %s (as rig.yaml states)",
+                 "hard sign" if law is None else f"tanh({law:g} w)")
+    hold = settings.zero_order_hold
+    if hold == AUTO:
+        rate = (rig.controller.rate_hz if isinstance(rig, CdprRig) and rig.controller
+                else (rig.controller or {}).get("rate_hz") if isinstance(rig, AxesRig)
+                else None)
+        hold = rate is not None
+        log.info("recorded torques %s", f"held over the controller period ({rate:g} Hz)"
+                 if hold else "taken as sampled (rig.yaml states no controller rate)")
+    for name, value in (("filter.cutoff_hz", cutoff), ("filter.trim_s", trim),
+                        ("decimate", q), ("sign_sharpness", law),
+                        ("zero_order_hold", hold)):
+        if isinstance(value, str):
+            raise ValueError(f"regression.{name}: unknown setting {value!r} "
+                             f"(a value, or {AUTO!r}/{RIG!r} where documented)")
+    return RegressionSettings(replace(filt, cutoff_hz=float(cutoff), trim_s=float(trim)),
+                              int(q), None if law is None else float(law), bool(hold))
+
+
 def _held_torque(torques: np.ndarray, zero_order_hold: bool) -> np.ndarray:
     # a torque recorded at t_k acts until t_k+1: around the central difference at t_k
     # the mean of samples k-1 and k acts (without it, a half-sample lag biases I_m ~2 %)
@@ -146,22 +269,120 @@ def _held_torque(torques: np.ndarray, zero_order_hold: bool) -> np.ndarray:
     return held
 
 
-def _assemble(a: np.ndarray, b: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
-              t: np.ndarray, settings: RegressionSettings) -> WinchRegression:
-    """Rows ``[a, b, c, 1] -> torque - smooth_load`` with parallel filtering.
+def _second_difference(xf: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``(x_k+1 - 2 x_k + x_k-1) / T^2``: exactly the acceleration averaged with the
+    triangle of half-width ``T`` around ``t_k``, the kernel that turns a torque held over
+    each sample into the mean of samples ``k-1`` and ``k`` (:func:`_friction_terms`)."""
+    step = float(np.median(np.diff(t)))
+    a = np.empty_like(xf)
+    a[1:-1] = (xf[2:] - 2 * xf[1:-1] + xf[:-2]) / step**2
+    a[0], a[-1] = a[1], a[-2]
+    return a
 
-    ``a``, ``b`` and ``smooth_load`` come from filtered positions already. Without
-    decimation the Butterworth is applied to what has not seen it yet (the torque and the
-    sign column, which switches faster than the low-pass); with decimation the
-    zero-phase anti-alias filter goes over every column alike.
+
+def _stop_share(dq_here: np.ndarray, dq_before: np.ndarray) -> np.ndarray:
+    """Share of an interval moved before the axis stopped in it, from the displacements
+    of that interval and the one before under a constant deceleration:
+    ``(dq_before + dq_here) / dq_here = ((1 + s) / s)^2``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = (dq_before + dq_here) / dq_here
+        share = 1.0 / (np.sqrt(ratio) - 1.0)
+    return np.where(ratio > 4.0, np.clip(share, 0.0, 1.0), 1.0)
+
+
+def _friction_terms(position: np.ndarray, b: np.ndarray, torque: np.ndarray,
+                    settings: RegressionSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Target torque, Coulomb column and offset column per sample, before filtering.
+
+    Each sample stands for the triangle of half-width ``T`` around it: the torque held
+    over ``[t_k-1, t_k]`` and ``[t_k, t_k+1]`` weighs half each (``zero_order_hold``).
+    With the hard sign an axis sticks: over an interval where the recorded position does
+    not change, ``a = v = 0`` and the friction is whatever balances ``u - d`` (inside
+    ``+-F_c``), so the row says nothing about the parameters. Such an interval is taken
+    out of the torque, the Coulomb and the offset columns alike *before* the parallel
+    filter (``u m = I a + F_v b + F_c sign m + d m``, exact since ``a`` and ``b`` vanish
+    where ``m = 0``); filtering ``sign(b)`` through a stop instead smears +-1 over rows
+    whose true friction is the holding torque (F_v off by up to 70 %). The interval where
+    the axis stops (starts) is moving only for the share a constant deceleration from
+    the displacements gives, and a sign change of ``b`` inside an interval is placed at
+    its linear zero crossing, so the Coulomb column is the triangle mean of ``sign(v)``.
+    """
+    n_samples = len(torque)
+    hold = settings.zero_order_hold
+    if settings.sign_sharpness is not None:       # a smooth law: no sticking, no rests
+        c = smooth_sign(b, settings.sign_sharpness)
+        return _held_torque(torque, hold), c, np.ones_like(c)
+    dq = np.diff(position, axis=0)
+    rest = dq == 0                                 # the encoder did not count
+    before = np.zeros_like(rest)
+    before[1:] = rest[:-1]
+    after = np.zeros_like(rest)
+    after[:-1] = rest[1:]
+    moving = ~rest
+    stop, start = moving & after, moving & before & ~after
+    fall = np.where(rest, 0.0, 0.5)                # moving share of [t_j, t_j+1] weighed
+    rise = fall.copy()                             # by the triangles of t_j and t_j+1
+    dq_before = np.zeros_like(dq)
+    dq_before[1:] = dq[:-1]
+    dq_after = np.zeros_like(dq)
+    dq_after[:-1] = dq[1:]
+    s = _stop_share(dq, dq_before)                 # moving over [t_j, t_j + s T]
+    fall = np.where(stop, s - s**2 / 2, fall)
+    rise = np.where(stop, s**2 / 2, rise)
+    g = _stop_share(dq, dq_after)                  # moving over [t_j+1 - g T, t_j+1]
+    fall = np.where(start, g**2 / 2, fall)
+    rise = np.where(start, g - g**2 / 2, rise)
+    # direction: sign(b) at each end of an ordinary interval, its displacement in a
+    # partial one; b changing sign inside an interval crosses zero at x T
+    sb = np.sign(b)
+    partial = stop | start
+    sign_fall = np.where(partial, np.sign(dq), sb[:-1])
+    sign_rise = np.where(partial, np.sign(dq), sb[1:])
+    c_fall, c_rise = sign_fall * fall, sign_rise * rise
+    turn = ~rest & ~partial & (sb[:-1] * sb[1:] < 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = np.clip(b[:-1] / (b[:-1] - b[1:]), 0.0, 1.0)
+    c_fall = np.where(turn, sb[:-1] * (2 * x - x**2 - 0.5), c_fall)
+    c_rise = np.where(turn, sb[:-1] * (x**2 - 0.5), c_rise)
+
+    def per_sample(f: np.ndarray, r: np.ndarray) -> np.ndarray:
+        out = np.empty((n_samples,) + f.shape[1:])
+        out[:-1] = f
+        out[-1] = r[-1]                            # the last sample: its earlier half twice
+        out[1:] += r
+        out[0] += f[0]
+        return out
+
+    one = per_sample(fall, rise)
+    c = per_sample(c_fall, c_rise)
+    if hold:
+        target = per_sample(torque[:-1] * fall, torque[:-1] * rise)
+        target[-1] = torque[-1] * one[-1]          # (held over the interval after the end)
+    else:
+        target = torque * one
+    return target, c, one
+
+
+def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
+              t: np.ndarray, settings: RegressionSettings) -> WinchRegression:
+    """Rows ``[a, b, c, m] -> u - m smooth_load`` with parallel filtering.
+
+    ``position`` is the recorded winch angle or axis position, ``torque`` the recorded
+    ``u``; ``smooth_load`` comes from filtered positions already. ``a`` (the second
+    difference) and ``b`` (central difference) come from the Butterworth-filtered
+    position, so the Butterworth also goes over the target and the sign and offset
+    columns (:func:`_friction_terms`), which switch faster than the low-pass; with
+    decimation the zero-phase anti-alias filter then goes over every column alike.
     """
     fs = 1.0 / float(np.median(np.diff(t)))
     filt = settings.filter
-    c = np.sign(b) if settings.sign_sharpness is None else smooth_sign(b, settings.sign_sharpness)
-    if settings.decimate <= 1:
-        c, torque = filt.smooth(c, fs), filt.smooth(torque, fs)
-    phi = np.stack([a, b, c, np.ones_like(a)], axis=-1)
-    target = torque - smooth_load
+    xf = filt.smooth(position, fs)
+    b = np.gradient(xf, t, axis=0)
+    a = _second_difference(xf, t)
+    target, c, one = _friction_terms(position, b, torque, settings)
+    target = target - smooth_load * one
+    target, c, one = (filt.smooth(x, fs) for x in (target, c, one))
+    phi = np.stack([a, b, c, one], axis=-1)
     trim = int(round(filt.trim_s * fs))
     phi, target = phi[trim:len(t) - trim], target[trim:len(t) - trim]
     if settings.decimate > 1:
@@ -178,32 +399,30 @@ def winch_regression(traj: Trajectory, rig: CdprRig, home_lengths: np.ndarray | 
     ``home_lengths`` is any constant reference of the encoder lengths (it cancels in the
     derivatives; the first sample when ``None``).
     """
-    settings = settings or RegressionSettings()
+    settings = resolve_settings(settings or RegressionSettings(), [traj], rig)
     R = rig.drum_radius_m
     ref = traj.lengths[0] if home_lengths is None else home_lengths
     theta = (ref - traj.lengths) / R
-    _, b, a = settings.filter.derivatives(theta, traj.t)
     pos, _, acc = settings.filter.derivatives(traj.position, traj.t)
     _, units = cable_geometry(rig.anchors_m, pos)
     gravity = np.array([0.0, 0.0, -rig.gravity])
     tension = tensions_for_force(units, rig.platform_mass_kg * (acc - gravity))
-    torque = _held_torque(traj.torques, settings.zero_order_hold)
-    return _assemble(a, b, torque, R * tension, traj.t, settings)
+    return _assemble(theta, np.asarray(traj.torques, float), R * tension, traj.t, settings)
 
 
 def axis_regression(traj: Trajectory, rig: AxesRig,
                     settings: RegressionSettings | None = None) -> WinchRegression:
     """Build the per-axis regression ``u = I a + F_v b + F_c c + d`` of an ``axes`` run."""
-    settings = settings or RegressionSettings()
-    _, b, a = settings.filter.derivatives(traj.position, traj.t)
-    torque = _held_torque(traj.torques, settings.zero_order_hold)
-    return _assemble(a, b, torque, np.zeros_like(torque), traj.t, settings)
+    settings = resolve_settings(settings or RegressionSettings(), [traj], rig)
+    position = np.asarray(traj.position, float)
+    return _assemble(position, np.asarray(traj.torques, float), np.zeros_like(position),
+                     traj.t, settings)
 
 
 def build_regression(traj: Trajectory, rig: Rig,
                      settings: RegressionSettings | None = None) -> WinchRegression:
     """The regression of one run of either kind."""
-    settings = settings or RegressionSettings()
+    settings = resolve_settings(settings or RegressionSettings(), [traj], rig)
     if isinstance(rig, CdprRig):
         return winch_regression(traj, rig, None, settings)
     return axis_regression(traj, rig, settings)
@@ -211,6 +430,12 @@ def build_regression(traj: Trajectory, rig: Rig,
 
 def dataset_regression(trajectories: Iterable[Trajectory], rig: Rig,
                        settings: RegressionSettings | None = None) -> WinchRegression:
-    """Regressions of several runs stacked, with the run index of every row."""
+    """Regressions of several runs stacked, with the run index of every row.
+
+    Settings left to the data are chosen from these runs; callers that build several
+    regressions of one dataset resolve them once on the whole dataset instead
+    (:func:`resolve_settings`) so that every part uses the same filter."""
+    trajectories = list(trajectories)
+    settings = resolve_settings(settings or RegressionSettings(), trajectories, rig)
     return WinchRegression.concatenate(build_regression(tr, rig, settings)
                                        for tr in trajectories)

@@ -1,12 +1,11 @@
-"""Windows of recorded runs for the sequence models, split by whole trajectory."""
+"""Windows of recorded runs for the sequence models, split by whole trajectory or, when
+whole runs cannot give training, validation and test a run each, by time blocks."""
 
 from __future__ import annotations
 
 import hashlib
 import logging
-from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import lightning as L
@@ -16,6 +15,7 @@ from torch.utils.data import DataLoader, Dataset, RandomSampler
 
 from cdpr_pipeline.data.io import Dataset as MeasuredDataset
 from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.data.split import Split, model_split, whole_run_split
 from cdpr_pipeline.models.features import (
     FeatureLayout,
     RunArrays,
@@ -28,57 +28,22 @@ from cdpr_pipeline.models.features import (
 log = logging.getLogger(__name__)
 
 
-@dataclass
-class RunSplit:
-    """Run names per split; ``test`` holds held-out runs of the training families and
-    every run of the test-only families (the unseen spiral)."""
-
-    train: list[str]
-    val: list[str]
-    test: list[str]
-
-    def as_dict(self) -> dict[str, list[str]]:
-        return {"train": self.train, "val": self.val, "test": self.test}
-
-
 def split_runs(names: Sequence[str], families: Sequence[str], val_fraction: float,
-               test_fraction: float, test_families: Sequence[str], seed: int) -> RunSplit:
+               test_fraction: float, test_families: Sequence[str], seed: int) -> Split:
     """Split whole runs (never samples within a run), stratified by family.
 
-    Each training family gives ``round(n * fraction)`` runs to validation and to test,
-    chosen by a seeded shuffle; at least one validation run is kept when any family has
-    two or more runs, so early stopping always has data it did not train on.
+    :func:`~cdpr_pipeline.data.split.whole_run_split`, which may leave validation or test
+    empty; :class:`TrajectoryDataModule` uses :func:`~cdpr_pipeline.data.split.model_split`,
+    which then cuts runs into time blocks.
+
+    Raises
+    ------
+    ValueError
+        If no training run is left.
     """
-    rng = np.random.default_rng(seed)
-    groups: dict[str, list[str]] = {}
-    for name, fam in zip(names, families, strict=True):
-        groups.setdefault(fam, []).append(name)
-    split = RunSplit([], [], [])
-    for fam, members in groups.items():
-        if fam in test_families:
-            split.test.extend(members)
-            continue
-        order = [members[i] for i in rng.permutation(len(members))]
-        n_test = int(round(len(order) * test_fraction))
-        n_val = int(round(len(order) * val_fraction))
-        n_test = min(n_test, max(0, len(order) - 1))
-        n_val = min(n_val, max(0, len(order) - 1 - n_test))
-        split.test.extend(order[:n_test])
-        split.val.extend(order[n_test:n_test + n_val])
-        split.train.extend(order[n_test + n_val:])
-    if not split.val:
-        family_of = dict(zip(names, families, strict=True))
-        count = Counter(family_of[n] for n in split.train)
-        donors = [n for n in split.train if count[family_of[n]] > 1]
-        if donors:
-            pick = donors[int(rng.integers(len(donors)))]
-            split.train.remove(pick)
-            split.val.append(pick)
-    if not split.train:
+    split = whole_run_split(names, families, val_fraction, test_fraction, test_families, seed)
+    if not split["train"]:
         raise ValueError("no training runs left after the split; lower val/test fractions")
-    order = {n: i for i, n in enumerate(names)}
-    for part in (split.train, split.val, split.test):
-        part.sort(key=order.__getitem__)
     return split
 
 
@@ -122,13 +87,29 @@ class TrajectoryDataModule(L.LightningDataModule):
         Windows drawn per training epoch (a fresh random subset each epoch) and the
         fixed, evenly spaced validation subset; ``0`` means all.
     val_fraction, test_fraction : float
-        Share of each training family's runs held out, by whole run.
+        Share of each training family's runs held out, by whole run; when whole runs
+        cannot give training, validation and test a run each (one or two runs, one run
+        per family), share of each run held out as a block at its end (test last,
+        validation before it; :func:`~cdpr_pipeline.data.split.model_split`).
     test_families : sequence of str
         Families used for testing only (the paper's unseen spiral).
     split_seed : int
         Seed of the run split.
+    num_workers : int
+        DataLoader workers.
     allow_gaps, min_samples : bool, int
-        Passed to the loader.
+        Passed to the loader; ``min_samples`` (or ``window + 3``, if more) is also the
+        shortest time block.
+    gap : int, optional
+        Samples left out between the time blocks of a run; ``None``: ``window``, so no
+        window holds samples of two parts.
+
+    Notes
+    -----
+    ``split`` is a :class:`~cdpr_pipeline.data.split.Split`; ``runs`` holds the run (or
+    block) arrays by segment name. Every block is its own sequence: windows never cross
+    a block's edges, and its time input starts at 0 at the block's first sample, as for
+    a whole run.
 
     Examples
     --------
@@ -140,11 +121,13 @@ class TrajectoryDataModule(L.LightningDataModule):
                  train_windows: int = 16384, val_windows: int = 4096,
                  val_fraction: float = 0.1, test_fraction: float = 0.1,
                  test_families: Sequence[str] = ("spiral",), split_seed: int = 0,
-                 num_workers: int = 0, allow_gaps: bool = False, min_samples: int = 50):
+                 num_workers: int = 0, allow_gaps: bool = False, min_samples: int = 50,
+                 gap: int | None = None):
         super().__init__()
         self.save_hyperparameters(logger=False)
         self.path = Path(path)
         self.window = int(window)
+        self.gap = self.window if gap is None else int(gap)
         self._ready = False
 
     # -- data -------------------------------------------------------------------------
@@ -156,11 +139,12 @@ class TrajectoryDataModule(L.LightningDataModule):
             self.path, allow_gaps=hp.allow_gaps, min_samples=hp.min_samples)
         has_desired = all(tr.desired is not None for tr in self.dataset)
         self.layout = FeatureLayout.for_rig(self.dataset.rig, has_desired)
-        names = self.dataset.names
-        families = [tr.family for tr in self.dataset]
-        self.split = split_runs(names, families, hp.val_fraction, hp.test_fraction,
-                                list(hp.test_families), hp.split_seed)
-        self.runs = {tr.name: run_arrays(tr, self.layout) for tr in self.dataset}
+        self.split: Split = model_split(
+            self.dataset.trajectories, hp.val_fraction, hp.test_fraction,
+            list(hp.test_families), hp.split_seed, gap=self.gap,
+            min_samples=max(self.window + 3, int(hp.min_samples)), source=str(self.path))
+        self.runs = {tr.name: run_arrays(tr, self.layout)
+                     for trs in self.split.materialise(self.dataset).values() for tr in trs}
         short = [n for n, r in self.runs.items() if r.n_samples < self.window + 3]
         if short:
             raise ValueError(f"{self.path}: runs {short} are shorter than window+3 = "
@@ -168,13 +152,15 @@ class TrajectoryDataModule(L.LightningDataModule):
         # scaling from training runs only: nothing of validation or test leaks into it
         self.scaler = Standardizer.fit([self.runs[n] for n in self.split.train], self.layout)
         self.data_digest = dataset_digest(self.path)
-        log.info("runs: %d train, %d val, %d test; %d inputs, %d outputs per step",
-                 len(self.split.train), len(self.split.val), len(self.split.test),
-                 self.layout.n_inputs, self.layout.n_outputs)
+        log.info("%s: %d train, %d val, %d test; %d inputs, %d outputs per step",
+                 "time blocks" if self.split.blocks else "runs", len(self.split.train),
+                 len(self.split.val), len(self.split.test), self.layout.n_inputs,
+                 self.layout.n_outputs)
         self._ready = True
 
     def runs_of(self, split: str) -> list[RunArrays]:
-        return [self.runs[n] for n in getattr(self.split, split)]
+        """Arrays of the runs or time blocks of ``split`` (``train``, ``val``, ``test``)."""
+        return [self.runs[n] for n in self.split.names(split)]
 
     def windows(self, split: str) -> WindowDataset:
         runs = self.runs_of(split)

@@ -7,6 +7,7 @@ Keys look like ``onestep/train/x/rmse``, ``onestep/test/spiral/overall/ppl``,
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -61,26 +62,43 @@ def _scores(prefix: str, pairs: list[tuple[np.ndarray, np.ndarray]],
     return _flatten(prefix, metric_table(true, pred, names))
 
 
-def one_step_pairs(fc: Forecaster, runs: list[RunArrays], stride: int = 1
+def _columns(fc: Forecaster, channels: Sequence[str] | None) -> slice | list[int]:
+    """State columns of ``channels`` (names of ``layout.state_names``); the position
+    when None."""
+    if channels is None:
+        return slice(0, fc.layout.n_position)
+    names = fc.layout.state_names
+    missing = [c for c in channels if c not in names]
+    if missing:
+        raise ValueError(f"channels {missing} are not predicted; the state is {names}")
+    return [names.index(c) for c in channels]
+
+
+def one_step_pairs(fc: Forecaster, runs: list[RunArrays], stride: int = 1,
+                   channels: Sequence[str] | None = None
                    ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(measured, one-step predicted) positions per run."""
-    npos = fc.layout.n_position
+    """(measured, one-step predicted) positions (or ``channels``) per run."""
+    cols = _columns(fc, channels)
     out = []
     for r in runs:
         _, p, t = fc.one_step(r, stride=stride)
-        out.append((t[:, :npos], p[:, :npos]))
+        out.append((t[:, cols], p[:, cols]))
     return out
 
 
 def free_run_pairs(fc: Forecaster, runs: list[RunArrays], horizon: int | None,
-                   every: int | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(measured, free-run) positions per run, all rollouts batched together.
+                   every: int | None = None, channels: Sequence[str] | None = None
+                   ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(measured, free-run) positions (or ``channels``) per run, all rollouts batched
+    together.
 
     ``horizon=None``: one rollout per run from its first full window to its end;
     otherwise rollouts of ``horizon`` samples started every ``every`` samples.
     """
     npos, first = fc.layout.n_position, fc.window + 1
-    empty = (np.zeros((0, npos)), np.zeros((0, npos)))
+    cols = _columns(fc, channels)
+    width = npos if channels is None else len(channels)
+    empty = (np.zeros((0, width)), np.zeros((0, width)))
     if horizon is None:
         # whole runs: one batch per run length, each rolled to its own end
         out: list = [empty] * len(runs)
@@ -89,9 +107,9 @@ def free_run_pairs(fc: Forecaster, runs: list[RunArrays], horizon: int | None,
             h = n - first - 1
             if h < 1:
                 continue
-            pred = fc.free_run([runs[i] for i in idx], [first] * len(idx), h)[..., :npos]
+            pred = fc.free_run([runs[i] for i in idx], [first] * len(idx), h)[..., cols]
             for j, i in enumerate(idx):
-                out[i] = (runs[i].state[first + 1:, :npos][None], pred[j:j + 1])
+                out[i] = (runs[i].state[first + 1:, cols][None], pred[j:j + 1])
         return out
     owner, sel, starts = [], [], []
     for i, r in enumerate(runs):
@@ -101,12 +119,12 @@ def free_run_pairs(fc: Forecaster, runs: list[RunArrays], horizon: int | None,
             starts.append(e)
     if not sel or horizon < 1:
         return []
-    pred = fc.free_run(sel, starts, horizon)[..., :npos]
+    pred = fc.free_run(sel, starts, horizon)[..., cols]
     out = []
     for i in range(len(runs)):
         rows = [j for j, o in enumerate(owner) if o == i]
         if rows:
-            true = np.stack([sel[j].state[starts[j] + 1:starts[j] + 1 + horizon, :npos]
+            true = np.stack([sel[j].state[starts[j] + 1:starts[j] + 1 + horizon, cols]
                              for j in rows])
             out.append((true, pred[rows]))
         else:
@@ -115,26 +133,28 @@ def free_run_pairs(fc: Forecaster, runs: list[RunArrays], horizon: int | None,
 
 
 def evaluate(fc: Forecaster, train_runs: list[RunArrays], test_runs: list[RunArrays],
-             settings: EvaluationSettings) -> dict[str, float]:
+             settings: EvaluationSettings, channels: Sequence[str] | None = None
+             ) -> dict[str, float]:
     """Table I (training runs, one-step) and Table II (test runs, all and per family,
-    one-step and free run) scores as flat metric keys."""
+    one-step and free run) scores as flat metric keys, of the position or of the state
+    ``channels`` (e.g. the torques ``u1..un`` of drive axes)."""
     out: dict[str, float] = {}
-    names = fc.layout.position_names
+    names = fc.layout.position_names if channels is None else tuple(channels)
     if settings.max_train_runs and len(train_runs) > settings.max_train_runs:
         pick = np.linspace(0, len(train_runs) - 1, settings.max_train_runs).astype(int)
         train_runs = [train_runs[i] for i in pick]
     if train_runs:
         out |= _scores("onestep/train", one_step_pairs(fc, train_runs,
-                                                       settings.onestep_stride), names)
+                                                       settings.onestep_stride, channels), names)
     if not test_runs:
         return out
     rate = fc.layout.sample_rate_hz
     horizon = max(1, int(round(settings.freerun_horizon_s * rate)))
     every = max(1, int(round(settings.freerun_every_s * rate)))
-    modes = {"onestep": one_step_pairs(fc, test_runs, settings.onestep_stride),
-             "freerun_1s": free_run_pairs(fc, test_runs, horizon, every)}
+    modes = {"onestep": one_step_pairs(fc, test_runs, settings.onestep_stride, channels),
+             "freerun_1s": free_run_pairs(fc, test_runs, horizon, every, channels)}
     if settings.whole_run:
-        modes["freerun_run"] = free_run_pairs(fc, test_runs, None)
+        modes["freerun_run"] = free_run_pairs(fc, test_runs, None, channels=channels)
     for mode, pairs in modes.items():
         if not pairs:
             continue

@@ -12,6 +12,15 @@ two ways, both used by the simulator *and* by diagnosis (one physics):
 that vocabulary set ``in_vocabulary = False`` and must be diagnosed as ``unnamed``.
 ``ranges`` documents the magnitudes :meth:`Effect.sample` draws (the ranges the README
 calls detectable); cable numbers are 1-based like the ``u1..un`` columns.
+
+Winch-side effects have one magnitude per winch: a parameter is a scalar (the same on
+every affected winch) or a list with one value per affected winch (per entry of
+``cables``, in its order; per winch when ``cables`` is None), see :func:`per_winch`.
+
+Everything diagnosis needs to know about an effect lives on its class, so adding an
+effect is one class (and one ``conf/effects`` file): :meth:`Effect.candidates` (the
+variants diagnosis fits, with their bounds), :meth:`Effect.shapes` (the free-form terms
+it names) and :meth:`Effect.scaled` (its strength scaled, for detection studies).
 """
 
 from __future__ import annotations
@@ -47,6 +56,82 @@ def _signed(rng: np.random.Generator, lo: float, hi: float) -> float:
     return float(rng.choice([-1.0, 1.0]) * rng.uniform(lo, hi))
 
 
+def per_winch(value: float | Sequence[float], cables: Sequence[int] | None, n: int,
+              fill: float = 0.0) -> np.ndarray:
+    """The (n,) values of a per-winch parameter.
+
+    Parameters
+    ----------
+    value : float or sequence of float
+        One value for every affected winch, or one per affected winch: per entry of
+        ``cables`` (in its order), or per winch when ``cables`` is None.
+    cables : sequence of int or None
+        Affected winches, 1-based; None: every winch.
+    n : int
+        Number of winches.
+    fill : float
+        Value of the winches the effect does not touch (its neutral value).
+
+    Examples
+    --------
+    >>> per_winch([0.3, 0.5], [3, 1], 3).tolist()
+    [0.5, 0.0, 0.3]
+    """
+    _cable_mask(cables, n)     # validates the cable numbers
+    idx = np.arange(n) if cables is None else np.asarray([int(c) - 1 for c in cables], int)
+    out = np.full(n, float(fill))
+    v = np.asarray(value, dtype=float)
+    if v.ndim == 0 or v.shape == (len(idx),):
+        out[idx] = v
+        return out
+    raise ValueError(f"{v.size} values for {len(idx)} winch(es) "
+                     f"({'every winch' if cables is None else f'cables {list(cables)}'})")
+
+
+def _map(value: Any, fn) -> Any:
+    """``fn`` applied to a scalar, or to each entry of a per-winch list."""
+    if value is None:
+        return None
+    if np.ndim(value) == 0:
+        return fn(float(value))
+    return [fn(float(v)) for v in value]
+
+
+def _plain(value: Any) -> Any:
+    """Arrays, tuples and numpy scalars as plain lists and numbers (YAML-able fields that
+    compare with ``==``)."""
+    if isinstance(value, np.ndarray | tuple):
+        return [_plain(v) for v in (value.tolist() if isinstance(value, np.ndarray)
+                                    else value)]
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _affected(cables: Sequence[int] | None, values: Sequence[Any],
+              plant: Plant | None) -> list[int] | None:
+    """1-based numbers of the winches a per-winch description lists (None: every winch
+    of a rig not known here)."""
+    if cables is not None:
+        return [int(c) for c in cables]
+    count = max((len(v) for v in values if v is not None and np.ndim(v) == 1), default=0)
+    if count == 0 and plant is not None:
+        count = plant.n
+    return list(range(1, count + 1)) if count else None
+
+
+def _finite(values: np.ndarray) -> list[float | None]:
+    """A list for reports, None where a value is undefined (a zero nominal parameter)."""
+    return [float(v) if np.isfinite(v) else None for v in values]
+
+
+def _relative(size: np.ndarray, nominal: np.ndarray) -> np.ndarray:
+    """``size / nominal``, NaN where the nominal value is zero."""
+    return np.where(nominal != 0, size / np.where(nominal != 0, nominal, 1.0), np.nan)
+
+
 @dataclass
 class Effect:
     """Base class of all hidden effects."""
@@ -62,6 +147,12 @@ class Effect:
     ranges: ClassVar[dict[str, tuple[float, float]]] = {}
     signed: ClassVar[frozenset[str]] = frozenset()
     log_uniform: ClassVar[frozenset[str]] = frozenset()
+    #: absolute size parameters that replace a relative one when given, e.g.
+    #: ``{"extra_static": "static_ratio"}``: a fit finds absolute sizes per winch (a
+    #: nominal parameter may be zero), the lab draws sizes relative to the nominal ones
+    replaces: ClassVar[dict[str, str]] = {}
+    #: diagnosis also tries this effect with the winch parameters re-identified jointly
+    refit_variant: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -69,6 +160,19 @@ class Effect:
             if cls.name in EFFECTS:
                 raise ValueError(f"effect name {cls.name!r} registered twice")
             EFFECTS[cls.name] = cls
+
+    def __post_init__(self) -> None:
+        defaults = {f.name: f.default for f in dataclasses.fields(self)}
+        for absolute, relative in self.replaces.items():
+            if getattr(self, absolute) is None:
+                if getattr(self, relative) is None:
+                    raise ValueError(f"{self.name}: give {relative} or {absolute}")
+            elif getattr(self, relative) == defaults[relative]:
+                setattr(self, relative, None)      # the absolute size given wins
+            elif getattr(self, relative) is not None:
+                raise ValueError(f"{self.name}: give {relative} or {absolute}, not both")
+        for f in dataclasses.fields(self):
+            setattr(self, f.name, _plain(getattr(self, f.name)))
 
     # -- physics hooks -----------------------------------------------------------
     def apply(self, plant: Plant) -> Plant:
@@ -96,13 +200,45 @@ class Effect:
             out[f.name] = value
         return out
 
-    def describe(self) -> str:
+    def describe(self, plant: Plant | None = None) -> str:
+        """What the effect does, in a sentence; with the nominal ``plant``, sizes are also
+        put in relation to its parameters."""
         return f"{self.name}: {self.params()}"
+
+    def derived(self, plant: Plant) -> dict[str, Any]:
+        """Per-winch sizes on the nominal ``plant`` in both forms (absolute and relative to
+        its parameters), for reports; empty for effects without such sizes."""
+        return {}
+
+    def scaled(self, s: float) -> Effect:
+        """The effect with its strength scaled by ``s`` (1: unchanged; detection studies
+        shrink drawn effects to find the smallest one detected)."""
+        raise NotImplementedError(f"{self.name} has no strength to scale")
+
+    # -- what diagnosis fits -----------------------------------------------------
+    @classmethod
+    def candidates(cls, rig: Any, scale: Any) -> list[Any]:
+        """The variants diagnosis fits (:class:`~cdpr_pipeline.discovery.candidates.
+        Candidate`), for a rig and the data's :class:`~cdpr_pipeline.discovery.
+        candidates.DataScale`; none for effects outside the vocabulary."""
+        return []
+
+    @classmethod
+    def shapes(cls, speed_rms: float) -> list[str]:
+        """Free-form expressions (:mod:`cdpr_pipeline.sim.expressions`) with this effect's
+        shape: a free-form term like one of them is this effect, so the free-form search
+        leaves such terms to its candidates (``speed_rms`` places shape parameters)."""
+        return []
 
     @classmethod
     def sample(cls, rng: np.random.Generator, n_cables: int, **fixed: Any) -> Effect:
-        """An instance with magnitudes drawn from ``ranges``; ``fixed`` values win."""
-        return cls(**{**cls.draw(rng, n_cables), **fixed})
+        """An instance with magnitudes drawn from ``ranges``; ``fixed`` values win (an
+        absolute size given replaces the relative one, see ``replaces``)."""
+        drawn = cls.draw(rng, n_cables)
+        for absolute, relative in cls.replaces.items():
+            if fixed.get(absolute) is not None:
+                drawn[relative] = None
+        return cls(**{**drawn, **fixed})
 
     @classmethod
     def draw(cls, rng: np.random.Generator, n_cables: int) -> dict[str, Any]:
@@ -133,6 +269,17 @@ def make_effect(name: str, rng: np.random.Generator, n_cables: int, **fixed: Any
 
 
 # ---------------------------------------------------------------------------- vocabulary
+def _candidate(*args: Any, **kwargs: Any) -> Any:
+    # imported late: diagnosis imports the effects, the effects only describe their fits
+    from cdpr_pipeline.discovery.candidates import Candidate
+
+    return Candidate(*args, **kwargs)
+
+
+def _arr(*x: float) -> np.ndarray:
+    return np.asarray(x, dtype=float)
+
+
 @dataclass
 class WinchParameterError(Effect):
     """One winch's true I_m, F_v, F_c or d differ from the nominal ones (wear, heat, a
@@ -164,7 +311,30 @@ class WinchParameterError(Effect):
         return {"cable": int(rng.integers(1, n_cables + 1)),
                 which: 1.0 + _signed(rng, *cls.ranges["relative_error"])}
 
-    def describe(self) -> str:
+    def scaled(self, s):
+        return type(self)(self.cable, *(1 + s * (getattr(self, k) - 1) for k in
+                                        ("inertia_scale", "viscous_scale", "coulomb_scale")),
+                          s * self.offset_delta)
+
+    @classmethod
+    def candidates(cls, rig, scale):
+        """Re-identify one winch (four parameters, linear), one variant per winch."""
+        from cdpr_pipeline.discovery.candidates import TORQUE
+
+        return [_candidate(
+            cls.name, f"{cls.name}[winch {cable}]",
+            lambda x, c=cable: [cls(c, float(x[0]), float(x[1]), float(x[2]), float(x[3]))],
+            [_arr(1, 1, 1, 0)], _arr(0.0, -np.inf, -np.inf, -np.inf),
+            _arr(np.inf, np.inf, np.inf, np.inf), _arr(0.1, 0.1, 0.1, 0.1), linear=True,
+            names=["inertia_scale", "viscous_scale", "coulomb_scale", "offset_delta"],
+            affects=TORQUE) for cable in range(1, scale.n + 1)]
+
+    @classmethod
+    def shapes(cls, speed_rms):
+        # viscous, Coulomb and offset terms are a winch's own parameters
+        return ["omega", "sign_(omega)", "one(omega)"]
+
+    def describe(self, plant=None) -> str:
         parts = [f"{k.split('_')[0]} x{v:.3f}" for k, v in self.params().items()
                  if k.endswith("_scale") and v != 1.0]
         if self.offset_delta:
@@ -175,57 +345,212 @@ class WinchParameterError(Effect):
 @dataclass
 class StribeckFriction(Effect):
     """Friction rises at low speed: ``(F_s - F_c) exp(-(w/w_s)^2) s(w)`` on top of the
-    nominal Coulomb term, with ``F_s = static_ratio * F_c``."""
+    nominal Coulomb term, on each affected winch with its own size and Stribeck velocity.
+
+    The size is ``extra_static = F_s - F_c`` (absolute: what a fit finds, and what holds
+    when the nominal F_c is zero) or ``static_ratio = F_s / F_c`` (relative to the
+    nominal F_c: what the lab draws). Each parameter is a scalar (every affected winch)
+    or one value per affected winch (see :func:`per_winch`).
+    """
 
     name: ClassVar[str] = "stribeck_friction"
     expression: ClassVar[str] = "tau_f += (F_s - F_c) exp(-(w/w_s)^2) sign(w)"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {
         "static_ratio": (1.6, 2.5), "stribeck_velocity": (0.5, 2.0)}
+    replaces: ClassVar[dict[str, str]] = {"extra_static": "static_ratio"}
+    refit_variant: ClassVar[bool] = True
 
-    static_ratio: float = 2.0
-    stribeck_velocity: float = 1.0          # rad/s
+    static_ratio: float | list[float] | None = 2.0
+    stribeck_velocity: float | list[float] = 1.0      # rad/s (m/s for a linear axis)
     cables: list[int] | None = None
+    extra_static: float | list[float] | None = None   # F_s - F_c, N m (N)
+
+    def extra(self, plant: Plant) -> np.ndarray:
+        """``F_s - F_c`` of every winch of ``plant`` (n,), zero where it does not act."""
+        if self.extra_static is not None:
+            return per_winch(self.extra_static, self.cables, plant.n)
+        ratio = per_winch(self.static_ratio, self.cables, plant.n, fill=1.0)
+        return (ratio - 1.0) * plant.winch.coulomb
+
+    def derived(self, plant):
+        cables = self.cables or list(range(1, plant.n + 1))
+        idx = np.asarray(cables) - 1
+        size = self.extra(plant)[idx]
+        return {"cables": cables, "extra_static": size.tolist(),
+                "static_ratio": _finite(1.0 + _relative(size, plant.winch.coulomb[idx])),
+                "stribeck_velocity": per_winch(self.stribeck_velocity, self.cables, plant.n,
+                                               fill=1.0)[idx].tolist()}
 
     def winch_torque(self, theta, omega, plant):
-        mask = _cable_mask(self.cables, plant.n)
-        bump = (self.static_ratio - 1.0) * plant.winch.coulomb * np.exp(
-            -(omega / self.stribeck_velocity) ** 2)
-        return np.where(mask, bump * smooth_sign(omega, plant.sign_sharpness), 0.0)
+        speed = per_winch(self.stribeck_velocity, self.cables, plant.n, fill=1.0)
+        return self.extra(plant) * np.exp(-(omega / speed) ** 2) * smooth_sign(
+            omega, plant.sign_sharpness)
 
-    def describe(self):
-        where = "every winch" if self.cables is None else f"winch(es) {self.cables}"
-        return (f"friction on {where} rises to {self.static_ratio:.2f} x F_c near zero speed "
-                f"(Stribeck velocity {self.stribeck_velocity:.3g})")
+    def scaled(self, s):
+        if self.extra_static is not None:
+            return dataclasses.replace(self, extra_static=_map(self.extra_static,
+                                                               lambda v: s * v))
+        return dataclasses.replace(self, static_ratio=_map(self.static_ratio,
+                                                           lambda r: 1 + s * (r - 1)))
 
+    @classmethod
+    def candidates(cls, rig, scale):
+        """Per winch a size ``F_s - F_c >= 0`` (friction *rises* at low speed: a smaller
+        static friction is another effect) and a Stribeck velocity; the data choose the
+        winches (:func:`~cdpr_pipeline.discovery.candidates.winch_candidate`)."""
+        from cdpr_pipeline.discovery.candidates import winch_candidate
+
+        w = scale.speed_rms
+        fc = np.abs(scale.winch.coulomb)
+
+        def make(parts):
+            cables = sorted(parts)
+            return [cls(static_ratio=None, cables=cables,
+                        extra_static=[parts[c].magnitude for c in cables],
+                        stribeck_velocity=[parts[c].shape for c in cables])]
+
+        return [winch_candidate(
+            cls.name, cls.name, make, scale.n,
+            # up to F_s = 20 F_c, the old bound of the ratio; any size if F_c is zero
+            magnitude=lambda i: (0.0, 19.0 * fc[i] if fc[i] > 0 else np.inf),
+            typical=lambda i: 0.5 * fc[i] if fc[i] > 0 else 1.0,
+            shape=(0.005 * w, 5.0 * w), names=("extra_static", "stribeck_velocity"))]
+
+    @classmethod
+    def shapes(cls, speed_rms):
+        # the family over every width a free-form term could take, 1.15 apart: a term
+        # between two of them still matches one to a cosine of 0.9987 (see freeform)
+        widths = speed_rms * np.geomspace(1e-3, 20.0, 72)
+        return [f"mul(gauss(omega, {s:.6g}), sign_(omega))" for s in widths]
+
+    def describe(self, plant=None):
+        if self.cables is None and self.extra_static is None and \
+                np.ndim(self.static_ratio) == 0 and np.ndim(self.stribeck_velocity) == 0:
+            return (f"friction on every winch rises to {self.static_ratio:.2f} x F_c near "
+                    f"zero speed (Stribeck velocity {self.stribeck_velocity:.3g})")
+        cables = _affected(self.cables, [self.extra_static, self.static_ratio,
+                                         self.stribeck_velocity], plant)
+        k = len(cables) if cables else 1
+        speed = per_winch(self.stribeck_velocity, None, k, fill=1.0)
+        size = None if self.extra_static is None else per_winch(self.extra_static, None, k)
+        ratio = None if self.static_ratio is None else per_winch(self.static_ratio, None, k)
+        if plant is not None and cables:
+            fc = plant.winch.coulomb[np.asarray(cables) - 1]
+            size = (ratio - 1.0) * fc if size is None else size
+            ratio = 1.0 + _relative(size, fc) if ratio is None else ratio
+        parts = []
+        for j in range(k):
+            bits = [] if size is None else [f"F_s - F_c = {size[j]:.3g}"]
+            if ratio is not None and np.isfinite(ratio[j]):
+                bits.append(f"F_s = {ratio[j]:.2f} F_c")
+            bits.append(f"Stribeck velocity {speed[j]:.3g}")
+            parts.append(f"{f'winch {cables[j]}' if cables else 'every winch'} "
+                         f"({', '.join(bits)})")
+        return "friction rises near zero speed on " + "; ".join(parts)
 
 
 @dataclass
 class AsymmetricViscousFriction(Effect):
-    """Viscous friction differs by direction: an extra ``ratio * F_v * w`` only while the
-    winch turns in ``direction`` (+1 reeling in, -1 paying out)."""
+    """Viscous friction differs by direction: an extra ``c w`` only while the winch
+    turns in ``direction`` (+1 reeling in, -1 paying out), per affected winch with its
+    own direction and size.
+
+    The size is ``coefficient = c`` (absolute: what a fit finds) or ``ratio = c / F_v``
+    (relative to the nominal F_v: what the lab draws); parameters are scalars or one value
+    per affected winch (see :func:`per_winch`).
+    """
 
     name: ClassVar[str] = "asymmetric_viscous_friction"
-    expression: ClassVar[str] = "tau_f += r F_v max(s w, 0) s  (s = direction)"
+    expression: ClassVar[str] = "tau_f += c max(s w, 0) s  (s = direction)"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"ratio": (0.3, 0.8)}
+    replaces: ClassVar[dict[str, str]] = {"coefficient": "ratio"}
+    refit_variant: ClassVar[bool] = True
 
-    ratio: float = 0.5
-    direction: int = 1
+    ratio: float | list[float] | None = 0.5
+    direction: int | list[int] = 1
     cables: list[int] | None = None
+    coefficient: float | list[float] | None = None    # N m s/rad (N s/m)
+
+    def size(self, plant: Plant) -> np.ndarray:
+        """The extra viscous coefficient ``c`` of every winch of ``plant`` (n,)."""
+        if self.coefficient is not None:
+            return per_winch(self.coefficient, self.cables, plant.n)
+        return per_winch(self.ratio, self.cables, plant.n) * plant.winch.viscous
+
+    def derived(self, plant):
+        cables = self.cables or list(range(1, plant.n + 1))
+        idx = np.asarray(cables) - 1
+        size = self.size(plant)[idx]
+        return {"cables": cables, "coefficient": size.tolist(),
+                "ratio": _finite(_relative(size, plant.winch.viscous[idx])),
+                "direction": per_winch(self.direction, self.cables, plant.n,
+                                       fill=1.0)[idx].astype(int).tolist()}
 
     def winch_torque(self, theta, omega, plant):
-        mask = _cable_mask(self.cables, plant.n)
-        one_side = self.direction * np.maximum(self.direction * omega, 0.0)
-        return np.where(mask, self.ratio * plant.winch.viscous * one_side, 0.0)
+        d = per_winch(self.direction, self.cables, plant.n, fill=1.0)
+        return self.size(plant) * d * np.maximum(d * omega, 0.0)
 
     @classmethod
     def draw(cls, rng, n_cables):
         return {**super().draw(rng, n_cables), "direction": int(rng.choice([-1, 1]))}
 
-    def describe(self):
-        where = "every winch" if self.cables is None else f"winch(es) {self.cables}"
-        side = "positive" if self.direction > 0 else "negative"
-        return (f"viscous friction on {where} is {100 * self.ratio:+.0f} % of F_v higher "
-                f"when the speed is {side}")
+    def scaled(self, s):
+        if self.coefficient is not None:
+            return dataclasses.replace(self, coefficient=_map(self.coefficient,
+                                                              lambda v: s * v))
+        return dataclasses.replace(self, ratio=_map(self.ratio, lambda r: s * r))
+
+    @classmethod
+    def candidates(cls, rig, scale):
+        """Per winch a direction (the better of the two) and a size ``c``: more friction
+        on one side, or less, down to 5 % of F_v (friction never pushes); the data
+        choose the winches (:func:`~cdpr_pipeline.discovery.candidates.winch_candidate`)."""
+        from cdpr_pipeline.discovery.candidates import winch_candidate
+
+        fv = np.abs(scale.winch.viscous)
+
+        def make(parts):
+            cables = sorted(parts)
+            return [cls(ratio=None, cables=cables,
+                        direction=[int(parts[c].variant) for c in cables],
+                        coefficient=[parts[c].magnitude for c in cables])]
+
+        return [winch_candidate(
+            cls.name, cls.name, make, scale.n, variants=(1, -1),
+            magnitude=lambda i: (-0.95 * fv[i], 10.0 * fv[i]) if fv[i] > 0 else (0.0, np.inf),
+            typical=lambda i: 0.3 * fv[i] if fv[i] > 0 else 1.0,
+            names=("coefficient", "direction"))]
+
+    @classmethod
+    def shapes(cls, speed_rms):
+        # |w| = max(w, 0) - min(w, 0) is the direction-dependent part of any viscous law
+        # with one coefficient per direction: this effect together with a winch's F_v
+        return ["pos(omega)", "negpart(omega)", "abs_(omega)"]
+
+    def describe(self, plant=None):
+        sides = {1: "positive", -1: "negative"}
+        if self.cables is None and self.coefficient is None and np.ndim(self.ratio) == 0 \
+                and np.ndim(self.direction) == 0:
+            return (f"viscous friction on every winch is {100 * self.ratio:+.0f} % of F_v "
+                    f"higher when the speed is {sides[int(self.direction)]}")
+        cables = _affected(self.cables, [self.coefficient, self.ratio, self.direction], plant)
+        k = len(cables) if cables else 1
+        direction = per_winch(self.direction, None, k, fill=1.0)
+        size = None if self.coefficient is None else per_winch(self.coefficient, None, k)
+        ratio = None if self.ratio is None else per_winch(self.ratio, None, k)
+        if plant is not None and cables:
+            fv = plant.winch.viscous[np.asarray(cables) - 1]
+            size = ratio * fv if size is None else size
+            ratio = _relative(size, fv) if ratio is None else ratio
+        parts = []
+        for j in range(k):
+            bits = [] if size is None else [f"{size[j]:+.3g}"]
+            if ratio is not None and np.isfinite(ratio[j]):
+                bits.append(f"{100 * ratio[j]:+.0f} % of F_v")
+            text = bits[0] + (f" ({bits[1]})" if len(bits) > 1 else "")
+            parts.append(f"{f'winch {cables[j]}' if cables else 'every winch'}: {text} "
+                         f"when the speed is {sides[1 if direction[j] >= 0 else -1]}")
+        return "viscous friction differs by direction: " + "; ".join(parts)
 
 
 @dataclass
@@ -246,8 +571,19 @@ class CableElasticity(Effect):
         return plant.replace(cable_stiffness=np.full(plant.n, float(self.ea_n)),
                              cable_damping_time=float(self.damping_time_s))
 
+    def scaled(self, s):
+        return type(self)(self.ea_n / s, self.damping_time_s)
 
-    def describe(self):
+    @classmethod
+    def candidates(cls, rig, scale):
+        # fitted as compliance 1/EA (nearly linear in the length residual); 0 is rigid
+        return [_candidate(
+            cls.name, cls.name,
+            lambda x: [cls(ea_n=1.0 / float(x[0]))] if x[0] > 0 else [],
+            [_arr(1e-6)], _arr(0.0), _arr(1e-2), _arr(1e-5), names=["compliance_per_n"],
+            affects=frozenset({"length"}))]
+
+    def describe(self, plant=None):
         return f"cables stretch with EA = {self.ea_n:.0f} N"
 
 
@@ -276,7 +612,19 @@ class AnchorOffset(Effect):
         return {"cable": int(rng.integers(1, n_cables + 1)),
                 "offset_m": [float(x) for x in dist * direction]}
 
-    def describe(self):
+    def scaled(self, s):
+        return type(self)(self.cable, [s * v for v in self.offset_m])
+
+    @classmethod
+    def candidates(cls, rig, scale):
+        return [_candidate(
+            cls.name, f"{cls.name}[cable {cable}]",
+            lambda x, c=cable: [cls(c, [float(v) for v in x])],
+            [_arr(0, 0, 0)], _arr(-0.5, -0.5, -0.5), _arr(0.5, 0.5, 0.5),
+            _arr(0.01, 0.01, 0.01), names=["dx_m", "dy_m", "dz_m"])
+            for cable in range(1, scale.n + 1)]
+
+    def describe(self, plant=None):
         axis = "xyz"[int(np.argmax(np.abs(self.offset_m)))]
         big = max(self.offset_m, key=abs)
         return f"cable {self.cable}'s exit point is {100 * big:+.1f} cm off in {axis} " \
@@ -303,10 +651,17 @@ class DrumRadiusError(Effect):
         return plant.replace(drum_radius=np.where(mask, plant.drum_radius * (1 + self.relative),
                                                   plant.drum_radius))
 
-    def describe(self):
+    def scaled(self, s):
+        return type(self)(s * self.relative, self.cables)
+
+    @classmethod
+    def candidates(cls, rig, scale):
+        return [_candidate(cls.name, cls.name, lambda x: [cls(float(x[0]))],
+                           [_arr(0.0)], _arr(-0.5), _arr(0.5), _arr(0.01), names=["relative"])]
+
+    def describe(self, plant=None):
         where = "every drum" if self.cables is None else f"drum(s) {self.cables}"
         return f"{where}: radius is {100 * self.relative:+.2f} % off the nominal R"
-
 
 
 @dataclass
@@ -318,34 +673,57 @@ class PayloadMassError(Effect):
     kinds: ClassVar[frozenset[str]] = frozenset({"cdpr"})
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative": (0.1, 0.3)}
     signed: ClassVar[frozenset[str]] = frozenset({"relative"})
+    refit_variant: ClassVar[bool] = True
 
     relative: float = 0.2
 
     def apply(self, plant):
         return plant.replace(mass=plant.mass * (1.0 + self.relative))
 
-    def describe(self):
-        return f"the platform mass is {100 * self.relative:+.1f} % off the nominal mass"
+    def scaled(self, s):
+        return type(self)(s * self.relative)
 
+    @classmethod
+    def candidates(cls, rig, scale):
+        return [_candidate(cls.name, cls.name, lambda x: [cls(float(x[0]))],
+                           [_arr(0.0)], _arr(-0.9), _arr(5.0), _arr(0.1), names=["relative"])]
+
+    def describe(self, plant=None):
+        return f"the platform mass is {100 * self.relative:+.1f} % off the nominal mass"
 
 
 @dataclass
 class ActuatorLag(Effect):
-    """The torque reaches the drum late: first-order lag ``tau u_drum' = u_cmd - u_drum``."""
+    """The torque reaches the drum late: first-order lag ``tau u_drum' = u_cmd - u_drum``
+    (one time constant for every drive: the plant's actuator model is shared)."""
 
     name: ClassVar[str] = "actuator_lag"
     expression: ClassVar[str] = "tau u_drum' = u_cmd - u_drum"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"time_constant_s": (0.003, 0.010)}
+    refit_variant: ClassVar[bool] = True
 
     time_constant_s: float = 0.005
 
     def apply(self, plant):
         return plant.replace(actuator_time_constant=float(self.time_constant_s))
 
-    def describe(self):
+    def scaled(self, s):
+        return type(self)(s * self.time_constant_s)
+
+    @classmethod
+    def candidates(cls, rig, scale):
+        from cdpr_pipeline.discovery.candidates import TORQUE
+
+        return [_candidate(
+            cls.name, cls.name,
+            # below half a millisecond a lag is not resolved by any rig sampled here
+            lambda x: [cls(float(x[0]))],
+            [_arr(0.002), _arr(0.01)], _arr(5e-4), _arr(0.2), _arr(0.005),
+            names=["time_constant_s"], affects=TORQUE)]
+
+    def describe(self, plant=None):
         return (f"the drives deliver torque with a first-order lag of "
                 f"{1000 * self.time_constant_s:.1f} ms")
-
 
 
 # ---------------------------------------------------------------- outside the vocabulary
@@ -366,6 +744,9 @@ class QuadraticDamping(Effect):
         mask = _cable_mask(self.cables, plant.n)
         coefficient = self.ratio * plant.winch.viscous / 5.0
         return np.where(mask, coefficient * omega * np.abs(omega), 0.0)
+
+    def scaled(self, s):
+        return type(self)(s * self.ratio, self.cables)
 
 
 
@@ -392,6 +773,10 @@ class CoggingTorque(Effect):
     def draw(cls, rng, n_cables):
         return {**super().draw(rng, n_cables), "periods_per_rev": int(rng.integers(4, 13)),
                 "phase_rad": float(rng.uniform(0, 2 * np.pi))}
+
+    def scaled(self, s):
+        return type(self)(s * self.amplitude_nm, self.periods_per_rev, self.phase_rad,
+                          self.cables)
 
 
 @dataclass
@@ -422,7 +807,11 @@ class SymbolicWinchTorque(Effect):
     def draw(cls, rng, n_cables):
         raise NotImplementedError("symbolic torques are found by discovery, not drawn")
 
-    def describe(self):
+    def scaled(self, s):
+        return type(self)([{**t, "coefficient": s * float(t["coefficient"])}
+                           for t in self.terms])
+
+    def describe(self, plant=None):
         from cdpr_pipeline.sim.expressions import to_infix
         parts = [f"{t['coefficient']:+.4g} {to_infix(t['expression'], str(t['cable']))}"
                  for t in self.terms]

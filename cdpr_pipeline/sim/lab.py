@@ -23,7 +23,7 @@ from cdpr_pipeline.data.io import write_dataset
 from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.sim.effects import Effect
-from cdpr_pipeline.sim.plant import SIGN_SHARPNESS, Plant
+from cdpr_pipeline.sim.plant import Plant
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import BatchSimulator, SimulationResult
 from cdpr_pipeline.sim.trajectories import (
@@ -97,7 +97,7 @@ def simulate_lab(
     sensors: Sensors | None = None,
     seed: int = 0,
     home_m: Sequence[float] | None = None,
-    sign_sharpness: float = SIGN_SHARPNESS,
+    sign_sharpness: float | None = None,
     substeps: int | None = None,
     batch_size: int = 256,
     feedback: str = "encoders",
@@ -125,7 +125,8 @@ def simulate_lab(
     if rig.controller is None:
         raise ValueError("the virtual lab needs a controller in the rig description")
     rng = np.random.default_rng(seed)
-    nominal = Plant.from_rig(rig, home=home_m, sign_sharpness=sign_sharpness)
+    rig = stated_rig(rig, sign_sharpness)
+    nominal = Plant.from_rig(rig, home=home_m)
     plant = nominal.with_effects(effects)
     centre = nominal.home if centre_m is None else np.asarray(centre_m, float)
     families = family_list(counts)
@@ -141,9 +142,17 @@ def simulate_lab(
         results.append(result)
         trajectories.extend(result.trajectories(first_index=start))
     truth = _truth_record(plant, nominal, effects, desired, sensors, seed,
-                          sign_sharpness, results[0].substeps if results else None, feedback)
+                          nominal.sign_sharpness,
+                          results[0].substeps if results else None, feedback)
     return LabRun(None, None, trajectories, results, plant, nominal, list(effects), truth,
                   desired, sim)
+
+
+def stated_rig(rig: CdprRig, sign_sharpness: float | None) -> CdprRig:
+    """``rig`` stating the Coulomb law the lab simulates: its own ``coulomb_law``, or
+    ``tanh(k w)`` when a sharpness ``k`` is given (written to rig.yaml, as the data spec
+    asks of every program that writes the format)."""
+    return rig if sign_sharpness is None else rig.replace(coulomb_sharpness=sign_sharpness)
 
 
 def generate_dataset(
@@ -154,7 +163,8 @@ def generate_dataset(
     the truth beside it (:func:`truth_path_for`). Both are written atomically."""
     run = simulate_lab(rig, counts, **kwargs)
     out_dir = Path(out_dir)
-    write_dataset(out_dir, rig, run.trajectories, overwrite=overwrite)
+    write_dataset(out_dir, stated_rig(rig, kwargs.get("sign_sharpness")), run.trajectories,
+                  overwrite=overwrite)
     truth_path = truth_path_for(out_dir)
     truth = dict(run.truth, dataset=out_dir.name)
     _atomic_write_text(truth_path, yaml.safe_dump(truth, sort_keys=False))

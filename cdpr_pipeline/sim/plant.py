@@ -147,9 +147,15 @@ class Plant:
         cls,
         rig: CdprRig,
         home: Sequence[float] | None = None,
-        sign_sharpness: float = SIGN_SHARPNESS,
+        sign_sharpness: float | None = None,
     ) -> Plant:
-        """The plant exactly as the rig file states it (the user's nominal model)."""
+        """The plant exactly as the rig file states it (the user's nominal model).
+
+        ``sign_sharpness`` None takes the rig's stated Coulomb law (infinite: the hard
+        sign, the spec's default)."""
+        if sign_sharpness is None:
+            sign_sharpness = (np.inf if rig.coulomb_sharpness is None
+                              else float(rig.coulomb_sharpness))
         if home is None:
             home = default_home(rig.anchors_m)
         return cls(

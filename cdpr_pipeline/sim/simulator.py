@@ -91,12 +91,37 @@ class TickGrid:
         return np.arange(self.n_samples) * self.dt * self.decimation
 
 
-def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5) -> int:
-    """RK4 sub-steps per control tick so that ``dt * fastest_rate <= accuracy``."""
+#: RK4 sub-steps per control tick that the Coulomb term alone may demand: a hard sign is
+#: integrated as ``tanh(k w)`` with the largest ``k`` this allows (see
+#: :func:`integration_plant`)
+HARD_SIGN_SUBSTEPS = 16
+
+
+def _coulomb_rate(plant: Plant, sharpness: float) -> float:
     # the smooth Coulomb sign acts like a damper of slope k F_c on the winch inertia plus
     # the platform mass seen through the drum
-    rates = [plant.sign_sharpness * plant.winch.coulomb.max()
-             / (plant.drum_radius.min() ** 2 * plant.mass + plant.winch.inertia.min())]
+    return float(sharpness * plant.winch.coulomb.max()
+                 / (plant.drum_radius.min() ** 2 * plant.mass + plant.winch.inertia.min()))
+
+
+def integration_plant(plant: Plant, control_dt: float, accuracy: float = 0.5) -> Plant:
+    """The plant the integrator steps: ``plant`` itself, except that a hard Coulomb sign
+    (infinite sharpness: what rig.yaml states by default) becomes ``tanh(k w)`` with the
+    sharpest ``k`` that :data:`HARD_SIGN_SUBSTEPS` RK4 sub-steps resolve. That is the
+    integrator's own numerics (a transition band of a few mrad/s for usual rigs), not a
+    change of the model the data is compared against: inverse dynamics keep the hard
+    sign."""
+    if np.isfinite(plant.sign_sharpness) or not plant.winch.coulomb.max() > 0:
+        return plant
+    per_unit = _coulomb_rate(plant, 1.0)
+    sharpness = HARD_SIGN_SUBSTEPS * accuracy / (control_dt * per_unit)
+    return plant.replace(sign_sharpness=float(sharpness))
+
+
+def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5) -> int:
+    """RK4 sub-steps per control tick so that ``dt * fastest_rate <= accuracy``."""
+    plant = integration_plant(plant, control_dt, accuracy)
+    rates = [_coulomb_rate(plant, plant.sign_sharpness)]
     if plant.elastic:
         shortest = 0.5 * plant.home_lengths.min()
         k = plant.cable_stiffness.max() / shortest
@@ -203,14 +228,15 @@ class BatchSimulator:
         show_progress: bool = False,
     ) -> SimulationResult:
         grid = self.tick_grid(desired)
-        substeps = self.substeps or auto_substeps(self.plant, grid.dt)
+        plant = integration_plant(self.plant, grid.dt)
+        substeps = self.substeps or auto_substeps(plant, grid.dt)
         dt = grid.dt / substeps
         law = ComputedTorquePD(self.nominal, self.controller)
         xd, vd, ad = grid.desired
         decimation, n_samples = grid.decimation, grid.n_samples
-        batch, n = len(desired), self.plant.n
-        state = self.plant.initial_state(xd[:, 0])
-        if self.plant.lagged:          # the drive starts holding the platform at rest
+        batch, n = len(desired), plant.n
+        state = plant.initial_state(xd[:, 0])
+        if plant.lagged:          # the drive starts holding the platform at rest
             state[:, -n:] = law(xd[:, 0], np.zeros((batch, 3)), xd[:, 0], vd[:, 0], ad[:, 0])
 
         measured = {"position": np.empty((batch, n_samples, 3)),
@@ -224,7 +250,7 @@ class BatchSimulator:
         ticks = progress(range(n_ticks), total=n_ticks, desc="simulate", enabled=show_progress)
         estimate = xd[:, 0].copy()
         for k in ticks:
-            s = self.plant.split_state(state)
+            s = plant.split_state(state)
             pos_meas = self.sensors.position(rng, s["p"])
             estimate, vel_est = self.estimate(state, pos_meas, estimate)
             u = law(estimate, vel_est, xd[:, k], vd[:, k], ad[:, k])
@@ -232,8 +258,8 @@ class BatchSimulator:
             if grid.recorded(k):
                 j = (k - grid.settle_ticks) // decimation
                 # the derivative serves both the record and the first RK4 stage
-                deriv = self.plant.derivative(state, u)
-                internals = self.plant.internals(state, u, deriv)
+                deriv = plant.derivative(state, u)
+                internals = plant.internals(state, u, deriv)
                 measured["position"][:, j] = pos_meas
                 measured["lengths"][:, j] = self.sensors.encoder_lengths(internals["theta"],
                                                                          self.nominal)
@@ -247,7 +273,7 @@ class BatchSimulator:
             if k == n_ticks - 1:
                 break
             for _ in range(substeps):
-                state = rk4_step(self.plant, state, u, dt, deriv)
+                state = rk4_step(plant, state, u, dt, deriv)
                 deriv = None
             if not np.all(np.isfinite(state)):
                 raise FloatingPointError(f"simulation diverged at t = {grid.time(k):.3f} s")

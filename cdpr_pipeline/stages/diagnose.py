@@ -20,11 +20,13 @@ from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.config import CONFIG_DIR
 from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.data.split import Split
 from cdpr_pipeline.discovery.diagnosis import (
     BlackBoxSettings,
     Diagnosis,
     DiagnosisSettings,
     diagnose,
+    diagnosis_split,
 )
 from cdpr_pipeline.sim.model_file import write_model
 from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
@@ -51,6 +53,7 @@ def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
         max_lag=int(disc.max_lag),
         wavelet=WaveletSplit("db4", int(disc.wavelet_level)),
         correlation_threshold=float(disc.correlation_threshold),
+        unusable_error_pct=float(disc.unusable_error_pct),
     )
 
 
@@ -71,8 +74,13 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str) -> dict[str, Path]:
-    """diagnosis.json, report.html and extended_model.yaml in ``out_dir``."""
+def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str,
+                  split: Split | None = None) -> dict[str, Path]:
+    """diagnosis.json, report.html and extended_model.yaml in ``out_dir``.
+
+    ``split``: the diagnosis's split (:func:`diagnosis_split`); when it cut runs into
+    time blocks, ``split`` in diagnosis.json lists them (run, samples, seconds).
+    """
     from cdpr_pipeline.discovery.report import render
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -80,6 +88,11 @@ def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str) -> dict[str, P
              "model": out_dir / "extended_model.yaml", "metrics": out_dir / "metrics.json"}
     record = d.as_json(paths["model"].name)
     record["dataset"] = str(dataset_path)
+    if split is not None and split.blocks:
+        if [list(split.train), list(split.heldout)] != [list(d.train), list(d.heldout)]:
+            raise RuntimeError(f"split {split.as_dict()} is not the diagnosis's "
+                               f"({d.train}, {d.heldout})")
+        record["split"] = split.as_dict()
     paths["json"].write_text(json.dumps(_plain(record), indent=1))
     paths["metrics"].write_text(json.dumps(_plain(summary_metrics(d)), indent=1))
     paths["html"].write_text(render(d))
@@ -104,8 +117,9 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
     """Load, diagnose, write, log."""
     data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
                         min_samples=cfg.data.min_samples)
-    d = diagnose(data, settings_from_config(cfg))
-    paths = write_outputs(d, Path(cfg.out_dir), cfg.data.path)
+    settings = settings_from_config(cfg)
+    d = diagnose(data, settings)
+    paths = write_outputs(d, Path(cfg.out_dir), cfg.data.path, diagnosis_split(data, settings))
     log.info("verdict: %s", d.verdict)
     log.info("%s", d.sentence)
     logger = make_logger(cfg.tracking.experiment, run_name=f"diagnose-{Path(cfg.data.path).name}",

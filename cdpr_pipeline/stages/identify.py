@@ -1,6 +1,7 @@
 """``cdpr identify data.path=DIR method=lsm|rls|lms|ga out_dir=OUT``.
 
-Writes ``OUT/identification.json`` (method, params, std, metrics) and logs an MLflow run.
+Writes ``OUT/identification.json`` (method, params, std, metrics, fit and held-out runs,
+and the split: with its time blocks when a single run was cut) and logs an MLflow run.
 """
 
 from __future__ import annotations
@@ -54,7 +55,8 @@ def identify(cfg: DictConfig) -> Identification:
     start = time.perf_counter()
     extra = [load_dataset(p, allow_gaps=cfg.data.allow_gaps, min_samples=cfg.data.min_samples)
              for p in (cfg.extra_data or [])]
-    result = identify_dataset(data, identifier, settings, split, list(cfg.holdout),
+    holdout = list(cfg.holdout) if cfg.get("holdout") else None     # None: spec default
+    result = identify_dataset(data, identifier, settings, split, holdout,
                               list(cfg.runs) if cfg.runs else None,
                               true_winch_params(cfg.data.path), extra)
     result.metrics["time_s"] = time.perf_counter() - start

@@ -3,7 +3,8 @@
 Rebuilds ``U*`` on the held-out runs of an identification from (a) least squares on the
 full band, (b) the identified parameters, (c) those plus the network's high-frequency
 part, and scores each per winch with MSE, MAE and PPL: Table IV over all held-out runs,
-Table V on one held-out run.
+Table V on one held-out run. The runs are those of the identification's split
+(``identification.json``), time blocks of a single run included.
 """
 
 from __future__ import annotations
@@ -21,12 +22,13 @@ from omegaconf import DictConfig, OmegaConf
 from cdpr_pipeline.config import CONFIG_DIR
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.rig import WINCH_KEYS
+from cdpr_pipeline.data.split import Split
 from cdpr_pipeline.identification.identifiers import LeastSquares
 from cdpr_pipeline.identification.reconstruction import (
     HighFrequencyModel,
     reconstruction_scores,
 )
-from cdpr_pipeline.identification.regressors import dataset_regression
+from cdpr_pipeline.identification.regressors import dataset_regression, resolve_settings
 from cdpr_pipeline.tables import to_markdown
 from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
 
@@ -70,10 +72,15 @@ def reconstruct(cfg: DictConfig) -> dict:
                          "identify with holdout=[...]")
     data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
                         min_samples=cfg.data.min_samples)
-    settings = instantiate(cfg.regression)
+    # "auto" filter and decimation chosen as identify_dataset chose them: from the dataset
+    settings = resolve_settings(instantiate(cfg.regression), data.trajectories, data.rig)
     theta = np.array([ident["params"][k] for k in WINCH_KEYS], float).T
-    fit_reg = dataset_regression(data.select(ident["fit_runs"]), data.rig, settings)
-    held_reg = dataset_regression(data.select(ident["heldout_runs"]), data.rig, settings)
+    # the identification's own split: whole runs, or time blocks of a single run
+    split = Split.from_dict(ident.get("split") or {"train": ident["fit_runs"],
+                                                   "heldout": ident["heldout_runs"]})
+    fit_runs, held_runs = split.trajectories("train", data), split.trajectories("heldout", data)
+    fit_reg = dataset_regression(fit_runs, data.rig, settings)
+    held_reg = dataset_regression(held_runs, data.rig, settings)
     lsm = LeastSquares().fit(fit_reg).theta
     rate = float(data.rig.sample_rate_hz) / max(1, int(settings.decimate))
     hf = HighFrequencyModel(instantiate(cfg.residual_model.net), sample_rate_hz=rate,
@@ -87,7 +94,7 @@ def reconstruct(cfg: DictConfig) -> dict:
                         strict=True))
 
     table4 = reconstruction_scores(held_reg.target, predictions(held_reg))
-    one = dataset_regression(data.select(ident["heldout_runs"][:1]), data.rig, settings)
+    one = dataset_regression(held_runs[:1], data.rig, settings)
     preds_one = predictions(one)
     table5 = reconstruction_scores(one.target, preds_one)
 

@@ -4,6 +4,8 @@ Reads what the earlier stages wrote (the dataset's description and truth, the mo
 comparison, every identification, the reconstruction, the diagnosis) and writes
 ``report.html`` (tables and figures, self-contained), ``report.md`` and ``summary.json``
 (flat figures for ``dvc metrics show`` and MLflow). A missing input is named in the error.
+It also lists every stage of the pipeline (``stages``) as ran or skipped, with the reason;
+the section of a skipped stage says so instead of its table.
 """
 
 from __future__ import annotations
@@ -12,16 +14,18 @@ import base64
 import html
 import json
 import logging
+from collections.abc import Mapping
 from pathlib import Path
 
 import hydra
 import numpy as np
 import pandas as pd
 import yaml
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.config import CONFIG_DIR
 from cdpr_pipeline.data.rig import WINCH_KEYS
+from cdpr_pipeline.pipeline.skip import skipped_reason
 from cdpr_pipeline.tables import to_markdown
 from cdpr_pipeline.tracking import finished_or_failed, log_metrics, make_logger
 
@@ -37,11 +41,39 @@ def _read_json(path: Path, what: str) -> dict:
         raise ValueError(f"{path}: not valid JSON ({what}): {err}") from err
 
 
+def stage_table(stages: Mapping[str, object]) -> pd.DataFrame:
+    """Which stages ran and which were skipped, and why.
+
+    Parameters
+    ----------
+    stages : Mapping
+        Stage -> one of its outputs; a ``foreach`` stage -> item -> output.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Indexed by stage (``NAME`` or ``NAME.ITEM``): ``status`` (``ran``, ``skipped``,
+        or ``not run`` when the output is missing) and ``reason``.
+    """
+    rows = []
+    for name, value in stages.items():
+        paths = value.items() if isinstance(value, Mapping) else [(None, value)]
+        for item, path in paths:
+            reason = skipped_reason(path)
+            status = ("skipped" if reason is not None
+                      else "ran" if Path(path).exists() else "not run")
+            rows.append({"stage": f"{name}.{item}" if item else name, "status": status,
+                         "reason": reason or ""})
+    return pd.DataFrame(rows, columns=["stage", "status", "reason"]).set_index("stage")
+
+
 def identification_table(identify_dirs: dict[str, str]) -> pd.DataFrame:
     """Table III: identified winch parameters per method, with the error against the
-    simulator's truth where the dataset has one."""
+    simulator's truth where the dataset has one. Skipped methods are left out."""
     rows = []
     for method, d in identify_dirs.items():
+        if skipped_reason(Path(d) / "identification.json") is not None:
+            continue
         ident = _read_json(Path(d) / "identification.json", f"{method} identification")
         params, metrics = ident["params"], ident["metrics"]
         for i in range(len(params[WINCH_KEYS[0]])):
@@ -53,6 +85,8 @@ def identification_table(identify_dirs: dict[str, str]) -> pd.DataFrame:
             if "heldout_relative_error_pct" in metrics:
                 row["held-out rel. error (%)"] = metrics["heldout_relative_error_pct"][i]
             rows.append(row)
+    if not rows:
+        return pd.DataFrame(index=pd.MultiIndex.from_tuples([], names=["method", "winch"]))
     return pd.DataFrame(rows).set_index(["method", "winch"])
 
 
@@ -67,64 +101,103 @@ def _section(title: str, body: str) -> str:
     return f"<h2>{html.escape(title)}</h2>\n{body}\n"
 
 
+def _skipped_note(reason: str) -> str:
+    return f"*Skipped: {reason}*\n"
+
+
+def _output(path: Path, what: str) -> tuple[dict | None, str | None]:
+    """An earlier stage's JSON output, or ``None`` and why that stage was skipped."""
+    reason = skipped_reason(path)
+    return (None, reason) if reason is not None else (_read_json(path, what), None)
+
+
 def build_report(cfg: DictConfig) -> dict:
     """Gather the pipeline's results into ``cfg.out_dir``; returns ``summary.json``."""
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    stages = stage_table(OmegaConf.to_container(cfg.stages, resolve=True)
+                         if cfg.get("stages") else {})
     dataset_dir = Path(cfg.dataset)
-    dataset = _read_json(dataset_dir / "dataset.json", "dataset description")
+    dataset, dataset_skipped = _output(dataset_dir / "dataset.json", "dataset description")
     truth_path = dataset_dir / "lab.truth.yaml"
     hidden = []
     if truth_path.exists():
         hidden = [e["description"] for e in (yaml.safe_load(truth_path.read_text())
                                              .get("effects") or [])]
     compare_dir = Path(cfg.compare)
-    comparison = _read_json(compare_dir / "metrics.json", "model comparison")
+    comparison, compare_skipped = _output(compare_dir / "metrics.json", "model comparison")
     summary_md = (compare_dir / "summary.md").read_text() \
-        if (compare_dir / "summary.md").exists() else ""
+        if comparison is not None and (compare_dir / "summary.md").exists() else ""
     table3 = identification_table(dict(cfg.identify))
-    reconstruction = _read_json(Path(cfg.reconstruct) / "reconstruction.json", "reconstruction")
-    diagnosis = _read_json(Path(cfg.diagnose) / "diagnosis.json", "diagnosis")
+    identify_skipped = "; ".join(
+        f"{method}: {skipped_reason(Path(d) / 'identification.json')}"
+        for method, d in dict(cfg.identify).items()
+        if skipped_reason(Path(d) / "identification.json") is not None)
+    reconstruction, reconstruct_skipped = _output(
+        Path(cfg.reconstruct) / "reconstruction.json", "reconstruction")
+    diagnosis, diagnose_skipped = _output(Path(cfg.diagnose) / "diagnosis.json", "diagnosis")
 
-    best_model = min(comparison, key=lambda m: comparison[m]["onestep_rmse"]
-                     if comparison[m]["onestep_rmse"] is not None else np.inf)
-    summary: dict[str, float | str] = {
-        "dataset_runs": dataset["runs"],
-        "best_onestep_model": best_model,
-        "best_onestep_rmse": comparison[best_model]["onestep_rmse"],
-        "diagnosis_verdict": diagnosis["verdict"],
-        "diagnosis_gain_relative": diagnosis["gain"]["relative"],
-    }
+    summary: dict[str, float | str] = {}
+    if dataset is not None:
+        summary["dataset_runs"] = dataset["runs"]
+    if comparison:
+        best_model = min(comparison, key=lambda m: comparison[m]["onestep_rmse"]
+                         if comparison[m]["onestep_rmse"] is not None else np.inf)
+        summary["best_onestep_model"] = best_model
+        summary["best_onestep_rmse"] = comparison[best_model]["onestep_rmse"]
+    if diagnosis is not None:
+        summary["diagnosis_verdict"] = diagnosis["verdict"]
+        summary["diagnosis_gain_relative"] = diagnosis["gain"]["relative"]
+    summary["stages_ran"] = int((stages["status"] == "ran").sum())
+    summary["stages_skipped"] = int((stages["status"] == "skipped").sum())
     if "max error vs truth (%)" in table3:
         for method, err in table3["max error vs truth (%)"].groupby(level=0).max().items():
             summary[f"identify_{method}_max_truth_error_pct"] = float(err)
 
+    table4_md = Path(cfg.reconstruct) / "table4.md"
+    ran = summary["stages_ran"]
     md = ["# Pipeline report\n",
-          f"**Dataset**: {dataset['runs']} runs, {dataset['samples']} samples "
-          f"({dataset['source']}{', hidden: ' + '; '.join(hidden) if hidden else ''}).\n",
-          f"**Diagnosis**: {diagnosis['summary']}\n",
-          "## Trajectory predictors (test runs)\n", summary_md,
-          "## Identification (Table III)\n", to_markdown(table3),
+          (f"**Dataset**: {dataset['runs']} runs, {dataset['samples']} samples "
+           f"({dataset['source']}{', hidden: ' + '; '.join(hidden) if hidden else ''}).\n"
+           if dataset is not None else f"**Dataset**: skipped: {dataset_skipped}\n"),
+          (f"**Diagnosis**: {diagnosis['summary']}\n" if diagnosis is not None
+           else f"**Diagnosis**: skipped: {diagnose_skipped}\n"),
+          f"**Stages**: {ran} ran, {summary['stages_skipped']} skipped (see the end).\n",
+          "## Trajectory predictors (test runs)\n",
+          summary_md if compare_skipped is None else _skipped_note(compare_skipped),
+          "## Identification (Table III)\n",
+          (to_markdown(table3) if not table3.empty else "")
+          + ("\n" + _skipped_note(identify_skipped) if identify_skipped else ""),
           "## Reconstruction (Table IV)\n",
-          (Path(cfg.reconstruct) / "table4.md").read_text()
-          if (Path(cfg.reconstruct) / "table4.md").exists() else ""]
+          (_skipped_note(reconstruct_skipped) if reconstruct_skipped is not None
+           else table4_md.read_text() if table4_md.exists() else ""),
+          "## Stages\n", to_markdown(stages) if not stages.empty else ""]
     (out / "report.md").write_text("\n".join(md))
+
+    def skipped_html(reason: str) -> str:
+        return f"<p><i>Skipped: {html.escape(reason)}</i></p>"
 
     diag_link = Path(cfg.diagnose) / "report.html"
     body = [
         "<h1>Pipeline report</h1>",
-        f"<p><b>Dataset</b>: {dataset['runs']} runs, {dataset['samples']} samples, "
-        f"{html.escape(dataset['source'])}.</p>",
+        (f"<p><b>Dataset</b>: {dataset['runs']} runs, {dataset['samples']} samples, "
+         f"{html.escape(dataset['source'])}.</p>" if dataset is not None
+         else f"<p><b>Dataset</b>: skipped: {html.escape(dataset_skipped)}</p>"),
         (f"<p><b>Hidden in the data</b> (the simulator's truth): "
          f"{html.escape('; '.join(hidden))}</p>" if hidden else ""),
-        f"<p><b>Diagnosis</b>: {html.escape(diagnosis['summary'])} "
-        f"(full diagnosis: <code>{html.escape(str(diag_link))}</code>)</p>",
+        (f"<p><b>Diagnosis</b>: {html.escape(diagnosis['summary'])} "
+         f"(full diagnosis: <code>{html.escape(str(diag_link))}</code>)</p>"
+         if diagnosis is not None
+         else f"<p><b>Diagnosis</b>: skipped: {html.escape(diagnose_skipped)}</p>"),
         _section("Trajectory predictors (Tables I-II, test runs)",
                  pd.DataFrame(comparison).T.to_html(float_format=lambda v: f"{v:.3g}")
-                 + _image(compare_dir / "comparison.png")),
+                 + _image(compare_dir / "comparison.png")
+                 if comparison is not None else skipped_html(compare_skipped)),
         _section("Identification (Table III)",
-                 table3.to_html(float_format=lambda v: f"{v:.5g}")),
+                 (table3.to_html(float_format=lambda v: f"{v:.5g}") if not table3.empty
+                  else "") + (skipped_html(identify_skipped) if identify_skipped else "")),
         _section("Reconstruction (Tables IV-V)",
+                 skipped_html(reconstruct_skipped) if reconstruction is None else
                  "<p>U* mean squared error on the held-out runs, per winch (N² m²)</p>"
                  + pd.DataFrame({m: v["mse"] for m, v in reconstruction["table4"].items()},
                                 index=[f"winch {i + 1}" for i in range(
@@ -132,6 +205,8 @@ def build_report(cfg: DictConfig) -> dict:
                                 ).T.to_html(float_format=lambda v: f"{v:.4g}")
                  + _image(Path(cfg.reconstruct) / "reconstruction.png")
                  if "table4" in reconstruction else ""),
+        _section("Stages", f"<p>{ran} ran, {summary['stages_skipped']} skipped.</p>"
+                 + stages.to_html()),
     ]
     (out / "report.html").write_text(
         "<!doctype html><html><head><meta charset='utf-8'><title>cdpr pipeline report</title>"
@@ -141,7 +216,8 @@ def build_report(cfg: DictConfig) -> dict:
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
 
     logger = make_logger(cfg.tracking.experiment, run_name="report", uri=cfg.tracking.uri,
-                         tags={"cdpr_task": "report", "verdict": diagnosis["verdict"]})
+                         tags={"cdpr_task": "report",
+                               "verdict": diagnosis["verdict"] if diagnosis else "skipped"})
     with finished_or_failed(logger):
         log_metrics(logger.experiment, logger.run_id,
                     {k: v for k, v in summary.items() if isinstance(v, (int, float))})

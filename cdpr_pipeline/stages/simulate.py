@@ -83,7 +83,7 @@ def simulate(cfg: DictConfig) -> LabRun:
         sensors=instantiate(cfg.sensors),
         seed=int(cfg.seed),
         home_m=None if cfg.rig.get("home_m") is None else list(cfg.rig.home_m),
-        sign_sharpness=float(sim.sign_sharpness),
+        sign_sharpness=None if sim.sign_sharpness is None else float(sim.sign_sharpness),
         substeps=sim.substeps,
         batch_size=int(sim.batch_size),
         feedback=str(sim.feedback),

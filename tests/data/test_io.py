@@ -294,3 +294,20 @@ def test_writing_a_large_dataset_is_fast(tmp_path: Path) -> None:
     write_dataset(tmp_path / "ds", rig, trajs)
     elapsed = time.perf_counter() - start
     assert elapsed < 20.0, f"writing 250 x 3000 rows took {elapsed:.1f} s"
+
+
+@pytest.mark.parametrize("law, sharpness", [(None, None), ("sign", None),
+                                            ({"tanh": 35.0}, 35.0)])
+def test_coulomb_law_is_read_and_written_back(cdpr_dir, tmp_path, law, sharpness):
+    """The spec's stated Coulomb law: hard sign when absent, ``{tanh: k}`` kept through a
+    write and a read."""
+    rig_file = cdpr_dir / "rig.yaml"
+    raw = yaml.safe_load(rig_file.read_text())
+    raw["winch_nominal"].pop("coulomb_law", None)
+    if law is not None:
+        raw["winch_nominal"]["coulomb_law"] = law
+    rig_file.write_text(yaml.safe_dump(raw))
+    data = load_dataset(cdpr_dir)
+    assert data.rig.coulomb_sharpness == sharpness
+    copy = write_dataset(tmp_path / "copy", data.rig, data.trajectories)
+    assert load_dataset(copy).rig.coulomb_sharpness == sharpness

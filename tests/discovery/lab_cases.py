@@ -36,7 +36,7 @@ def fast_settings(**changes):
     from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings
     from cdpr_pipeline.discovery.freeform import FreeFormSearch
 
-    base = {"freeform": FreeFormSearch(time_budget_s=3.0), "closed_loop": False}
+    base = {"freeform": FreeFormSearch(), "closed_loop": False}
     return DiagnosisSettings(**{**base, **changes})
 
 

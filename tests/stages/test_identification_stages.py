@@ -109,7 +109,7 @@ def test_reconstruct_tables_four_and_five(small_lab, tracking, tmp_path):
     # extra_data: more runs of the same rig fitted whole (here the same runs again)
     identify(compose_config("identify", [f"data.path={small_lab}", f"out_dir={tmp_path}",
                                          f"tracking.uri={tracking}", "holdout=[spiral]",
-                                         f"extra_data=[{small_lab}]"]))
+                                         "wavelet=none", f"extra_data=[{small_lab}]"]))
     ident = json.loads((tmp_path / "identification.json").read_text())
     assert ident["extra_runs"] == {str(small_lab): load_dataset(small_lab).names}
     assert "012_spiral" not in ident["fit_runs"]

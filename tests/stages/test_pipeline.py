@@ -1,6 +1,8 @@
-"""The staged pipeline's machinery: params.yaml from conf/, dvc.yaml's shape, and the stage
-runner's promises (outputs swapped in whole, earlier outputs kept on failure with the
-input named, one writer per output directory, resume, a nested MLflow run per stage)."""
+"""The staged pipeline's machinery: params.yaml from conf/, dvc.yaml's shape and its
+agreement with the inputs and outputs conf/pipeline.yaml declares, and the stage runner's
+promises on real stages (outputs swapped in whole, earlier outputs kept on failure with
+the input named, resume, a nested MLflow run per stage). The runner's pieces are tested
+one by one in tests/pipeline/."""
 
 from __future__ import annotations
 
@@ -14,20 +16,11 @@ import yaml
 from mlflow.tracking import MlflowClient
 
 from cdpr_pipeline.config import PROJECT_ROOT, compose_config
+from cdpr_pipeline.pipeline.inputs import input_paths
+from cdpr_pipeline.pipeline.params import PARAMS_FILE, pipeline_params, write_params
+from cdpr_pipeline.pipeline.stage_runner import StageFailed, run_stage
 from cdpr_pipeline.resources import foreign_rig_path
 from cdpr_pipeline.stages.dataset import build_dataset
-from cdpr_pipeline.stages.pipeline import (
-    PARAMS_FILE,
-    StageFailed,
-    hydra_literal,
-    output_lock,
-    partial_dir,
-    pipeline_params,
-    rebase_paths,
-    run_stage,
-    stage_overrides,
-    write_params,
-)
 from cdpr_pipeline.tracking import PARENT_RUN_ENV
 
 TINY_DATASET = ["trajectory=tiny", "trajectory.duration_s=1.0", "quiet=true"]
@@ -86,6 +79,66 @@ def test_every_dvc_stage_runs_its_own_section_and_writes_fixed_paths(default_par
     assert list(default_params["report"]["config"]["identify"]) == dvc["identify"]["foreach"]
 
 
+def _dvc_stages(params):
+    """``(key, {deps, outputs}, section)`` per DVC stage, ``${...}`` expanded."""
+    dvc = yaml.safe_load((PROJECT_ROOT / "dvc.yaml").read_text())["stages"]
+    for name, stage in dvc.items():
+        body = stage.get("do", stage)
+        for item in stage.get("foreach", [None]):
+            def expand(s, item=item):
+                s = s.replace("${item}", item) if item else s
+                for k, v in params["pipeline"].items():
+                    s = s.replace(f"${{pipeline.{k}}}", str(v))
+                return s
+
+            paths = {"deps": [expand(d) for d in body.get("deps", [])],
+                     "outputs": [expand(next(iter(o)) if isinstance(o, dict) else o)
+                                 for kind in ("outs", "metrics", "plots")
+                                 for o in body.get(kind, [])]}
+            section = params[name][item] if item else params[name]
+            yield (f"{name}.{item}" if item else name), paths, section
+
+
+def _is_code(dep):
+    return dep.startswith("cdpr_pipeline/") and not dep.startswith("cdpr_pipeline/resources/")
+
+
+def _overlap(a, b):
+    return a == b or a.startswith(b + "/") or b.startswith(a + "/")
+
+
+def test_declared_inputs_are_the_data_deps_and_declared_outputs_the_outs(default_params):
+    """conf/pipeline.yaml's `inputs` and `outputs` and dvc.yaml cannot drift apart: every
+    declared input is (in) a data dep and every data dep is (in) a declared input; the
+    declared outputs are exactly the outs, metrics and plots."""
+    ingest = pipeline_params(compose_config("pipeline", [
+        "dataset.source=ingest", "dataset.path=/data/my_rig"]))
+    stages = [*_dvc_stages(default_params),
+              *[s for s in _dvc_stages(ingest) if s[0] == "dataset"]]
+    for key, dvc, section in stages:
+        inputs = input_paths(section["config"], section["inputs"])
+        data_deps = [d for d in dvc["deps"] if not _is_code(d)]
+        for label, path in inputs.items():
+            assert any(_overlap(path, d) for d in data_deps), f"{key}: input {label}={path}"
+        for dep in data_deps:
+            assert any(_overlap(p, dep) for p in inputs.values()), f"{key}: dep {dep}"
+        out_dir = section["config"]["out_dir"]
+        declared = {out_dir if o in (".", "./") else f"{out_dir}/{o}".rstrip("/")
+                    for o in section["outputs"]}
+        assert declared == set(dvc["outputs"]), key
+
+
+def test_the_report_lists_every_other_stage_by_one_of_its_outputs(default_params):
+    listed = {}
+    for name, value in default_params["report"]["config"]["stages"].items():
+        pairs = value.items() if isinstance(value, dict) else [(None, value)]
+        listed |= {f"{name}.{item}" if item else name: path for item, path in pairs}
+    outputs = {key: dvc["outputs"] for key, dvc, _ in _dvc_stages(default_params)}
+    assert set(listed) == set(outputs) - {"report"}
+    for key, path in listed.items():
+        assert path in outputs[key], key           # so the report's deps cover it
+
+
 def test_one_param_changes_only_the_sections_that_read_it(default_params):
     changed = pipeline_params(compose_config("pipeline", ["virtual_model=arx"]))
     differ = {k for k in default_params if default_params[k] != changed[k]}
@@ -98,53 +151,13 @@ def test_one_param_changes_only_the_sections_that_read_it(default_params):
     assert paper["identify"] == default_params["identify"]
 
 
-def test_overrides_are_hydra_literals():
-    assert hydra_literal(None) == "null"
-    assert hydra_literal(True) == "true"
-    assert hydra_literal(["a", 2]) == "[a,2]"
-    assert hydra_literal("a b") == "'a b'"
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    parser = OverridesParser.create()
-    for text in ("a b", "C:\\x", "données/x", "x#y", "it's", "end\\", "/tmp/a-b/c.d", "null"):
-        assert parser.parse_override(f"k={hydra_literal(text)}").value() == text, text
-    spec = {"values": {"seed": 3, "path": None}, "overrides": ["model={item}"]}
-    profile = {"overrides": {"train": ["trainer.max_epochs=1"]}}
-    assert stage_overrides(spec, profile, "train", "tcn") == [
-        "seed=3", "path=null", "model=tcn", "trainer.max_epochs=1"]
-
-
-def test_rebase_moves_only_paths_under_the_output():
-    tree = {"out_dir": "results/x", "ckpt": {"dirpath": "results/x/checkpoints"},
-            "other": "results/xy", "data": ["data/lab"]}
-    assert rebase_paths(tree, "results/x", "results/x.partial") == {
-        "out_dir": "results/x.partial", "ckpt": {"dirpath": "results/x.partial/checkpoints"},
-        "other": "results/xy", "data": ["data/lab"]}
-
-
-def test_partial_output_is_kept_for_the_same_params_only(tmp_path):
-    out = tmp_path / "out"
-    p = partial_dir(out, "aaa")
-    (p / "checkpoint").write_text("epoch 3")
-    assert (partial_dir(out, "aaa") / "checkpoint").read_text() == "epoch 3"   # resume
-    assert not (partial_dir(out, "bbb") / "checkpoint").exists()             # new params
-
-
-def test_a_second_writer_of_an_output_directory_is_refused(tmp_path):
-    with output_lock(tmp_path / "out"):
-        with pytest.raises(RuntimeError, match="being written by pid"):
-            with output_lock(tmp_path / "out"):
-                pass
-    with output_lock(tmp_path / "out"):   # released
-        pass
-
-
-def _section_file(tmp_path, name, config, function="cdpr_pipeline.stages.dataset.build_dataset"):
+def _section_file(tmp_path, name, config, function="cdpr_pipeline.stages.dataset.build_dataset",
+                  inputs=("path",)):
     from omegaconf import OmegaConf
 
     path = tmp_path / "params.yaml"
     params = yaml.safe_load(path.read_text()) if path.exists() else {}
-    params[name] = {"function": function,
+    params[name] = {"function": function, "inputs": list(inputs),
                     "config": OmegaConf.to_container(config, resolve=True)}
     write_params(params, path)
     return path
@@ -233,7 +246,8 @@ def test_an_interrupted_training_stage_resumes_from_its_checkpoint(
         "data.train_windows=256", "data.val_windows=128", "data.batch_size=64",
         "evaluation.max_train_runs=2", "evaluation.whole_run=false", "quiet=true",
         "data.test_fraction=0.34", f"out_dir={tmp_path / 'tcn'}"])
-    params = _section_file(tmp_path, "train", config, "cdpr_pipeline.stages.train.train")
+    params = _section_file(tmp_path, "train", config, "cdpr_pipeline.stages.train.train",
+                           inputs=["data.path"])
     real_evaluate = train_module.evaluate
 
     def interrupted(*args, **kwargs):

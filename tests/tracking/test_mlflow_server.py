@@ -17,7 +17,8 @@ import yaml
 from mlflow.tracking import MlflowClient
 
 from cdpr_pipeline.config import compose_config
-from cdpr_pipeline.stages.pipeline import run_stage, write_params
+from cdpr_pipeline.pipeline.params import write_params
+from cdpr_pipeline.pipeline.stage_runner import run_stage
 from cdpr_pipeline.tracking import PARENT_RUN_ENV
 
 

@@ -1,0 +1,70 @@
+"""The pipeline's ``cdpr`` subcommands: argument parsing, logging and exit codes around
+:mod:`~cdpr_pipeline.pipeline.params`, :mod:`~cdpr_pipeline.pipeline.stage_runner` and
+:mod:`~cdpr_pipeline.pipeline.repro`.
+
+- ``cdpr params [overrides]``: write ``params.yaml`` from ``conf/``.
+- ``cdpr stage NAME[.ITEM] [--params FILE]``: run one section (what ``dvc.yaml`` calls).
+- ``cdpr repro [overrides]``: ``params.yaml``, then ``dvc repro`` under one MLflow run.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from collections.abc import Sequence
+
+import hydra
+from omegaconf import DictConfig
+
+from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.pipeline.params import PARAMS_FILE, pipeline_params, write_params
+from cdpr_pipeline.pipeline.repro import repro
+from cdpr_pipeline.pipeline.stage_runner import run_stage
+
+log = logging.getLogger(__name__)
+
+
+@hydra.main(config_path=CONFIG_DIR, config_name="pipeline", version_base="1.3")
+def params_main(cfg: DictConfig) -> None:
+    """``cdpr params [overrides]``."""
+    changed = write_params(pipeline_params(cfg))
+    log.info("%s %s", PARAMS_FILE, "written" if changed else "unchanged")
+
+
+def stage_main(argv: Sequence[str] | None = None) -> None:
+    """``cdpr stage NAME[.ITEM] [--params FILE]``.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The arguments (default: ``sys.argv[1:]``).
+
+    Raises
+    ------
+    SystemExit
+        With status 1 if the stage failed or is unknown (the error is logged).
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    if not args or args[0] in ("-h", "--help"):
+        sys.stdout.write("usage: cdpr stage NAME[.ITEM] [--params params.yaml]\n"
+                         "runs one section of params.yaml (what dvc.yaml's stages call)\n")
+        return
+    params_file = PARAMS_FILE
+    if "--params" in args:
+        i = args.index("--params")
+        params_file = args[i + 1]
+        del args[i:i + 2]
+    logging.basicConfig(level=logging.INFO, format="[%(asctime)s][%(name)s] %(message)s")
+    try:
+        run_stage(args[0], params_file)
+    except (KeyError, FileNotFoundError, RuntimeError) as err:   # StageFailed included
+        log.error("%s", err.args[0] if isinstance(err, KeyError) else err)
+        raise SystemExit(1) from None
+
+
+@hydra.main(config_path=CONFIG_DIR, config_name="pipeline", version_base="1.3")
+def repro_main(cfg: DictConfig) -> None:
+    """``cdpr repro [overrides]``."""
+    rc = repro(cfg)
+    if rc:
+        raise SystemExit(rc)

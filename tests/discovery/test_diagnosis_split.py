@@ -1,0 +1,50 @@
+"""The diagnosis's train / held-out split: whole runs by the spec's default, the last
+block of the run when there is only one (with the blocks in diagnosis.json)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from lab_cases import fast_settings
+
+from cdpr_pipeline.data.io import Dataset
+from cdpr_pipeline.discovery.diagnosis import diagnose, diagnosis_split, split_runs
+from cdpr_pipeline.stages.diagnose import write_outputs
+
+
+def test_whole_runs_by_default_and_by_name(quiet_lab):
+    names = quiet_lab.names
+    spirals = [n for n in names if n.endswith("_spiral")]
+    train, held = split_runs(quiet_lab.trajectories)
+    assert held == spirals and train == [n for n in names if n not in spirals]
+    split = diagnosis_split(quiet_lab, fast_settings())
+    assert not split.blocks and list(split.heldout) == held
+    assert split.as_dict() == {"train": train, "heldout": held}
+    train, held = split_runs(quiet_lab.trajectories, [names[0]])
+    assert held == [names[0]] and len(train) == len(names) - 1
+    with pytest.raises(ValueError, match="no run or family named"):
+        split_runs(quiet_lab.trajectories, ["nope"])
+
+
+def test_a_single_run_is_diagnosed_on_its_last_block(quiet_lab, tmp_path):
+    one = Dataset("one_run", quiet_lab.rig, quiet_lab.trajectories[:1])
+    run = one[0]
+    settings = fast_settings(closed_loop=True)
+    split = diagnosis_split(one, settings)
+    (train,), (held,) = split["train"], split["heldout"]
+    assert split.blocks and held.run == train.run == run.name
+    # 25 % of 8 s is 2 s; the held-out block gets 3 s, at the end of the run
+    assert held.stop == run.n_samples and held.start == train.stop
+    assert held.t_start == pytest.approx(run.t[-1] - 3.0, abs=0.01)
+
+    d = diagnose(one, settings)
+    assert d.train == list(split.train) and d.heldout == list(split.heldout)
+    assert d.heldout[0].startswith(f"{run.name}@")
+    # a block inside a run cannot be re-simulated from rest: skipped with the reason
+    assert not d.closed_loop["available"] and "time blocks" in d.closed_loop["reason"]
+    write_outputs(d, tmp_path, "one_run", split)
+    record = json.loads((tmp_path / "diagnosis.json").read_text())
+    assert record["split"]["heldout"] == d.heldout
+    (block,) = record["split"]["blocks"]["heldout"]
+    assert block["run"] == run.name and block["stop"] == run.n_samples

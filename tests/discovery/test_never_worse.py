@@ -1,0 +1,61 @@
+"""Never worse (spec/diagnosis.md): no cause is reported, nor put in the extended model,
+unless the held-out gain's 95 % interval lies above zero; a grossly wrong stated model is
+re-identified first and the report says it was unusable."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cdpr_pipeline.discovery import diagnosis as diagnosis_module
+from cdpr_pipeline.discovery.diagnosis import diagnose
+from cdpr_pipeline.discovery.selection import Judgement, Selection
+from cdpr_pipeline.sim.effects import PayloadMassError
+
+from .lab_cases import draw_seed, fast_settings, lab_dataset, rng_for
+
+
+def test_a_cause_that_makes_held_out_runs_worse_is_withdrawn(paper_rig, monkeypatch):
+    """Whatever the selection proposes, a cause whose held-out gain is not above zero with
+    95 % confidence is withdrawn: verdict none, an extended model without it."""
+    seed = draw_seed()
+    data = lab_dataset(paper_rig, [], seed, duration_s=6.0)
+    wrong = float(rng_for(seed).uniform(0.2, 0.5))       # a heavier platform than true
+    harmful = Judgement("payload_mass_error", "payload_mass_error",
+                        [PayloadMassError(wrong)], 1, {}, {}, 100.0, 1e-9, 90.0, "torque",
+                        0.5, (0.4, 0.6), ["u1"], passed=True)
+
+    def fake_select(*args, **kwargs):
+        return Selection([harmful], [[harmful]], list(harmful.effects))
+
+    monkeypatch.setattr(diagnosis_module, "select_causes", fake_select)
+    d = diagnose(data, fast_settings())
+    assert d.verdict == "none", seed
+    assert d.effects == [] and d.causes == []
+    assert d.gain["withdrawn"] == ["payload_mass_error"]
+    assert "withdrawn" in d.sentence
+
+
+def test_an_unusable_stated_model_is_re_identified_first(paper_rig):
+    """The rig.yaml of a lab without hidden effects states winch friction many times too
+    large (a wrong data sheet): the stated model's torque error is over 100 %; the
+    diagnosis re-identifies every winch first, says so, and finds the true parameters."""
+    seed = draw_seed()
+    rng = rng_for(seed)
+    data = lab_dataset(paper_rig, [], seed, duration_s=6.0)
+    w = paper_rig.winch_nominal
+    stated = w.replace(viscous=w.viscous * rng.uniform(15, 30, w.n),
+                       coulomb=w.coulomb * rng.uniform(4, 8, w.n))
+    data.rig = paper_rig.replace(winch_nominal=stated)
+    d = diagnose(data, fast_settings())
+    assert d.nominal_metrics["train"]["relative_error_pct"] > 100, seed
+    record = d.as_json()
+    assert record["nominal"]["unusable"]["relative_error_pct"] > 100
+    assert record["causes"][0]["effect"] == "winch_parameter_error", seed
+    assert "unusable" in d.sentence
+    found = record["nominal"]["unusable"]["reidentified"]
+    for key in ("inertia", "viscous", "coulomb"):
+        np.testing.assert_allclose(found[key], getattr(w, key), rtol=0.05,
+                                   err_msg=f"{key}, seed {seed}")
+    assert d.extended_metrics["heldout"]["relative_error_pct"] == pytest.approx(
+        0, abs=0.1 * d.nominal_metrics["heldout"]["relative_error_pct"])

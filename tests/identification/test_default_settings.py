@@ -1,0 +1,95 @@
+"""Settings chosen from the data (``regression: auto``): the filter, decimation, trim,
+Coulomb law and torque hold, and that with nothing but ``data.path`` the published EMPS
+identification comes out."""
+
+from __future__ import annotations
+
+import json
+import logging
+
+import numpy as np
+import pytest
+
+from cdpr_pipeline.config import compose_config
+from cdpr_pipeline.data.convert import (
+    EMPS_PUBLISHED,
+    EMPS_PUBLISHED_RELATIVE_ERROR,
+    convert_emps,
+)
+from cdpr_pipeline.data.rig import AxesRig, WinchParams
+from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.identification.regressors import (
+    DerivativeFilter,
+    RegressionSettings,
+    motion_bandwidth_hz,
+    resolve_settings,
+)
+from cdpr_pipeline.resources import emps_path
+from cdpr_pipeline.stages.identify import identify
+
+AUTO = RegressionSettings(DerivativeFilter("auto", 4, "auto"), "auto", "rig", "auto")
+
+
+def _axis_run(fs: float, freqs: list[float], seconds: float = 40.0, noise: float = 0.0,
+              seed: int = 0) -> Trajectory:
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(seconds * fs)) / fs
+    q = sum(np.sin(2 * np.pi * f * t + k) / (1 + k) for k, f in enumerate(freqs))
+    q = q + noise * rng.standard_normal(t.size)
+    return Trajectory("000_test", t, q[:, None], np.zeros((t.size, 1)))
+
+
+@pytest.mark.parametrize("fs", [100.0, 1000.0, 5000.0])
+def test_motion_bandwidth_is_the_highest_moving_frequency(fs):
+    rng = np.random.default_rng(int(fs))
+    top = float(rng.uniform(0.5, 4.0))
+    # the top component carries most of the velocity power (velocity power ~ f^2 A^2)
+    run = _axis_run(fs, [0.3 * top, top], noise=1e-5, seed=int(fs))
+    assert motion_bandwidth_hz([run]) == pytest.approx(top, rel=0.1)
+
+
+def test_resolved_settings_follow_the_rate_and_the_motion(caplog):
+    run = _axis_run(1000.0, [0.5, 2.0])
+    rig = AxesRig(1000.0, ("q1",), WinchParams([1.0], [1.0], [1.0], [0.0]),
+                  coulomb_sharpness=None)
+    with caplog.at_level(logging.INFO):
+        s = resolve_settings(AUTO, [run], rig)
+    bw = motion_bandwidth_hz([run])
+    assert s.filter.cutoff_hz == pytest.approx(25 * bw)
+    assert s.decimate == int(1000.0 // s.filter.cutoff_hz)
+    assert s.filter.trim_s == pytest.approx(5 / s.filter.cutoff_hz)
+    assert s.sign_sharpness is None and s.zero_order_hold is False
+    assert "cut-off" in caplog.text and "decimation" in caplog.text
+    # a stated law and a stated controller rate are taken from the rig
+    rig2 = AxesRig(1000.0, ("q1",), rig.nominal, controller={"rate_hz": 1000.0},
+                   coulomb_sharpness=35.0)
+    s2 = resolve_settings(AUTO, [run], rig2)
+    assert s2.sign_sharpness == 35.0 and s2.zero_order_hold is True
+    # the cut-off never reaches Nyquist: a slow rate caps it at 0.4 fs
+    slow = _axis_run(20.0, [2.0])
+    s3 = resolve_settings(AUTO, [slow], AxesRig(20.0, ("q1",), rig.nominal))
+    assert s3.filter.cutoff_hz == pytest.approx(8.0) and s3.decimate == 2
+
+
+def test_unresolved_filter_refuses_to_run():
+    with pytest.raises(ValueError, match="auto"):
+        DerivativeFilter("auto").smooth(np.zeros(100), 100.0)
+
+
+def test_identify_emps_with_default_settings_reproduces_the_published_idim_ls(tmp_path):
+    """``cdpr identify data.path=<converted EMPS>`` and nothing else: the published
+    IDIM-LS parameters within 1 % and its relative errors (training 4.08 %, cross-test
+    5.98 %) within 0.2 point."""
+    data = convert_emps(emps_path(), tmp_path / "emps")
+    cfg = compose_config("identify", [f"data.path={data}", f"out_dir={tmp_path / 'id'}",
+                                      f"tracking.uri=sqlite:///{tmp_path / 'm.db'}"])
+    identify(cfg)
+    out = json.loads((tmp_path / "id" / "identification.json").read_text())
+    assert out["heldout_runs"] == ["001_pulses"]
+    for key, value in EMPS_PUBLISHED.items():
+        assert out["params"][key][0] == pytest.approx(value, rel=0.01), key
+    m = out["metrics"]
+    assert m["relative_error_pct"][0] == pytest.approx(
+        EMPS_PUBLISHED_RELATIVE_ERROR["training"], abs=0.2)
+    assert m["heldout_relative_error_pct"][0] == pytest.approx(
+        EMPS_PUBLISHED_RELATIVE_ERROR["cross_test"], abs=0.2)

@@ -1,0 +1,333 @@
+"""Hidden effects of the independent simulator: what they are, how big, and the true model.
+
+An :class:`Effect` carries one magnitude per channel (winch or axis) in absolute units;
+channels it does not touch hold the neutral value (zero). :func:`draw_effect` draws them
+within the ranges documented in the package docstring (``tests.independent_sim``), and
+:func:`true_model` folds a nominal rig and any number of effects into the true plant
+parameters (:class:`TrueModel`) that the simulators integrate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+#: every effect the generator can hide, with the rig kinds it applies to
+EFFECT_KINDS: dict[str, tuple[str, ...]] = {
+    "stribeck_friction": ("cdpr", "axes"),
+    "asymmetric_viscous_friction": ("cdpr", "axes"),
+    "winch_parameter_error": ("cdpr", "axes"),
+    "payload_mass_error": ("cdpr",),
+    "anchor_offset": ("cdpr",),
+    "drum_radius_error": ("cdpr",),
+    "cable_elasticity": ("cdpr",),
+    "actuator_lag": ("cdpr", "axes"),
+    "quadratic_drag": ("cdpr", "axes"),
+    "periodic_torque": ("cdpr", "axes"),
+}
+
+#: the two effects outside the pipeline's vocabulary (its diagnosis should say `unnamed`)
+OUTSIDE_VOCABULARY = ("quadratic_drag", "periodic_torque")
+
+#: which signal an effect shows up in first (torque ``u`` or encoder length ``l``)
+_SIGNAL = {"anchor_offset": "l", "drum_radius_error": "l", "cable_elasticity": "l"}
+
+#: per-channel parameters of the effects that act on the winch or axis torque
+_WINCH_PARAMS = ("inertia", "viscous", "coulomb", "offset")
+
+#: cables an effect does not name stay this many times stiffer than the stiffest one named,
+#: so that their stretch stays below the motion-capture noise
+RIGID_STIFFNESS_FACTOR = 50.0
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One hidden effect with its magnitude per channel.
+
+    Attributes
+    ----------
+    name : str
+        Effect name (a key of :data:`EFFECT_KINDS`).
+    channels : tuple of int
+        Affected channels, 0-based (winch / cable / axis index).
+    params : dict of str to ndarray
+        Per-channel magnitudes in absolute SI units, arrays of length n (``(n, 3)`` for
+        ``anchor_offset``); the entries of channels not affected are neutral (0). The
+        scalar ``delta_mass_kg`` of ``payload_mass_error`` is a 0-d array.
+    """
+
+    name: str
+    channels: tuple[int, ...]
+    params: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.name not in EFFECT_KINDS:
+            raise ValueError(f"unknown effect {self.name!r}; known: {sorted(EFFECT_KINDS)}")
+        object.__setattr__(self, "channels", tuple(sorted(int(c) for c in self.channels)))
+        object.__setattr__(self, "params", {k: np.asarray(v, dtype=float)
+                                            for k, v in self.params.items()})
+
+    @property
+    def signal(self) -> str:
+        """``'u'`` when the effect acts on the torque, ``'l'`` when on the encoder lengths."""
+        return _SIGNAL.get(self.name, "u")
+
+    def labels(self) -> list[str]:
+        """Column names of the affected channels, e.g. ``['u2', 'u3']``."""
+        return [f"{self.signal}{c + 1}" for c in self.channels]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain description: the affected channels and their magnitudes only."""
+        params: dict[str, Any] = {}
+        for key, value in self.params.items():
+            if value.ndim == 0:
+                params[key] = float(value)
+            else:
+                params[key] = [np.asarray(value[c]).tolist() for c in self.channels]
+        return {"effect": self.name, "channels": self.labels(),
+                "channel_index": [c + 1 for c in self.channels], "params": params}
+
+
+def _pick_channels(n: int, rng: np.random.Generator) -> tuple[int, ...]:
+    """One, some or all channels, each mode equally likely (``some`` needs n >= 3)."""
+    modes = ["one", "all"] + (["some"] if n >= 3 else [])
+    mode = modes[rng.integers(len(modes))]
+    if mode == "all" or n == 1:
+        return tuple(range(n))
+    size = 1 if mode == "one" else int(rng.integers(2, n))
+    return tuple(sorted(rng.choice(n, size=size, replace=False).tolist()))
+
+
+def _signed(rng: np.random.Generator, lo: float, hi: float, size: int) -> np.ndarray:
+    """Magnitudes uniform in [lo, hi] with a random sign each."""
+    return rng.uniform(lo, hi, size) * rng.choice([-1.0, 1.0], size)
+
+
+def draw_effect(name: str, rig: Any, rng: np.random.Generator,
+                channels: tuple[int, ...] | list[int] | None = None) -> Effect:
+    """Draw one hidden effect at a random magnitude within its documented range.
+
+    Parameters
+    ----------
+    name : str
+        Effect name; must apply to the rig's kind (see :data:`EFFECT_KINDS`).
+    rig : RigSpec or AxesRigSpec
+        The nominal rig; magnitudes are drawn relative to its nominal values, then stored
+        in absolute units.
+    rng : numpy.random.Generator
+        Source of randomness.
+    channels : sequence of int, optional
+        Affected channels (0-based); drawn (one, some or all) when omitted.
+
+    Returns
+    -------
+    Effect
+    """
+    if name not in EFFECT_KINDS:
+        raise ValueError(f"unknown effect {name!r}; known: {sorted(EFFECT_KINDS)}")
+    if rig.kind not in EFFECT_KINDS[name]:
+        raise ValueError(f"effect {name!r} does not apply to kind {rig.kind!r}")
+    n = rig.n
+    if name == "payload_mass_error":
+        chans = tuple(range(n))  # the platform couples every cable
+    elif channels is None:
+        chans = _pick_channels(n, rng)
+    else:
+        chans = tuple(int(c) for c in channels)
+        if not chans or min(chans) < 0 or max(chans) >= n:
+            raise ValueError(f"channels {chans} out of range for {n} channels")
+    idx = np.asarray(chans, dtype=int)
+    m = idx.size
+
+    def per_channel(values: np.ndarray, shape: tuple[int, ...] = ()) -> np.ndarray:
+        out = np.zeros((n, *shape))
+        out[idx] = values
+        return out
+
+    fc, fv, speed = rig.coulomb, rig.viscous, rig.typical_speed
+    params: dict[str, np.ndarray]
+    if name == "stribeck_friction":
+        params = {"delta": per_channel(rng.uniform(0.2, 0.6, m) * fc[idx]),
+                  "speed": per_channel(rng.uniform(0.1, 0.3, m) * speed[idx])}
+    elif name == "asymmetric_viscous_friction":
+        params = {"coefficient": per_channel(rng.uniform(0.3, 0.8, m) * fv[idx]),
+                  "side": per_channel(rng.choice([-1.0, 1.0], m))}
+    elif name == "winch_parameter_error":
+        params = {key: np.zeros(n) for key in _WINCH_PARAMS}
+        for c in idx:
+            # one or two parameters of this winch are off; offset errors scale with Coulomb
+            # because a nominal offset is often 0
+            keys = rng.choice(len(_WINCH_PARAMS), size=int(rng.integers(1, 3)), replace=False)
+            for j in keys:
+                key = _WINCH_PARAMS[j]
+                base = fc[c] if key == "offset" else getattr(rig, key)[c]
+                params[key][c] = _signed(rng, 0.3, 0.6, 1)[0] * base
+    elif name == "payload_mass_error":
+        params = {"delta_mass_kg": np.asarray(_signed(rng, 0.1, 0.3, 1)[0] * rig.mass)}
+    elif name == "anchor_offset":
+        direction = rng.normal(size=(m, 3))
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        params = {"offset_m": per_channel(direction * rng.uniform(0.01, 0.04, (m, 1)), (3,))}
+    elif name == "drum_radius_error":
+        params = {"delta_radius_m": per_channel(_signed(rng, 0.02, 0.05, m) * rig.radius[idx])}
+    elif name == "cable_elasticity":
+        # EA such that the static stretch at the workspace centre is 2..6 mm
+        stretch = rng.uniform(0.002, 0.006, m)
+        tension, length = rig.static_tension(), rig.home_lengths()
+        params = {"ea_n": per_channel(tension[idx] * length[idx] / stretch)}
+    elif name == "actuator_lag":
+        hi = 0.015 if rig.kind == "cdpr" else 0.010
+        lag = rng.uniform(0.003 if rig.kind == "cdpr" else 0.002, hi, m)
+        # a lag near the loop's crossover would destabilise it: keep omega_c * T <= 0.3
+        lag = np.minimum(lag, 0.3 / rig.bandwidth_rad_s[idx])
+        params = {"time_constant_s": per_channel(lag)}
+    elif name == "quadratic_drag":
+        params = {"coefficient": per_channel(rng.uniform(0.3, 0.8, m) * fv[idx] / speed[idx])}
+    elif name == "periodic_torque":
+        if rig.kind == "cdpr":
+            wavenumber = rng.integers(1, 5, m).astype(float)  # periods per motor turn
+        else:
+            wavenumber = 2 * np.pi / (rng.uniform(0.2, 0.5, m) * rig.amplitude[idx])
+        params = {"amplitude": per_channel(rng.uniform(0.3, 0.8, m) * fc[idx]),
+                  "wavenumber": per_channel(wavenumber),
+                  "phase": per_channel(rng.uniform(0.0, 2 * np.pi, m))}
+    else:  # pragma: no cover - guarded by EFFECT_KINDS above
+        raise AssertionError(name)
+    return Effect(name, chans, params)
+
+
+@dataclass
+class TrueModel:
+    """The plant the simulator integrates: nominal rig plus hidden effects.
+
+    Per-channel arrays have length n. Geometry fields (``mass``, ``anchors``, ``radius``,
+    ``ea``) are None for kind ``axes``; ``ea`` is None for rigid cables.
+    """
+
+    inertia: np.ndarray
+    viscous: np.ndarray
+    coulomb: np.ndarray
+    offset: np.ndarray
+    stribeck_delta: np.ndarray
+    stribeck_speed: np.ndarray
+    asym_coefficient: np.ndarray
+    asym_side: np.ndarray
+    quad_coefficient: np.ndarray
+    periodic_amplitude: np.ndarray
+    periodic_wavenumber: np.ndarray
+    periodic_phase: np.ndarray
+    lag_s: np.ndarray
+    mass: float | None = None
+    anchors: np.ndarray | None = None
+    radius: np.ndarray | None = None
+    ea: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Cache which hidden terms are present (called again after changing fields);
+        the integrators evaluate these functions tens of thousands of times."""
+        self._stribeck = bool(np.any(self.stribeck_delta > 0))
+        self._asym = bool(np.any(self.asym_coefficient))
+        self._quad = bool(np.any(self.quad_coefficient))
+        self._periodic = bool(np.any(self.periodic_amplitude))
+        self._ws = np.where(self.stribeck_delta > 0, self.stribeck_speed, 1.0)
+
+    def friction_level(self, w: np.ndarray) -> np.ndarray:
+        """Magnitude of the set-valued (sign) friction at speed ``w``: Coulomb plus the
+        Stribeck bump, which makes the static level ``F_s = F_c + delta``."""
+        if not self._stribeck:
+            return self.coulomb  # broadcasts against w where it is used
+        return self.coulomb + self.stribeck_delta * np.exp(-((w / self._ws) ** 2))
+
+    def smooth_torque(self, w: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        """The continuous part of the friction-side torque: viscous, asymmetric viscous,
+        quadratic drag, periodic torque and the offset ``d``."""
+        out = self.viscous * w + self.offset
+        if self._asym:
+            side = np.where(self.asym_side > 0, np.maximum(w, 0.0), np.minimum(w, 0.0))
+            out = out + self.asym_coefficient * side
+        if self._quad:
+            out = out + self.quad_coefficient * w * np.abs(w)
+        if self._periodic:
+            out = out + self.periodic_amplitude * np.sin(
+                self.periodic_wavenumber * angle + self.periodic_phase)
+        return out
+
+    def extra_torque(self, w: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        """Torque of the hidden friction-side effects alone (at ``w != 0``), i.e. the true
+        friction minus the nominal-form terms of the *true* parameters."""
+        sign = np.sign(w)
+        return (self.friction_level(w) - self.coulomb) * sign + self.smooth_torque(w, angle) \
+            - self.viscous * w - self.offset
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {k: np.asarray(getattr(self, k)).tolist() for k in (
+            "inertia", "viscous", "coulomb", "offset")}
+        if self.mass is not None:
+            out.update(platform_mass_kg=float(self.mass), anchors_m=self.anchors.tolist(),
+                       drum_radius_m=self.radius.tolist())
+            if self.ea is not None:
+                out["ea_n"] = self.ea.tolist()
+        return out
+
+
+def true_model(rig: Any, effects: list[Effect]) -> TrueModel:
+    """Fold a nominal rig and hidden effects into the true plant.
+
+    Effects of the same name add up. Cables that ``cable_elasticity`` does not name stay
+    :data:`RIGID_STIFFNESS_FACTOR` times stiffer than the stiffest named one.
+    """
+    n = rig.n
+    zeros = np.zeros(n)
+    model = TrueModel(
+        inertia=rig.inertia.copy(), viscous=rig.viscous.copy(), coulomb=rig.coulomb.copy(),
+        offset=rig.offset.copy(), stribeck_delta=zeros.copy(), stribeck_speed=np.ones(n),
+        asym_coefficient=zeros.copy(), asym_side=np.ones(n), quad_coefficient=zeros.copy(),
+        periodic_amplitude=zeros.copy(), periodic_wavenumber=zeros.copy(),
+        periodic_phase=zeros.copy(), lag_s=zeros.copy())
+    if rig.kind == "cdpr":
+        model.mass, model.anchors, model.radius = rig.mass, rig.anchors.copy(), rig.radius.copy()
+    for eff in effects:
+        if rig.kind not in EFFECT_KINDS[eff.name]:
+            raise ValueError(f"effect {eff.name!r} does not apply to kind {rig.kind!r}")
+        p, on = eff.params, np.zeros(n, dtype=bool)
+        on[list(eff.channels)] = True
+        if eff.name == "stribeck_friction":
+            model.stribeck_delta = model.stribeck_delta + p["delta"]
+            model.stribeck_speed = np.where(on, p["speed"], model.stribeck_speed)
+        elif eff.name == "asymmetric_viscous_friction":
+            model.asym_coefficient = model.asym_coefficient + p["coefficient"]
+            model.asym_side = np.where(on, p["side"], model.asym_side)
+        elif eff.name == "winch_parameter_error":
+            for key in _WINCH_PARAMS:
+                setattr(model, key, getattr(model, key) + p[key])
+        elif eff.name == "payload_mass_error":
+            model.mass = model.mass + float(p["delta_mass_kg"])
+        elif eff.name == "anchor_offset":
+            model.anchors = model.anchors + p["offset_m"]
+        elif eff.name == "drum_radius_error":
+            model.radius = model.radius + p["delta_radius_m"]
+        elif eff.name == "cable_elasticity":
+            ea = np.where(on, p["ea_n"], np.inf)
+            model.ea = ea if model.ea is None else np.minimum(model.ea, ea)
+        elif eff.name == "actuator_lag":
+            model.lag_s = model.lag_s + p["time_constant_s"]
+        elif eff.name == "quadratic_drag":
+            model.quad_coefficient = model.quad_coefficient + p["coefficient"]
+        elif eff.name == "periodic_torque":
+            model.periodic_amplitude = np.where(on, p["amplitude"], model.periodic_amplitude)
+            model.periodic_wavenumber = np.where(on, p["wavenumber"],
+                                                 model.periodic_wavenumber)
+            model.periodic_phase = np.where(on, p["phase"], model.periodic_phase)
+    if model.ea is not None:
+        finite = np.isfinite(model.ea)
+        model.ea = np.where(finite, model.ea, RIGID_STIFFNESS_FACTOR * model.ea[finite].max())
+    model.refresh()
+    for key in ("inertia", "viscous", "coulomb"):
+        if np.any(getattr(model, key) < 0) or np.any(model.inertia <= 0):
+            raise ValueError(f"true {key} must stay positive: {getattr(model, key)}")
+    return model
