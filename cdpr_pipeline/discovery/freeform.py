@@ -187,7 +187,7 @@ class L0Regression:
 
     max_terms: int = 6
     penalty: float | None = None
-    max_overlap: float = 0.99
+    max_overlap: float = 0.95
     support_: list[int] = field(default_factory=list)
     coef_: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
@@ -465,6 +465,8 @@ def _tree_expression(tree) -> str:
                 text = _TERMINALS.get(prim.name) or prim.format()
             elif prim.name in _WRAPPERS:
                 text = args[0]
+            elif prim.name == "mul" and _TERMINALS["unit"] in args:
+                text = args[1] if args[0] == _TERMINALS["unit"] else args[0]   # x 1
             else:
                 text = prim.format(*args)
             if not stack:

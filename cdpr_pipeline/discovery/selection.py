@@ -359,15 +359,17 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
 
     1. Forward selection over the named candidates, alone and in combination.
     2. The free-form search (GP and library, none of its terms with a candidate's shape)
-       on what the named causes leave.
-    3. Each named cause is kept only if the model with it (and free-form terms
-       re-selected around it) has a BIC within one parameter's worth of the model
-       without it (free-form terms re-selected to take its place): a named effect wins a
-       tie, a candidate that merely mimics part of an effect outside the vocabulary
+       on what the named causes leave. If its terms fail the tests every candidate
+       passes, the named causes explain the discrepancy and stand (even where free-form
+       terms could imitate one of them: a named cause gets the first chance).
+    3. Otherwise something outside the vocabulary is there, and a named cause may be a
+       partial mimic of it: each is kept only if the model with it (and free-form
+       terms re-selected around it) has a BIC within one parameter's worth of the model
+       without it (free-form terms re-selected to take its place): a named effect wins
+       a tie, a candidate that merely mimics part of an effect outside the vocabulary
        costs parameters and never gets to name it.
     4. The free-form terms, re-selected on top of the named causes kept, are the
-       ``unnamed`` cause if they pass the tests every candidate passes (they add
-       significantly, and on held-out runs, beyond the named causes).
+       ``unnamed`` cause if they still pass those tests.
     """
     kind = "axes" if not hasattr(nominal, "anchors") else "cdpr"
     search = _Search(nominal, train, heldout, settings, freeform,
@@ -384,7 +386,7 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
         search.steps.append([rest])
         search._log([rest])
         keep = []
-        for c in causes if rest.freeform.terms else []:
+        for c in causes if rest.passed else []:
             others = [o for o in causes if o is not c]
             without = search.refit(rest, _effects(others), n_tests)
             with_c = search.refit(rest, _effects(others + [c]), n_tests)
@@ -396,7 +398,7 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
             elif log:
                 log.info("  %s dropped: free-form terms explain it as well (%s)", c.label,
                          without.freeform.describe())
-        if rest.freeform.terms:
+        if rest.passed:
             final = rest if len(keep) == len(causes) else \
                 search.refit(rest, _effects(keep), n_tests)
             causes = keep + ([final] if final.passed else [])

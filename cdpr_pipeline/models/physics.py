@@ -18,10 +18,11 @@ split, with the six metrics of :mod:`cdpr_pipeline.metrics`, under the flat keys
   :meth:`~cdpr_pipeline.sim.plant.Plant.derivative` and
   :func:`~cdpr_pipeline.sim.simulator.rk4_step`, with its sub-steps and its numerics for a
   hard Coulomb sign) are integrated over one sample under the recorded torque (held over
-  the sample) from an estimate of the current state that uses the past only: a least-squares quadratic through the last ``state_window_s`` of
-  measured positions gives position and velocity (and winch angle and speed from the
-  encoders, for elastic cables); a lagging actuator's drum torque is the recorded command
-  passed through the lag. A zero-phase filter would read the very sample being predicted
+  the sample) from an estimate of the current state that uses the past only: a
+  least-squares quadratic through the last ``state_window_s`` of measured positions gives
+  position and velocity (and winch angle and speed from the encoders, for elastic
+  cables); a lagging actuator's drum torque is the recorded command passed through the
+  lag. A zero-phase filter would read the very sample being predicted
   (on the test lab it scores *below* the sensor noise, which no forecaster can). Also
   scored, for the physics rows only: the *open-loop* run over ``openloop_horizon_s``
   under the recorded torques (``openloop_1s`` keys), where a wrong model drifts off. The
@@ -31,6 +32,10 @@ split, with the six metrics of :mod:`cdpr_pipeline.metrics`, under the flat keys
   and identification compute it). This is a reconstruction from the motion around each
   sample, not a forecast; the networks' rows for ``axes`` are their one-step forecasts of
   the same ``u`` channels.
+
+At 300 Hz the model's own share of one sample's motion is ``a dt^2 / 2``, micrometres
+against 0.1 mm of motion-capture noise: the one-step rows of models that differ in their
+dynamics differ little, the open loop tells them apart.
 """
 
 from __future__ import annotations
