@@ -318,13 +318,15 @@ class WinchParameterError(Effect):
 
     @classmethod
     def candidates(cls, rig, scale):
-        """Re-identify one winch (four parameters, linear), one variant per winch."""
+        """Re-identify one winch (four parameters, linear), one variant per winch.
+        Inertia, viscous and Coulomb friction stay non-negative: a negative friction
+        coefficient is another effect being imitated, not a wrong data sheet."""
         from cdpr_pipeline.discovery.candidates import TORQUE
 
         return [_candidate(
             cls.name, f"{cls.name}[winch {cable}]",
             lambda x, c=cable: [cls(c, float(x[0]), float(x[1]), float(x[2]), float(x[3]))],
-            [_arr(1, 1, 1, 0)], _arr(0.0, -np.inf, -np.inf, -np.inf),
+            [_arr(1, 1, 1, 0)], _arr(0.0, 0.0, 0.0, -np.inf),
             _arr(np.inf, np.inf, np.inf, np.inf), _arr(0.1, 0.1, 0.1, 0.1), linear=True,
             names=["inertia_scale", "viscous_scale", "coulomb_scale", "offset_delta"],
             affects=TORQUE) for cable in range(1, scale.n + 1)]
@@ -414,7 +416,9 @@ class StribeckFriction(Effect):
             # up to F_s = 20 F_c, the old bound of the ratio; any size if F_c is zero
             magnitude=lambda i: (0.0, 19.0 * fc[i] if fc[i] > 0 else np.inf),
             typical=lambda i: 0.5 * fc[i] if fc[i] > 0 else 1.0,
-            shape=(0.005 * w, 5.0 * w), names=("extra_static", "stribeck_velocity"))]
+            # a Stribeck velocity is a low speed: beyond the typical speed the "bump"
+            # covers most of the motion and only imitates another law
+            shape=(0.005 * w, 1.5 * w), names=("extra_static", "stribeck_velocity"))]
 
     @classmethod
     def shapes(cls, speed_rms):
