@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_pipeline.config import compose_config
-from cdpr_pipeline.discovery.study import SCALE, run_case
+from cdpr_pipeline.discovery.study import run_case
 from cdpr_pipeline.sim.effects import EFFECTS
 from cdpr_pipeline.stages.simulate import rig_from_config
 
@@ -58,7 +58,7 @@ def main() -> None:
             hits = 0
             for seed in seeds:
                 effect = EFFECTS[name].sample(np.random.default_rng([seed, 17]), rig.n)
-                case = run_case(rig, counts, duration, [SCALE[name](effect, scale)], seed)
+                case = run_case(rig, counts, duration, [effect.scaled(scale)], seed)
                 record(name, scale, case)
                 hits += case["hit"]
             if hits < 0.9 * len(seeds):

@@ -190,17 +190,22 @@ class L0Regression:
     max_overlap: float = 0.95
     support_: list[int] = field(default_factory=list)
     coef_: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    _cost: np.ndarray = field(default_factory=lambda: np.zeros(0), init=False, repr=False)
 
     def _criterion(self, X: np.ndarray, y: np.ndarray, support: list[int]) -> float:
         n = len(y)
         rss = float(y @ y) if not support else float(
             np.sum((y - X[:, support] @ np.linalg.lstsq(X[:, support], y, rcond=None)[0]) ** 2))
         pen = np.log(n) if self.penalty is None else self.penalty
-        return n * np.log(max(rss, 1e-300) / n) + pen * len(support)
+        return n * np.log(max(rss, 1e-300) / n) + pen * float(np.sum(self._cost[support]))
 
-    def fit(self, X: np.ndarray, y: np.ndarray) -> L0Regression:
+    def fit(self, X: np.ndarray, y: np.ndarray, cost: np.ndarray | None = None
+            ) -> L0Regression:
+        """Select and fit; ``cost`` (per column, default 1) counts a term's parameters
+        (its coefficient plus the constants a search chose for it)."""
         X = np.asarray(X, float)
         y = np.asarray(y, float)
+        self._cost = np.ones(X.shape[1]) if cost is None else np.asarray(cost, float)
         support: list[int] = []
         best = self._criterion(X, y, support)
         norms = np.linalg.norm(X, axis=0)
@@ -439,6 +444,19 @@ class GrammarGP:
         return distinct
 
 
+def term_cost(expression: str) -> int:
+    """Parameters a term costs: its coefficient and each numeric constant in it (chosen
+    by the search on the same data, so fitted like the coefficient).
+
+    Examples
+    --------
+    >>> term_cost("mul(omega, abs_(omega))"), term_cost("mul(gauss(omega, 0.3), omega)")
+    (1, 2)
+    """
+    return 1 + sum(isinstance(n, ast.Constant) for n in ast.walk(ast.parse(expression,
+                                                                          mode="eval")))
+
+
 def _nodes(expression: str) -> int:
     """Size of an expression: functions, variables and constants (every function name
     and variable is an ``ast.Name``)."""
@@ -507,7 +525,9 @@ class FreeFormResult:
 
     @property
     def n_params(self) -> int:
-        return len(self.terms)
+        """Fitted parameters: every term's coefficient and the constants the search chose
+        for it (a width, a harmonic), which were fitted to the same data."""
+        return int(sum(term_cost(t["expression"]) for t in self.terms))
 
     def describe(self) -> str:
         return "; ".join(f"u{t['cable']}: {t['coefficient']:+.4g} "
@@ -557,12 +577,13 @@ class FreeFormSearch:
         vocabulary = ShapeFilter(exclude, row_state(signals))
         library = [e for e in library if readable(e) and not vocabulary.matches(e)]
         X = term_columns(library, signals)
+        cost = np.array([term_cost(e) for e in library], float)
         terms = []
         max_terms = min(self.regression.max_terms, MAX_TERMS_PER_CHANNEL)
         for i in range(residual.shape[1]):
             reg = L0Regression(max_terms, self.regression.penalty,
                                self.regression.max_overlap)
-            reg.fit(X[:, i, :], residual[:, i])
+            reg.fit(X[:, i, :], residual[:, i], cost)
             for j in reg.support_:
                 # a residual r = u - u_model is explained by extra resisting torque +c f
                 terms.append({"cable": i + 1, "expression": library[j],

@@ -15,10 +15,16 @@ judged by
 * BIC, ``LR - k log N``, to rank those that pass: fewer parameters win when two
   explain the data alike (a structural effect against re-fitting winch parameters).
 
-The free-form search competes like a candidate. When it ranks first, a named
-candidate still takes the step if the free-form terms add nothing significant on top of
-it (the terms *confirm* it); otherwise the step is reported as ``unnamed``. So an effect
-outside the vocabulary cannot borrow a name from a candidate that only partly mimics it.
+Winch-side candidates have one magnitude per winch, and each step first lets the data
+choose their winches (:func:`~cdpr_pipeline.discovery.fitting.fit_winches`): only the
+kept winches' parameters count in the tests.
+
+Named causes get the first chance: the free-form search runs on what they leave, with no
+term of a vocabulary effect's shape (those are the named candidates' to explain), and is
+kept as ``unnamed`` only if it passes the same tests on top of them. A named cause then
+stays only if it is more than a partial mimic of the unnamed part (a BIC comparison with
+the free-form terms re-selected with and without it), so an effect outside the
+vocabulary cannot borrow a name from a candidate that only partly imitates it.
 """
 
 from __future__ import annotations
@@ -359,17 +365,21 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
 
     1. Forward selection over the named candidates, alone and in combination.
     2. The free-form search (GP and library, none of its terms with a candidate's shape)
-       on what the named causes leave. If its terms fail the tests every candidate
-       passes, the named causes explain the discrepancy and stand (even where free-form
-       terms could imitate one of them: a named cause gets the first chance).
-    3. Otherwise something outside the vocabulary is there, and a named cause may be a
-       partial mimic of it: each is kept only if the model with it (and free-form
-       terms re-selected around it) has a BIC within one parameter's worth of the model
-       without it (free-form terms re-selected to take its place): a named effect wins
-       a tie, a candidate that merely mimics part of an effect outside the vocabulary
-       costs parameters and never gets to name it.
+       on what the named causes leave.
+    3. A named cause may be a partial mimic of something outside the vocabulary. It is
+       dropped when the model without it (free-form terms re-selected to take its
+       place) has a BIC better by more than one parameter's worth than the model with
+       it (free-form terms re-selected around it), and either the free-form part passes
+       on top of the named causes (something outside the vocabulary is there anyway) or
+       the terms taking its place need no more parameters than it has (a simpler
+       description). A named effect wins ties, and is not displaced by a larger set of
+       terms that merely imitates its shape while adding nothing significant beyond
+       it; a candidate that merely mimics an effect outside the vocabulary costs
+       parameters and never gets to name it. Free-form terms pay for the constants the
+       search chose for them (a width, a harmonic).
     4. The free-form terms, re-selected on top of the named causes kept, are the
-       ``unnamed`` cause if they still pass those tests.
+       ``unnamed`` cause if they pass the tests every candidate passes (they add
+       significantly, and on held-out runs, beyond the named causes).
     """
     kind = "axes" if not hasattr(nominal, "anchors") else "cdpr"
     search = _Search(nominal, train, heldout, settings, freeform,
@@ -386,19 +396,25 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
         search.steps.append([rest])
         search._log([rest])
         keep = []
-        for c in causes if rest.passed else []:
+        for c in causes if rest.freeform.terms else []:
             others = [o for o in causes if o is not c]
             without = search.refit(rest, _effects(others), n_tests)
             with_c = search.refit(rest, _effects(others + [c]), n_tests)
-            if search.bic(_effects(others + [c]) + with_c.effects,
-                          c.n_params + with_c.n_params) <= \
-                    search.bic(_effects(others) + without.effects, without.n_params) \
-                    + search.log_n():
+            bic_with = search.bic(_effects(others + [c]) + with_c.effects,
+                                  c.n_params + with_c.n_params)
+            bic_without = search.bic(_effects(others) + without.effects, without.n_params)
+            # the free-form parameters that take c's place
+            replacing = without.n_params - with_c.n_params
+            if bic_without + search.log_n() < bic_with and (rest.passed
+                                                            or replacing <= c.n_params):
+                if log:
+                    log.info("  %s dropped: free-form terms explain it better (BIC %+.1f "
+                             "with %d parameters for its %d): %s", c.label,
+                             bic_without - bic_with, replacing, c.n_params,
+                             without.freeform.describe())
+            else:
                 keep.append(c)
-            elif log:
-                log.info("  %s dropped: free-form terms explain it as well (%s)", c.label,
-                         without.freeform.describe())
-        if rest.passed:
+        if rest.freeform.terms:
             final = rest if len(keep) == len(causes) else \
                 search.refit(rest, _effects(keep), n_tests)
             causes = keep + ([final] if final.passed else [])

@@ -1,6 +1,7 @@
 """Detection study: hide effects in the virtual lab and count how often diagnosis names
 them (detection rate), how often it names something when nothing is hidden (false
-alarms), and how small an effect can be before detection fails. Used by the slow test
+alarms), and how small an effect can be before detection fails (each effect scales its
+own strength, :meth:`~cdpr_pipeline.sim.effects.Effect.scaled`). Used by the slow test
 suite and ``benchmarks/bench_detection.py``.
 """
 
@@ -13,24 +14,6 @@ from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnose
 from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.lab import simulate_lab
-
-#: how an effect's strength scales by ``s`` (1: as drawn from its documented range)
-SCALE = {
-    "winch_parameter_error": lambda e, s: type(e)(
-        e.cable, *(1 + s * (getattr(e, k) - 1) for k in
-                   ("inertia_scale", "viscous_scale", "coulomb_scale")), e.offset_delta),
-    "stribeck_friction": lambda e, s: type(e)(1 + s * (e.static_ratio - 1),
-                                              e.stribeck_velocity, e.cables),
-    "asymmetric_viscous_friction": lambda e, s: type(e)(s * e.ratio, e.direction, e.cables),
-    "cable_elasticity": lambda e, s: type(e)(e.ea_n / s, e.damping_time_s),
-    "anchor_offset": lambda e, s: type(e)(e.cable, [s * v for v in e.offset_m]),
-    "drum_radius_error": lambda e, s: type(e)(s * e.relative, e.cables),
-    "payload_mass_error": lambda e, s: type(e)(s * e.relative),
-    "actuator_lag": lambda e, s: type(e)(s * e.time_constant_s),
-    "quadratic_damping": lambda e, s: type(e)(s * e.ratio, e.cables),
-    "cogging_torque": lambda e, s: type(e)(s * e.amplitude_nm, e.periods_per_rev,
-                                           e.phase_rad, e.cables),
-}
 
 
 def run_case(rig, counts: dict, duration: float, effects: Sequence[Effect], seed: int,

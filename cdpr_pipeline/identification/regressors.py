@@ -7,10 +7,12 @@ paper, written per winch as in the data spec). ``axes`` kind: the same per axis 
 ``U* = u`` (no cable).
 
 Derivatives the way robotics does it: zero-phase Butterworth filtering of the positions,
-central differences, then *parallel filtering* of every column, so the target and each
-regressor see the same low-pass: either the Butterworth again (no decimation) or the
-zero-phase anti-alias filter of a decimation by ``decimate``, which also drops the
-samples that carry no new information.
+central (second) differences, then *parallel filtering* of every column, so the target and
+each regressor see the same low-pass: the Butterworth over the torque and the friction
+columns, then the zero-phase anti-alias filter of a decimation by ``decimate`` (if any)
+over all, which also drops the samples that carry no new information. With the hard
+sign, samples where the axis sticks, stops, starts or reverses (friction not ``+-F_c``)
+are taken out of every column before the filters (:func:`_assemble`).
 """
 
 from __future__ import annotations
@@ -96,8 +98,8 @@ class RegressionSettings:
         Low-pass and trimming for the derivatives; ``cutoff_hz`` and ``trim_s`` may be
         ``"auto"`` (chosen from the data by :func:`resolve_settings`).
     decimate : int or "auto"
-        Decimation factor after parallel filtering (1: none; the Butterworth then does
-        the parallel filtering).
+        Decimation factor after the parallel Butterworth (1: none), with its zero-phase
+        anti-alias filter over every column.
     sign_sharpness : float, None or "rig"
         ``tanh(k b)`` for the Coulomb column, the hard ``sign(b)`` when ``None``, the law
         rig.yaml states (``coulomb_law``) when ``"rig"``.
@@ -260,8 +262,9 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
 
 
 def _held_torque(torques: np.ndarray, zero_order_hold: bool) -> np.ndarray:
-    # a torque recorded at t_k acts until t_k+1: around the central difference at t_k
-    # the mean of samples k-1 and k acts (without it, a half-sample lag biases I_m ~2 %)
+    # a torque recorded at t_k acts until t_k+1: the triangle of half-width T around t_k
+    # that the second difference averages the acceleration with (_second_difference)
+    # sees samples k-1 and k for half each, exactly (without it a half-sample lag)
     if not zero_order_hold:
         return torques
     held = torques.copy()
@@ -295,29 +298,21 @@ def _sliding(position: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-#: largest share of the acceleration column's energy that the raw differences of dropped
-#: samples may bring in as position noise (an attenuation of ``I_m`` of that order)
-DROP_NOISE_SHARE = 1e-3
+#: consecutive unchanged samples that show a position sensor resolving standstill
+STANDSTILL_SAMPLES = 3
 
 
-def _resolves_stops(position: np.ndarray, xf: np.ndarray, a: np.ndarray, keep: np.ndarray,
-                    cutoff_hz: float, fs: float) -> np.ndarray:
-    """``(n,)``: whether each channel's recorded position is clean enough to take samples
-    out of the regression with their raw differences (:func:`_assemble`).
-
-    Every dropped stretch brings in the noise of two raw first differences, ``2 sigma / T^2``
-    in acceleration over about ``fs / cutoff`` rows after the low-pass; with ``sigma`` the
-    position noise (robust spread of the raw minus the filtered position), that must stay
-    below :data:`DROP_NOISE_SHARE` of the acceleration column's energy. An encoder that
-    resolves the motion passes by orders of magnitude; noisy positions do not, and keep
-    every row with the filtered ``sign(b)``.
-    """
-    resid = position - xf
-    sigma = 1.4826 * np.median(np.abs(resid - np.median(resid, axis=0)), axis=0)
-    drop = ~keep
-    stretches = np.count_nonzero(drop[1:] & ~drop[:-1], axis=0) + drop[0]
-    noise = stretches * (2 * sigma * fs**2 * 2 * cutoff_hz / fs) ** 2 * fs / cutoff_hz
-    return noise <= DROP_NOISE_SHARE * np.sum(keep * a**2, axis=0)
+def _shows_standstill(position: np.ndarray) -> np.ndarray:
+    """``(n,)``: whether each channel's recorded position stays exactly unchanged for
+    :data:`STANDSTILL_SAMPLES` differences somewhere, as an encoder does where the axis
+    stands still. Only such a sensor tells rests, stops and reversals sample by sample
+    (:func:`_sliding`); on a noisy or never-stopping position the raw differences would
+    only bring noise in, and every sample is taken as sliding the way ``b`` says."""
+    still = np.diff(position, axis=0) == 0
+    if len(still) < STANDSTILL_SAMPLES:
+        return np.zeros(still.shape[1:], bool)
+    runs = np.lib.stride_tricks.sliding_window_view(still, STANDSTILL_SAMPLES, axis=0)
+    return runs.all(axis=-1).any(axis=0)
 
 
 def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
@@ -354,14 +349,14 @@ def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
         target, c = filt.smooth(torque, fs) - smooth_load, filt.smooth(c, fs)
     else:
         keep = _sliding(position, b)
-        keep[:, ~_resolves_stops(position, xf, a, keep, filt.cutoff_hz, fs)] = True
+        keep[:, ~_shows_standstill(position)] = True
         drop = (~keep).astype(float)
+        c = filt.smooth(keep * np.sign(b), fs)
+        one = filt.smooth(keep.astype(float), fs)
         # what a, b and the load (filtered already) hold of the dropped samples comes out
         a = a - filt.smooth(drop * _second_difference(position, step), fs)
         b = b - filt.smooth(drop * np.gradient(position, t, axis=0), fs)
         load = smooth_load - filt.smooth(drop * smooth_load, fs)
-        c = filt.smooth(keep * np.sign(b), fs)
-        one = filt.smooth(keep.astype(float), fs)
         target = filt.smooth(keep * torque, fs) - load
     phi = np.stack([a, b, c, one], axis=-1)
     trim = int(round(filt.trim_s * fs))

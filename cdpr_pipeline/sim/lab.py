@@ -196,7 +196,7 @@ def _truth_record(plant, nominal, effects, desired, sensors, seed, sharpness, su
         "format": TRUTH_FORMAT,
         "seed": int(seed),
         "effects": [{"effect": e.name, "label": e.label, "params": e.params(),
-                     "description": e.describe(),
+                     "description": e.describe(nominal),
                      "class": f"{type(e).__module__}.{type(e).__qualname__}"} for e in effects],
         "verdict": effects[0].label if len(effects) == 1 else
         ("none" if not effects else [e.label for e in effects]),

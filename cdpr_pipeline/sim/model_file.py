@@ -17,18 +17,21 @@ from typing import Any
 import yaml
 
 from cdpr_pipeline.data.errors import DataValidationError
-from cdpr_pipeline.data.rig import Rig
+from cdpr_pipeline.data.rig import CdprRig, Rig
 from cdpr_pipeline.data.validation import parse_rig
 from cdpr_pipeline.sim.effects import EFFECTS, Effect
+from cdpr_pipeline.sim.plant import Drives, Plant
 
 MODEL_FORMAT = "cdpr-model/1"
 
 
 def model_record(rig: Rig, effects: Sequence[Effect], **meta: Any) -> dict[str, Any]:
-    """The YAML-able record of ``rig`` with ``effects``; ``meta`` is kept as is."""
+    """The YAML-able record of ``rig`` with ``effects``; ``meta`` is kept as is. The
+    descriptions put per-winch sizes in relation to the rig's nominal parameters."""
+    nominal = Plant.from_rig(rig) if isinstance(rig, CdprRig) else Drives(rig.nominal)
     return {"format": MODEL_FORMAT, **meta, "rig": rig.to_dict(),
-            "effects": [{"effect": e.name, "params": e.params(), "description": e.describe()}
-                        for e in effects]}
+            "effects": [{"effect": e.name, "params": e.params(),
+                         "description": e.describe(nominal)} for e in effects]}
 
 
 def write_model(path: str | Path, rig: Rig, effects: Sequence[Effect], **meta: Any) -> Path:
