@@ -105,7 +105,8 @@ def train(cfg: DictConfig) -> TrainResult:
     logger = make_logger(cfg.tracking.experiment, run_name=name, uri=cfg.tracking.uri,
                          tags={"cdpr_task": "train", "model": name,
                                "data_digest": dm.data_digest,
-                               "data_path": str(Path(cfg.data.path).resolve())})
+                               "data_path": str(Path(cfg.data.path).resolve())},
+                         lightning=True)
     logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
     client, run_id = logger.experiment, logger.run_id
     try:
