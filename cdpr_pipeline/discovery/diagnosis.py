@@ -22,6 +22,7 @@ from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.split import Split, heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
+from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
 from cdpr_pipeline.discovery.freeform import FreeFormSearch
 from cdpr_pipeline.discovery.residuals import (
     Model,
@@ -31,7 +32,6 @@ from cdpr_pipeline.discovery.residuals import (
     nominal_model,
     residuals,
 )
-from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
 from cdpr_pipeline.discovery.selection import (
     Judge,
     Judgement,
@@ -599,9 +599,10 @@ def summary_sentence(causes: list[Judgement], nominal: Model, gain: dict[str, An
     top = causes[0]
     name = "an effect outside the vocabulary (unnamed)" if top.effect == "unnamed" \
         else top.effect.replace("_", " ")
-    text = prefix + (f"Most likely cause: {name}: {describe_cause(top, nominal)}. Extending the model "
-            f"lowers the held-out {gain['signal']} RMSE by {100 * gain['relative']:.1f} % "
-            f"(95 % CI {100 * gain['ci95'][0]:.1f} to {100 * gain['ci95'][1]:.1f} %).")
+    text = prefix + (
+        f"Most likely cause: {name}: {describe_cause(top, nominal)}. Extending the model "
+        f"lowers the held-out {gain['signal']} RMSE by {100 * gain['relative']:.1f} % "
+        f"(95 % CI {100 * gain['ci95'][0]:.1f} to {100 * gain['ci95'][1]:.1f} %).")
     if len(causes) > 1:
         text += " Also: " + "; ".join(c.effect for c in causes[1:]) + "."
     return text

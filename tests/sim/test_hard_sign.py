@@ -35,9 +35,9 @@ def test_hard_sign_rig_is_simulated_and_its_smoothing_is_numerical_only(paper_ri
     # twice as sharp (and twice the sub-steps): once moving, the recorded motion agrees
     # far below the motion-capture noise (0.1 mm) and the torques within the torque
     # sensor's noise level (0.01 N m; a winch passing through zero speed briefly differs
-    # by a few mN m), so the numerical smoothing is invisible in the data. (At rest a hard sign leaves the static friction
-    # anywhere in [-F_c, F_c]: where the platform settles before the run differs by a
-    # fraction of a millimetre, as it would between two real runs.)
+    # by a few mN m), so the numerical smoothing is invisible in the data. (At rest a hard
+    # sign leaves the static friction anywhere in [-F_c, F_c]: where the platform settles
+    # before the run differs by a fraction of a millimetre, as between two real runs.)
     monkeypatch.setattr(simulator, "HARD_SIGN_SUBSTEPS", 2 * HARD_SIGN_SUBSTEPS)
     sharp = _run(rig, seed)
     a, b = coarse.results[0], sharp.results[0]

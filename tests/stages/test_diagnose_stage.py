@@ -17,8 +17,8 @@ from cdpr_pipeline.sim.model_file import read_model
 from cdpr_pipeline.stages.diagnose import run_diagnosis
 from cdpr_pipeline.stages.simulate import simulate
 
-FAST = ["blackbox.epochs=1", "blackbox.max_windows=256", "discovery.freeform.gp.max_evaluations=1000",
-        "discovery.selection.n_boot=200"]
+FAST = ["blackbox.epochs=1", "blackbox.max_windows=256",
+        "discovery.freeform.gp.max_evaluations=1000", "discovery.selection.n_boot=200"]
 
 
 def _cfg(tmp_path, data, *extra):
