@@ -28,9 +28,11 @@ run: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
-## test-pipeline: the end-to-end pipeline test (cdpr repro profile=tiny in a scratch copy)
+## test-pipeline: the end-to-end pipeline tests (cdpr repro profile=tiny in scratch copies):
+## on the virtual lab, then ingesting the shipped foreign rig and the shipped EMPS data
 test-pipeline: $(STAMP)
-	$(BIN)/python -m pytest -m slow tests/stages/test_pipeline_e2e.py $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -m slow tests/stages/test_pipeline_e2e.py \
+		tests/stages/test_pipeline_ingest_e2e.py --durations=3 $(PYTEST_ARGS)
 
 ## test-slow: every slow end-to-end test
 test-slow: $(STAMP)

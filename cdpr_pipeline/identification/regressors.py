@@ -317,7 +317,8 @@ def _shows_standstill(position: np.ndarray) -> np.ndarray:
 
 def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
               t: np.ndarray, settings: RegressionSettings) -> WinchRegression:
-    """Rows ``[a, b, c, 1] -> u - smooth_load`` with parallel filtering.
+    """Rows ``[a, b, c, 1] -> u - smooth_load`` with parallel filtering (the offset column
+    is the filtered share of rows kept, 1 away from dropped samples).
 
     ``position`` is the recorded winch angle or axis position, ``torque`` the recorded
     ``u``, ``smooth_load`` comes from filtered positions already. ``a`` is the second
