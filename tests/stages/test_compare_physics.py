@@ -113,8 +113,9 @@ def test_compare_adds_physics_rows_on_the_same_split(small_lab, fitted, tracking
 
 
 def test_compare_scores_drive_axes_on_their_forces(tmp_path, tracking):
-    """EMPS (two runs, so time blocks): the networks' one-step forecasts of the force
-    ``u1`` (re-scored from forecaster.pt) beside the nominal inverse dynamics."""
+    """EMPS (the cross-test run test-only, the other cut into time blocks): the networks'
+    one-step forecasts of the force ``u1`` (re-scored from forecaster.pt) beside the
+    nominal inverse dynamics."""
     from cdpr_pipeline.data.convert import convert_emps
     from cdpr_pipeline.resources import emps_path
 
@@ -134,8 +135,10 @@ def test_compare_scores_drive_axes_on_their_forces(tmp_path, tracking):
     assert "RMSE (N)" in result.table2.index.get_level_values(1)
     fams = set(result.table2.index.get_level_values(0))
     assert {"bangbang", "pulses", "all"} <= fams            # the test blocks of both runs
-    for m in ("arx", NOMINAL):
-        assert result.table2.loc[("all", "R^2 (%)"), (m, "u1")] > 90
+    # the stated physics explains the force on the unseen pulses run; ARX, fitted on the
+    # bang-bang blocks, is scored there too (it generalises poorly: about 60 %)
+    assert result.table2.loc[("pulses", "R^2 (%)"), (NOMINAL, "u1")] > 90
+    assert math.isfinite(result.table2.loc[("pulses", "R^2 (%)"), ("arx", "u1")])
     physics = json.loads((tmp_path / "out" / "physics.json").read_text())
     assert physics["scored"] == "torque" and physics["unit"] == "N"
 
