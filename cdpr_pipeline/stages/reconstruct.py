@@ -42,7 +42,8 @@ def _table(scores: dict[str, dict[str, list[float]]]) -> pd.DataFrame:
     return pd.DataFrame.from_dict(rows, orient="index", columns=cols)
 
 
-def _plot(t: np.ndarray, target: np.ndarray, preds: dict[str, np.ndarray], path: Path) -> Path:
+def _plot(t: np.ndarray, target: np.ndarray, preds: dict[str, np.ndarray], path: Path,
+          unit: str = "N m") -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -55,7 +56,7 @@ def _plot(t: np.ndarray, target: np.ndarray, preds: dict[str, np.ndarray], path:
         ax.plot(t, target[:, i], "k", lw=1, label="measured U*")
         for j, (label, p) in enumerate(preds.items()):
             ax.plot(t, p[:, i], f"C{j}", lw=0.8, label=label)
-        ax.set_ylabel(f"U*_{i + 1} (N m)")
+        ax.set_ylabel(f"U*_{i + 1} ({unit})")
     axes[0, 0].legend(fontsize=7)
     axes[-1, 0].set_xlabel("sample")
     fig.tight_layout()
@@ -109,7 +110,11 @@ def reconstruct(cfg: DictConfig) -> dict:
         df.to_csv(out / f"{name}.csv")
         (out / f"{name}.md").write_text(to_markdown(df))
         files += [out / f"{name}.csv", out / f"{name}.md"]
-    files.append(_plot(np.arange(len(one)), one.target, preds_one, out / "reconstruction.png"))
+    # U* is a winch torque (cable robots) or the force or torque of a drive axis
+    unit = "N m" if data.rig.kind == "cdpr" else \
+        str((data.rig.to_dict().get("units") or {}).get("u1", "N or N m"))
+    files.append(_plot(np.arange(len(one)), one.target, preds_one, out / "reconstruction.png",
+                       unit))
 
     logger = make_logger(cfg.tracking.experiment, run_name=f"reconstruct-{method}",
                          uri=cfg.tracking.uri, tags={"cdpr_task": "reconstruct",
