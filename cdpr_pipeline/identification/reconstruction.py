@@ -6,17 +6,14 @@ winch with MSE, MAE and PPL (the paper's Tables IV and V).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
 
-import lightning as L
 import numpy as np
 import torch
 
 from cdpr_pipeline.identification.regressors import WinchRegression
 from cdpr_pipeline.metrics import mae, mse, ppl
-from cdpr_pipeline.models.datamodule import WindowDataset
 from cdpr_pipeline.models.features import ChannelLayout
-from cdpr_pipeline.models.module import ForecastModule
+from cdpr_pipeline.models.module import fit_window_network
 
 
 def _inputs(reg: WinchRegression, theta: np.ndarray) -> np.ndarray:
@@ -57,23 +54,17 @@ class HighFrequencyModel:
     sample_rate_hz: float = 1.0       # of the regression rows (for networks that filter)
 
     def fit(self, reg: WinchRegression, theta: np.ndarray) -> HighFrequencyModel:
-        L.seed_everything(self.seed, verbose=False)
         x = _inputs(reg, theta)
         y = reg.target - reg.predict(theta)
         self.x_mean, self.x_std = x.mean(axis=0), np.where(x.std(axis=0) > 0, x.std(axis=0), 1)
         self.y_mean, self.y_std = y.mean(axis=0), np.where(y.std(axis=0) > 0, y.std(axis=0), 1)
         rows = _runs(reg)
-        ds = WindowDataset([(x[r] - self.x_mean) / self.x_std for r in rows],
-                           [(y[r] - self.y_mean) / self.y_std for r in rows], self.window)
-        self.net = self.net_factory(layout=ChannelLayout(x.shape[1], reg.n, self.sample_rate_hz))
-        module = ForecastModule(self.net, partial(torch.optim.Adam, lr=self.lr))
-        sampler = torch.utils.data.RandomSampler(ds, num_samples=min(self.max_windows, len(ds)))
-        loader = torch.utils.data.DataLoader(ds, batch_size=self.batch_size, sampler=sampler)
-        trainer = L.Trainer(max_epochs=self.epochs, logger=False, enable_checkpointing=False,
-                            enable_progress_bar=False, enable_model_summary=False,
-                            accelerator="auto", devices=1)
-        trainer.fit(module, loader)
-        self.net = module.net.cpu().eval()
+        net = self.net_factory(layout=ChannelLayout(x.shape[1], reg.n, self.sample_rate_hz))
+        self.net = fit_window_network(
+            net, [(x[r] - self.x_mean) / self.x_std for r in rows],
+            [(y[r] - self.y_mean) / self.y_std for r in rows], self.window, lr=self.lr,
+            epochs=self.epochs, max_windows=self.max_windows, batch_size=self.batch_size,
+            seed=self.seed, accelerator="auto")
         self.theta = np.asarray(theta, float)
         return self
 

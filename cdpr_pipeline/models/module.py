@@ -95,3 +95,29 @@ class TimeToBest(L.Callback):
             self.best = float(value)
             self.seconds = time.perf_counter() - self._start
             self.epoch = int(trainer.current_epoch)
+
+
+def fit_window_network(net: nn.Module, inputs: list, targets: list, window: int, *,
+                       lr: float, epochs: int, max_windows: int, batch_size: int, seed: int,
+                       accelerator: str = "cpu") -> nn.Module:
+    """Train ``net`` on sliding windows of already standardised rows: ``inputs[i]``
+    (N_i, F) -> ``targets[i]`` (N_i, C), at most ``max_windows`` windows drawn per epoch.
+    The residual networks of reconstruction and of the comparison's hybrid use it.
+
+    Random state stays local: torch's generator is forked and seeded for the fit and
+    restored after (no global seed is left behind)."""
+    from functools import partial
+
+    from cdpr_pipeline.models.datamodule import WindowDataset
+
+    with torch.random.fork_rng():
+        torch.manual_seed(seed)
+        ds = WindowDataset(list(inputs), list(targets), window)
+        module = ForecastModule(net, partial(torch.optim.Adam, lr=lr))
+        sampler = torch.utils.data.RandomSampler(ds, num_samples=min(max_windows, len(ds)))
+        loader = torch.utils.data.DataLoader(ds, batch_size=batch_size, sampler=sampler)
+        trainer = L.Trainer(max_epochs=epochs, logger=False, enable_checkpointing=False,
+                            enable_progress_bar=False, enable_model_summary=False,
+                            accelerator=accelerator, devices=1)
+        trainer.fit(module, loader)
+    return module.net.cpu().eval()

@@ -380,34 +380,22 @@ class ResidualNetwork:
             gain_rows: list[np.ndarray] | None = None) -> ResidualNetwork:
         """Train on per-segment rows ``inputs[i]`` (N_i, F) -> ``targets[i]`` (N_i, C); the
         output gain is fitted on the rows ``gain_rows[i]`` (default: all)."""
-        from functools import partial
-
-        import lightning as L
-        import torch
-
-        from cdpr_pipeline.models.datamodule import WindowDataset
         from cdpr_pipeline.models.features import ChannelLayout
-        from cdpr_pipeline.models.module import ForecastModule
+        from cdpr_pipeline.models.module import fit_window_network
 
         st = self.settings
-        L.seed_everything(st.seed, verbose=False)
         x, y = np.concatenate(inputs), np.concatenate(targets)
         self.x_mean, self.x_std = x.mean(axis=0), _std(x)
         self.y_mean, self.y_std = y.mean(axis=0), _std(y)
         keep = [i for i, a in enumerate(inputs) if len(a) >= st.window + 3]
         if not keep:
             raise ValueError(f"no training segment is longer than window+3 = {st.window + 3}")
-        ds = WindowDataset([(inputs[i] - self.x_mean) / self.x_std for i in keep],
-                           [(targets[i] - self.y_mean) / self.y_std for i in keep], st.window)
-        self.net = st.net_factory(layout=ChannelLayout(x.shape[1], y.shape[1], sample_rate_hz))
-        module = ForecastModule(self.net, partial(torch.optim.Adam, lr=st.lr))
-        sampler = torch.utils.data.RandomSampler(ds, num_samples=min(st.max_windows, len(ds)))
-        loader = torch.utils.data.DataLoader(ds, batch_size=st.batch_size, sampler=sampler)
-        trainer = L.Trainer(max_epochs=st.epochs, logger=False, enable_checkpointing=False,
-                            enable_progress_bar=False, enable_model_summary=False,
-                            accelerator="cpu", devices=1)
-        trainer.fit(module, loader)
-        self.net = module.net.cpu().eval()
+        net = st.net_factory(layout=ChannelLayout(x.shape[1], y.shape[1], sample_rate_hz))
+        self.net = fit_window_network(
+            net, [(inputs[i] - self.x_mean) / self.x_std for i in keep],
+            [(targets[i] - self.y_mean) / self.y_std for i in keep], st.window, lr=st.lr,
+            epochs=st.epochs, max_windows=st.max_windows, batch_size=st.batch_size,
+            seed=st.seed)
         self.gain = np.ones(y.shape[1])
         rows = gain_rows if gain_rows is not None else [np.arange(len(a)) for a in inputs]
         fitted = self.predict(inputs, rows)
