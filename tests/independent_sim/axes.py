@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from .effects import Effect, TrueModel, true_model
-from .writer import FORMAT, RunTruth, Truth, prepare_dir, truth_path, write_csv, write_rig_yaml
+from .writer import FORMAT, RunTruth, Truth, write_simulated
 
 AXES_FAMILIES = ("multisine", "moves", "mixed")
 SUB_RATE_HZ = 1000.0  # sub-steps of at most 1 ms (torque error < 0.3 % of a 4x finer step)
@@ -433,11 +433,5 @@ def simulate_axes_dataset(out_dir: str | Path, rig: AxesRigSpec, effects: Any = 
         raise ValueError(f"{len(families)} families for {n_runs} runs")
     eff = resolve_effects(rig, effects, seed)
     columns, runs, settings = simulate_axes_runs(rig, eff, families, duration_s, seed, noise)
-    out = prepare_dir(out_dir, overwrite)
-    write_rig_yaml(out / "rig.yaml", rig.rig_yaml())
-    for run, cols in zip(runs, columns, strict=True):
-        write_csv(out / "trajectories" / f"{run.name}.csv", cols)
-    truth = Truth("axes", int(seed), rig, eff, true_model(rig, eff), runs, settings)
-    if write_truth:
-        truth.write(truth_path(out))
-    return truth
+    return write_simulated(out_dir, "axes", rig, eff, true_model(rig, eff), seed, columns,
+                           runs, settings, write_truth, overwrite)

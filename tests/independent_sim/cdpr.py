@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from .effects import Effect, TrueModel, draw_effect, true_model
-from .writer import FORMAT, RunTruth, Truth, prepare_dir, truth_path, write_csv, write_rig_yaml
+from .writer import FORMAT, RunTruth, Truth, write_simulated
 
 #: trajectory families (the part of the file name after the index)
 CDPR_FAMILIES = ("flat_circle", "oblique_circle", "flat_eight", "oblique_eight", "spiral",
@@ -784,11 +784,5 @@ def simulate_dataset(out_dir: str | Path, rig: RigSpec, effects: Any = (), n_run
         raise ValueError(f"{len(families)} families for {n_runs} runs")
     eff = resolve_effects(rig, effects, seed)
     columns, runs, settings = simulate_runs(rig, eff, families, duration_s, seed, noise)
-    out = prepare_dir(out_dir, overwrite)
-    write_rig_yaml(out / "rig.yaml", rig.rig_yaml())
-    for run, cols in zip(runs, columns, strict=True):
-        write_csv(out / "trajectories" / f"{run.name}.csv", cols)
-    truth = Truth("cdpr", int(seed), rig, eff, true_model(rig, eff), runs, settings)
-    if write_truth:
-        truth.write(truth_path(out))
-    return truth
+    return write_simulated(out_dir, "cdpr", rig, eff, true_model(rig, eff), seed, columns,
+                           runs, settings, write_truth, overwrite)

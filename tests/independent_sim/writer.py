@@ -145,3 +145,18 @@ class Truth:
         path = Path(path)
         path.write_text(yaml.safe_dump(self.to_dict(), sort_keys=False), encoding="utf-8")
         return path
+
+
+def write_simulated(out_dir: str | Path, kind: str, rig: Any, effects: list[Any], model: Any,
+                    seed: int, columns: list[dict[str, np.ndarray]], runs: list[RunTruth],
+                    settings: dict[str, Any], write_truth: bool, overwrite: bool) -> Truth:
+    """Write simulated runs as a ``cdpr-measured/1`` dataset (rig.yaml and one CSV per
+    run) and return their :class:`Truth`, written beside the dataset if asked."""
+    out = prepare_dir(out_dir, overwrite)
+    write_rig_yaml(out / "rig.yaml", rig.rig_yaml())
+    for run, cols in zip(runs, columns, strict=True):
+        write_csv(out / "trajectories" / f"{run.name}.csv", cols)
+    truth = Truth(kind, int(seed), rig, effects, model, runs, settings)
+    if write_truth:
+        truth.write(truth_path(out))
+    return truth
