@@ -32,6 +32,20 @@ from cdpr_pipeline.discovery.residuals import (
     nominal_model,
     residuals,
 )
+from cdpr_pipeline.discovery.results import (
+    Band,
+    BlackBoxShare,
+    ChannelGain,
+    ClosedLoopComparison,
+    ClosedLoopErrors,
+    Discrepancy,
+    ErrorMetrics,
+    HeldoutGain,
+    ModelMetrics,
+    ResidualValidity,
+    Unusable,
+    ValidityComparison,
+)
 from cdpr_pipeline.discovery.selection import (
     Judge,
     Judgement,
@@ -112,31 +126,36 @@ def split_runs(trajectories: Sequence[Trajectory], heldout: Sequence[str] | None
     return list(split.train), list(split.heldout)
 
 
-@dataclass
+@dataclass(frozen=True)
 class Diagnosis:
-    """Result of :func:`diagnose` (see :meth:`as_json` for the file layout)."""
+    """Result of :func:`diagnose` (see :meth:`as_json` for the file layout).
+
+    ``timings`` holds the seconds per phase (signals, candidates, free-form, validity,
+    closed loop, black box, total); it is not part of ``diagnosis.json``, which depends
+    only on the data and the settings. ``plots`` holds the arrays of the report's figures.
+    """
 
     dataset: str
     rig: Any
-    train: list[str]
-    heldout: list[str]
+    train: tuple[str, ...]
+    heldout: tuple[str, ...]
     nominal: Model
     extended: Model
-    causes: list[Judgement]
-    steps: list[list[Judgement]]
-    discrepancies: list[dict[str, Any]]
-    nominal_metrics: dict[str, Any]
-    extended_metrics: dict[str, Any]
-    gain: dict[str, Any]
-    validity: dict[str, Any]
-    closed_loop: dict[str, Any]
-    blackbox: dict[str, Any] | None
+    causes: tuple[Judgement, ...]
+    steps: tuple[tuple[Judgement, ...], ...]
+    discrepancies: tuple[Discrepancy, ...]
+    nominal_metrics: ModelMetrics
+    extended_metrics: ModelMetrics
+    gain: HeldoutGain
+    validity: ValidityComparison
+    closed_loop: ClosedLoopComparison
+    blackbox: BlackBoxShare | None
     sentence: str
-    timings: dict[str, float]
-    plots: dict[str, Any]
-    extension: list[Effect] = field(default_factory=list)
+    timings: dict[str, float] = field(compare=False)
+    plots: dict[str, Any] = field(compare=False, repr=False)
+    extension: tuple[Effect, ...] = ()
     #: set when the stated model was grossly wrong and re-identified first
-    unusable: dict[str, Any] | None = None
+    unusable: Unusable | None = None
 
     @property
     def verdict(self) -> str:
@@ -151,21 +170,20 @@ class Diagnosis:
         return {
             "format": FORMAT,
             "dataset": self.dataset,
-            "split": {"train": self.train, "heldout": self.heldout},
-            "nominal": {"params": self.rig_params(), "metrics": self.nominal_metrics,
-                        **({"unusable": self.unusable} if self.unusable else {})},
-            "discrepancies": self.discrepancies,
+            "split": {"train": list(self.train), "heldout": list(self.heldout)},
+            "nominal": {"params": self.rig_params(), "metrics": self.nominal_metrics.as_dict(),
+                        **({"unusable": self.unusable.as_dict()} if self.unusable else {})},
+            "discrepancies": [e.as_dict() for e in self.discrepancies],
             "causes": [cause_record(c, self.nominal) for c in self.causes],
             "verdict": self.verdict,
             "summary": self.sentence,
             "extended_model": extended_model_file,
-            "extended": {"metrics": self.extended_metrics},
-            "gain": self.gain,
-            "validity": self.validity,
-            "closed_loop": self.closed_loop,
-            "blackbox": self.blackbox,
+            "extended": {"metrics": self.extended_metrics.as_dict()},
+            "gain": self.gain.as_dict(),
+            "validity": self.validity.as_dict(),
+            "closed_loop": self.closed_loop.as_dict(),
+            "blackbox": self.blackbox.as_dict() if self.blackbox else None,
             "candidates": [[judgement_record(j) for j in step] for step in self.steps],
-            "timings_s": self.timings,
         }
 
     def rig_params(self) -> dict[str, list[float]]:
@@ -204,7 +222,7 @@ def cause_record(j: Judgement, nominal: Model) -> dict[str, Any]:
     else:
         structural = [e for e in j.effects if not isinstance(e, WinchParameterError)]
         expression = (structural or j.effects)[0].expression if j.effects else ""
-    return {"effect": j.effect, "channels": j.channels,
+    return {"effect": j.effect, "channels": list(j.channels),
             "params": cause_params(j.effects, nominal), "expression": expression,
             "description": describe_cause(j, nominal), "evidence": j.evidence()}
 
@@ -235,31 +253,27 @@ def describe_cause(j: Judgement, nominal: Model) -> str:
 
 
 # ---------------------------------------------------------------------- metrics
-def _metrics(res: Residuals, measured: np.ndarray, channel: str) -> dict[str, float]:
+def _metrics(res: Residuals, measured: np.ndarray, channel: str) -> ErrorMetrics:
     r = res.stacked(channel)
-    return {"rmse": float(np.sqrt(np.mean(r ** 2))),
-            "relative_error_pct": float(100 * np.linalg.norm(r) / max(np.linalg.norm(measured),
-                                                                       1e-300)),
-            "rmse_per_channel": np.sqrt(np.mean(r ** 2, axis=0)).tolist()}
+    return ErrorMetrics(float(np.sqrt(np.mean(r ** 2))),
+                        float(100 * np.linalg.norm(r) / max(np.linalg.norm(measured), 1e-300)),
+                        tuple(float(v) for v in np.sqrt(np.mean(r ** 2, axis=0))))
 
 
 def model_metrics(model: Model, nominal: Model, train: list[RunSignals],
-                  held: list[RunSignals]) -> dict[str, Any]:
-    """``{"train": {...}, "heldout": {...}}`` for the torque channel (the spec's
-    ``rmse``/``relative_error_pct``), plus ``by_signal`` for every channel."""
-    out: dict[str, Any] = {}
-    by_signal: dict[str, Any] = {}
+                  held: list[RunSignals]) -> ModelMetrics:
+    """Torque (force) error on the training and held-out runs (the spec's
+    ``rmse``/``relative_error_pct``), and every channel's in ``by_signal``."""
+    by_signal: dict[str, dict[str, ErrorMetrics]] = {}
     for part, sigs in (("train", train), ("heldout", held)):
         res = residuals(model, nominal, sigs)
         for ch in res.channels:
             by_signal.setdefault(ch, {})[part] = _metrics(res, measured_rows(sigs, ch), ch)
-        out[part] = {k: v for k, v in by_signal["torque"][part].items()
-                     if k != "rmse_per_channel"}
-    out["by_signal"] = by_signal
-    return out
+    return ModelMetrics(by_signal["torque"]["train"], by_signal["torque"]["heldout"],
+                        by_signal)
 
 
-def _bands(x: np.ndarray, fs: float, split: WaveletSplit) -> list[dict[str, float]]:
+def _bands(x: np.ndarray, fs: float, split: WaveletSplit) -> tuple[Band, ...]:
     level = max(1, min(split.level, int(np.log2(max(len(x), 2) / 8))))
     split = WaveletSplit(split.wavelet, level, split.mode)
     shares = band_energies(x, split)
@@ -268,8 +282,8 @@ def _bands(x: np.ndarray, fs: float, split: WaveletSplit) -> list[dict[str, floa
         j = int(name[1:])
         hi = fs / 2 ** j if name[0] == "D" else fs / 2 ** (level + 1)
         lo = hi / 2 if name[0] == "D" else 0.0
-        out.append({"band": name, "lo_hz": lo, "hi_hz": hi, "share": share})
-    return sorted(out, key=lambda b: b["lo_hz"])
+        out.append(Band(name, float(lo), float(hi), float(share)))
+    return tuple(sorted(out, key=lambda b: b.lo_hz))
 
 
 def _signatures(sig: RunSignals, nominal: Model, channel: str, i: int
@@ -303,7 +317,7 @@ def _innovations(res: Residuals, channel: str, noise: dict[str, NoiseModel]) -> 
 
 def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
                   settings: DiagnosisSettings, noise: dict[str, NoiseModel]
-                  ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+                  ) -> tuple[list[Discrepancy], dict[str, Any]]:
     """Per channel column of the nominal model: residual size, share, band, whiteness
     (of the innovations), what it follows, and the correlation tests. Also returns plot
     data, with what the extended model explains of each residual."""
@@ -329,19 +343,13 @@ def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
                              key=lambda k: -abs(corr[k]))
             # bands of the unfiltered full-rate residual of the longest run
             bands = _bands(full[:, i], longest.fs, settings.wavelet)
-            top = max(bands, key=lambda b: b["share"])
             inputs = sigs["winch speed"] if ch == "torque" else sigs["cable length"]
             tests = correlation_tests(innovations[:, i], inputs,
                                       min(settings.max_lag, len(r) // 4))
-            out.append({"signal": ch, "channel": name, "rms": float(np.sqrt(np.mean(r ** 2))),
-                        "share_of_error": float(np.sum(r ** 2) / total),
-                        "band_hz": [top["lo_hz"], top["hi_hz"]],
-                        "bands": bands,
-                        "whiteness_pvalue": ljung_box_pvalue(innovations[:, i],
-                                                             settings.max_lag),
-                        "correlates_with": follows,
-                        "correlations": corr,
-                        "validity": tests.as_dict()})
+            out.append(Discrepancy(ch, name, float(np.sqrt(np.mean(r ** 2))),
+                                   float(np.sum(r ** 2) / total), bands,
+                                   ljung_box_pvalue(innovations[:, i], settings.max_lag),
+                                   tuple(follows), corr, tests))
             plots[name] = {"residual": r, "explained": r - ext.stacked(ch)[:, i],
                            "signatures": sigs, "bands": bands, "tests": tests}
     return out, plots
@@ -358,7 +366,7 @@ def _full_rate_residual(model: Model, sig: RunSignals, channel: str) -> np.ndarr
 
 # ---------------------------------------------------------------------- gain
 def heldout_gain(before: Residuals, after: Residuals, held: list[RunSignals], channel: str,
-                 block_s: float, n_boot: int, seed: int) -> dict[str, Any]:
+                 block_s: float, n_boot: int, seed: int) -> HeldoutGain:
     """Held-out RMSE of ``channel`` before and after, relative drop and its 95 % block
     bootstrap interval; per channel column too."""
     def stat(b, a):
@@ -376,30 +384,30 @@ def heldout_gain(before: Residuals, after: Residuals, held: list[RunSignals], ch
     for i, name in enumerate(channel_names(channel, b.shape[1])):
         _, clo, chi = (block_bootstrap(lambda x, y, i=i: stat(x[:, i], y[:, i]), blocks, n_boot,
                                        0.95, seed) if len(blocks) > 1 else (0, -np.inf, np.inf))
-        per_col[name] = {"before": float(np.sqrt(np.mean(b[:, i] ** 2))),
-                         "after": float(np.sqrt(np.mean(a[:, i] ** 2))),
-                         "relative": float(stat(b[:, i] ** 2, a[:, i] ** 2)),
-                         "ci95": [float(clo), float(chi)]}
-    return {"metric": "heldout_rmse", "signal": channel,
-            "before": float(np.sqrt(np.mean(b ** 2))), "after": float(np.sqrt(np.mean(a ** 2))),
-            "relative": float(est), "ci95": [float(lo), float(hi)], "by_channel": per_col}
+        per_col[name] = ChannelGain(float(np.sqrt(np.mean(b[:, i] ** 2))),
+                                    float(np.sqrt(np.mean(a[:, i] ** 2))),
+                                    float(stat(b[:, i] ** 2, a[:, i] ** 2)),
+                                    (float(clo), float(chi)))
+    return HeldoutGain(channel, float(np.sqrt(np.mean(b ** 2))),
+                       float(np.sqrt(np.mean(a ** 2))), float(est), (float(lo), float(hi)),
+                       per_col)
 
 
 def _validity(res: Residuals, held: list[RunSignals], channel: str, max_lag: int,
-              noise: dict[str, NoiseModel]) -> dict[str, Any]:
+              noise: dict[str, NoiseModel]) -> dict[str, ResidualValidity]:
     r = _innovations(res, channel, noise)
     speed = np.concatenate([s.rows(s.omega) for s in held])
     out = {}
     for i, name in enumerate(channel_names(channel, r.shape[1])):
         tests = correlation_tests(r[:, i], speed[:, i], min(max_lag, len(r) // 4))
-        out[name] = tests.as_dict() | {"ljung_box_pvalue": ljung_box_pvalue(r[:, i], max_lag)}
+        out[name] = ResidualValidity(tests, ljung_box_pvalue(r[:, i], max_lag))
     return out
 
 
 # ---------------------------------------------------------------------- black box
 def blackbox_share(nominal: Model, extended: Model, train: list[RunSignals],
                    held: list[RunSignals], channel: str, settings: BlackBoxSettings
-                   ) -> dict[str, Any]:
+                   ) -> BlackBoxShare:
     """Held-out share of the nominal residual a sequence network explains, against the
     share the named physics explains, on the same rows."""
     from cdpr_pipeline.identification.reconstruction import HighFrequencyModel
@@ -417,7 +425,6 @@ def blackbox_share(nominal: Model, extended: Model, train: list[RunSignals],
             parts.append(WinchRegression(phi, target, np.full(len(target), k)))
         return WinchRegression.concatenate(parts)
 
-    start = time.perf_counter()
     tr, ho = regression(train), regression(held)
     n = tr.n
     model = HighFrequencyModel(settings.net_factory, settings.window, settings.epochs,
@@ -432,12 +439,7 @@ def blackbox_share(nominal: Model, extended: Model, train: list[RunSignals],
     after_phys = residuals(extended, nominal, held).stacked(channel)[mask]
     share_bb = 1 - float(np.sum(after_bb ** 2) / np.sum(before ** 2))
     share_phys = 1 - float(np.sum(after_phys ** 2) / np.sum(before ** 2))
-    return {"model": "tcn_transformer on the nominal residual", "signal": channel,
-            "heldout_explained_share_blackbox": share_bb,
-            "heldout_explained_share_physics": share_phys,
-            "physics_recovers_pct_of_blackbox": 100 * share_phys / share_bb
-            if share_bb > 0 else None,
-            "train_s": time.perf_counter() - start}
+    return BlackBoxShare(channel, share_bb, share_phys)
 
 
 # ---------------------------------------------------------------------- the whole
@@ -469,7 +471,10 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     selection = select_causes(base, rig, train, held, settings.selection, settings.freeform,
                               log=log)
     causes = ([first] if first else []) + list(selection.causes)
-    clock["causes"] = time.perf_counter() - t0
+    clock["candidates"] = time.perf_counter() - t0 - selection.seconds_freeform
+    clock["free-form"] = selection.seconds_freeform
+
+    t0 = time.perf_counter()
 
     # never worse: the causes are kept only while the extended model's held-out gain has
     # a 95 % interval above zero; the weakest cause goes first until it has
@@ -499,31 +504,26 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         gain = heldout_gain(before_held, after_held, held, channel,
                             settings.selection.block_s, settings.selection.n_boot,
                             settings.selection.seed)
-        if not causes or gain["ci95"][0] > 0:
+        if not causes or gain.ci95[0] > 0:
             break
         dropped = causes.pop()
         withdrawn.append(dropped.label)
         log.info("never worse: %s withdrawn (held-out gain %.1f %%, 95 %% CI %.1f to %.1f %%)",
-                 dropped.label, 100 * gain["relative"], 100 * gain["ci95"][0],
-                 100 * gain["ci95"][1])
-    if withdrawn:
-        gain["withdrawn"] = withdrawn
+                 dropped.label, 100 * gain.relative, 100 * gain.ci95[0], 100 * gain.ci95[1])
+    gain = dataclasses.replace(gain, withdrawn=tuple(withdrawn))
     if unusable:
-        unusable["kept"] = bool(causes and causes[0] is first)
+        unusable = dataclasses.replace(unusable, kept=bool(causes and causes[0] is first))
 
-    t0 = time.perf_counter()
     noise = fit_noise(extended, nominal, train)
     found, plots = discrepancies(nominal, extended, signals, settings, noise)
     nominal_metrics = model_metrics(nominal, nominal, train, held)
-    clock["discrepancies"] = time.perf_counter() - t0
-
-    validity = {"signal": channel, "prewhitened": "AR noise model of the extended model's "
-                "training residual, order by BIC",
-                "before": _validity(before_held, held, channel, settings.max_lag, noise),
-                "after": _validity(after_held, held, channel, settings.max_lag, noise)}
+    validity = ValidityComparison(
+        channel, _validity(before_held, held, channel, settings.max_lag, noise),
+        _validity(after_held, held, channel, settings.max_lag, noise))
     extended_metrics = model_metrics(extended, nominal, train, held)
+    clock["validity"] = time.perf_counter() - t0
 
-    closed: dict[str, Any] = {"available": False}
+    closed = ClosedLoopComparison(False)
     why_not = can_resimulate(rig, trajectories) if settings.closed_loop else "disabled"
     if why_not is None and split.blocks:
         # a block inside a run does not start at rest, where the re-simulation starts
@@ -532,37 +532,37 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         log.info("closed loop not re-simulated: %s", why_not)
     if why_not is None:
         t0 = time.perf_counter()
-        closed = _closed_loop(nominal, extended, rig, trajectories, held_names, found,
-                              bool(causes))
-        plots["closed_loop"] = closed.pop("_plot")
-        clock["closed_loop"] = time.perf_counter() - t0
+        closed, rows, plots["closed_loop"] = _closed_loop(nominal, extended, rig, trajectories,
+                                                          held_names, bool(causes))
+        found += rows
+        clock["closed loop"] = time.perf_counter() - t0
     else:
-        closed["reason"] = why_not
+        closed = ClosedLoopComparison(False, why_not)
 
     blackbox = None
     if settings.blackbox is not None and settings.blackbox.net_factory is not None:
         t0 = time.perf_counter()
         blackbox = blackbox_share(nominal, extended, train, held, channel, settings.blackbox)
-        clock["blackbox"] = time.perf_counter() - t0
+        clock["black box"] = time.perf_counter() - t0
     clock["total"] = time.perf_counter() - start
 
     sentence = summary_sentence(causes, nominal, gain, unusable, withdrawn)
     plots["before_after"] = {"before": before_held.stacked(channel),
                              "after": after_held.stacked(channel), "channel": channel,
                              "t": np.concatenate([s.row_times() for s in held])}
-    return Diagnosis(str(dataset.root), rig, train_names, held_names, nominal, extended,
-                     causes, selection.steps, found, nominal_metrics,
+    return Diagnosis(str(dataset.root), rig, tuple(train_names), tuple(held_names), nominal,
+                     extended, tuple(causes), selection.steps, tuple(found), nominal_metrics,
                      extended_metrics, gain, validity, closed, blackbox, sentence, clock, plots,
-                     extension, unusable)
+                     tuple(extension), unusable)
 
 
 def _reidentify_if_unusable(nominal: Model, train: list[RunSignals], held: list[RunSignals],
                             settings: DiagnosisSettings
-                            ) -> tuple[Judgement | None, dict[str, Any] | None]:
+                            ) -> tuple[Judgement | None, Unusable | None]:
     """A ``winch_parameter_error`` cause re-identifying every winch (linear least squares
     of I_m, F_v, F_c, d) when the stated model's training relative error exceeds
     ``settings.unusable_error_pct``; else ``(None, None)``."""
-    rel = model_metrics(nominal, nominal, train, held)["train"]["relative_error_pct"]
+    rel = model_metrics(nominal, nominal, train, held).train.relative_error_pct
     if not rel > settings.unusable_error_pct:
         return None, None
     ctx = FitContext(nominal, train, [], {})
@@ -576,16 +576,16 @@ def _reidentify_if_unusable(nominal: Model, train: list[RunSignals], held: list[
     log.warning("the stated model is unusable: %.0f %% relative torque error on the training "
                 "runs (over %.0f %%); every winch re-identified before naming causes", rel,
                 settings.unusable_error_pct)
-    return first, {"relative_error_pct": rel, "threshold_pct": settings.unusable_error_pct,
-                   "reidentified": nominal.with_effects(effects).winch.as_dict()}
+    return first, Unusable(rel, settings.unusable_error_pct,
+                           nominal.with_effects(effects).winch.as_dict())
 
 
-def summary_sentence(causes: list[Judgement], nominal: Model, gain: dict[str, Any],
-                     unusable: dict[str, Any] | None = None,
+def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutGain,
+                     unusable: Unusable | None = None,
                      withdrawn: Sequence[str] = ()) -> str:
     prefix = ""
     if unusable:
-        prefix = (f"The stated model was unusable ({unusable['relative_error_pct']:.0f} % "
+        prefix = (f"The stated model was unusable ({unusable.relative_error_pct:.0f} % "
                   f"relative torque error on the training runs): every winch was "
                   f"re-identified before naming causes. ")
     if withdrawn:
@@ -601,36 +601,40 @@ def summary_sentence(causes: list[Judgement], nominal: Model, gain: dict[str, An
         else top.effect.replace("_", " ")
     text = prefix + (
         f"Most likely cause: {name}: {describe_cause(top, nominal)}. Extending the model "
-        f"lowers the held-out {gain['signal']} RMSE by {100 * gain['relative']:.1f} % "
-        f"(95 % CI {100 * gain['ci95'][0]:.1f} to {100 * gain['ci95'][1]:.1f} %).")
+        f"lowers the held-out {gain.signal} RMSE by {100 * gain.relative:.1f} % "
+        f"(95 % CI {100 * gain.ci95[0]:.1f} to {100 * gain.ci95[1]:.1f} %).")
     if len(causes) > 1:
         text += " Also: " + "; ".join(c.effect for c in causes[1:]) + "."
     return text
 
 
-def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names, found,
-                 extended_differs: bool) -> dict[str, Any]:
+def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names,
+                 extended_differs: bool
+                 ) -> tuple[ClosedLoopComparison, list[Discrepancy], dict[str, Any]]:
+    """Both models re-simulated in closed loop: the comparison, one discrepancy row per
+    column of the nominal model's errors, and the data of the report's figure."""
     sim_nom = resimulate(nominal, nominal, rig, trajectories)
     err_nom = closed_loop_errors(trajectories, sim_nom)
     err_ext = err_nom
     if extended_differs:
         err_ext = closed_loop_errors(trajectories, resimulate(extended, nominal, rig,
                                                               trajectories))
-    out: dict[str, Any] = {"available": True, "runs": {}}
+    rows, errors = [], {}
     for sig_name in ("position", "torque"):
         allb = np.concatenate([err_nom[n][sig_name] for n in err_nom])
         total = float(np.sum(allb ** 2)) or 1.0
         cols = ["x", "y", "z"] if sig_name == "position" else \
             channel_names("torque", allb.shape[1])
-        for i, col in enumerate(cols):
-            found.append({"signal": f"closed_loop_{sig_name}", "channel": col,
-                          "rms": float(np.sqrt(np.mean(allb[:, i] ** 2))),
-                          "share_of_error": float(np.sum(allb[:, i] ** 2) / total)})
+        rows += [Discrepancy(f"closed_loop_{sig_name}", col,
+                             float(np.sqrt(np.mean(allb[:, i] ** 2))),
+                             float(np.sum(allb[:, i] ** 2) / total))
+                 for i, col in enumerate(cols)]
         hb = np.concatenate([err_nom[n][sig_name] for n in held_names])
         ha = np.concatenate([err_ext[n][sig_name] for n in held_names])
-        out[sig_name] = {"heldout_rmse_before": np.sqrt(np.mean(hb ** 2, axis=0)).tolist(),
-                         "heldout_rmse_after": np.sqrt(np.mean(ha ** 2, axis=0)).tolist()}
+        errors[sig_name] = ClosedLoopErrors(
+            tuple(float(v) for v in np.sqrt(np.mean(hb ** 2, axis=0))),
+            tuple(float(v) for v in np.sqrt(np.mean(ha ** 2, axis=0))))
     first = held_names[0]
-    out["_plot"] = {"run": first, "before": err_nom[first]["position"],
-                    "after": err_ext[first]["position"]}
-    return out
+    plot = {"run": first, "before": err_nom[first]["position"],
+            "after": err_ext[first]["position"]}
+    return ClosedLoopComparison(True, None, errors["position"], errors["torque"]), rows, plot

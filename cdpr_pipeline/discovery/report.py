@@ -48,19 +48,18 @@ def _plt():
 def _explaining_plot(d: Diagnosis) -> str:
     """Nominal residual of the most affected column against the signal it follows."""
     if not d.causes:
-        entry = max((e for e in d.discrepancies if "correlations" in e),
-                    key=lambda e: e["share_of_error"], default=None)
+        entry = max((e for e in d.discrepancies if e.correlations is not None),
+                    key=lambda e: e.share_of_error, default=None)
     else:
-        gains = d.gain["by_channel"]
-        col = max(gains, key=lambda k: gains[k]["relative"])
-        entry = next(e for e in d.discrepancies if e.get("channel") == col
-                     and e["signal"] == d.gain["signal"])
+        col = d.gain.best_column()
+        entry = next(e for e in d.discrepancies if e.channel == col
+                     and e.signal == d.gain.signal)
     if entry is None:
         return ""
     plt = _plt()
-    data = d.plots[entry["channel"]]
-    corr = entry["correlations"]
-    key = max(corr, key=lambda k: abs(corr[k]))
+    data = d.plots[entry.channel]
+    corr = entry.correlations
+    key = entry.strongest_correlate()
     x, r = data["signatures"][key], data["residual"]
     fig, ax = plt.subplots(figsize=(7, 3.6))
     ax.plot(x, r, ".", ms=2, alpha=0.35, color="C0", label="nominal residual (all runs)")
@@ -73,25 +72,25 @@ def _explaining_plot(d: Diagnosis) -> str:
         ax.plot(x[order], np.convolve(r[order], np.ones(k) / k, mode="same"), "C3", lw=2,
                 label="running mean")
     ax.set_xlabel(key)
-    unit = "m" if entry["signal"] == "length" else "N m" if hasattr(d.rig, "anchors_m") \
+    unit = "m" if entry.signal == "length" else "N m" if hasattr(d.rig, "anchors_m") \
         else "force/torque units"
-    ax.set_ylabel(f"{entry['channel']} residual ({unit})")
-    ax.set_title(f"{entry['channel']}: residual against {key} (r = {corr[key]:+.2f})")
+    ax.set_ylabel(f"{entry.channel} residual ({unit})")
+    ax.set_title(f"{entry.channel}: residual against {key} (r = {corr[key]:+.2f})")
     ax.legend(fontsize=8)
     return _png(fig)
 
 
 def _band_plot(d: Diagnosis) -> str:
     plt = _plt()
-    entries = [e for e in d.discrepancies if "bands" in e]
+    entries = [e for e in d.discrepancies if e.bands]
     if not entries:
         return ""
     fig, ax = plt.subplots(figsize=(8, 3.2))
-    labels = [f"{b['lo_hz']:.3g}-{b['hi_hz']:.3g}" for b in entries[0]["bands"]]
+    labels = [f"{b.lo_hz:.3g}-{b.hi_hz:.3g}" for b in entries[0].bands]
     width = 0.8 / len(entries)
     for j, e in enumerate(entries):
-        ax.bar(np.arange(len(labels)) + j * width, [b["share"] for b in e["bands"]], width,
-               label=e["channel"])
+        ax.bar(np.arange(len(labels)) + j * width, [b.share for b in e.bands], width,
+               label=e.channel)
     ax.set_xticks(np.arange(len(labels)) + 0.4 - width / 2, labels, fontsize=8)
     ax.set_xlabel("band (Hz), db4 wavelet")
     ax.set_ylabel("share of residual energy")
@@ -100,10 +99,9 @@ def _band_plot(d: Diagnosis) -> str:
 
 
 def _validity_plot(d: Diagnosis) -> str:
-    gains = d.gain["by_channel"]
-    col = max(gains, key=lambda k: gains[k]["relative"])
-    before = d.validity["before"].get(col)
-    after = d.validity["after"].get(col)
+    col = d.gain.best_column()
+    before = d.validity.before.get(col)
+    after = d.validity.after.get(col)
     if before is None:
         return ""
     plt = _plt()
@@ -111,10 +109,9 @@ def _validity_plot(d: Diagnosis) -> str:
     fig, axes = plt.subplots(1, 5, figsize=(12, 2.6), sharey=True)
     for ax, name in zip(axes, names, strict=True):
         for k, res in enumerate((before, after)):
-            t = res[name]
-            ax.bar([k], [t["max_abs"]], color="C3" if not t["passed"] else "C2",
-                   alpha=0.8)
-        band = before[name]["band"]
+            t = res.tests.tests[name]
+            ax.bar([k], [t.max_abs], color="C3" if not t.passed else "C2", alpha=0.8)
+        band = before.tests.tests[name].band
         ax.axhline(band, color="k", ls="--", lw=1)
         ax.set_xticks([0, 1], ["nominal", "extended"], fontsize=8)
         ax.set_title(name, fontsize=9)
@@ -171,14 +168,15 @@ def render(d: Diagnosis) -> str:
     cause_rows = [[c["effect"], c["description"], ", ".join(c["channels"]),
                    c["evidence"]["pvalue"], c["evidence"]["bic_drop"],
                    c["evidence"]["heldout_rmse_drop_pct"]] for c in causes]
-    disc = [[e["signal"], e["channel"], e["rms"], e["share_of_error"],
-             "-".join(f"{v:.3g}" for v in e.get("band_hz", [])),
-             e.get("whiteness_pvalue", ""), ", ".join(e.get("correlates_with", [])[:3])]
+    disc = [[e.signal, e.channel, e.rms, e.share_of_error,
+             "-".join(f"{v:.3g}" for v in e.band_hz or ()),
+             "" if e.whiteness_pvalue is None else e.whiteness_pvalue,
+             ", ".join(e.correlates_with[:3])]
             for e in d.discrepancies]
     g = d.gain
-    gain_rows = [[k, v["before"], v["after"], 100 * v["relative"],
-                  f"{100 * v['ci95'][0]:.1f} to {100 * v['ci95'][1]:.1f}"]
-                 for k, v in g["by_channel"].items()]
+    gain_rows = [[k, v.before, v.after, 100 * v.relative,
+                  f"{100 * v.ci95[0]:.1f} to {100 * v.ci95[1]:.1f}"]
+                 for k, v in g.by_channel.items()]
     first = d.steps[0] if d.steps else []
     cand_rows = [[j.label, j.n_params, j.lr, j.pvalue, j.bic_drop, 100 * j.heldout_gain,
                   "pass" if j.passed else j.reason]
@@ -192,22 +190,22 @@ def render(d: Diagnosis) -> str:
         f"{html.escape(d.sentence)}</p>",
         f"<p class='small'>Training runs: {', '.join(d.train)}. Held-out runs (no part in "
         f"any fit): {', '.join(d.heldout)}. Nominal torque relative error "
-        f"{nm['train']['relative_error_pct']:.2f} % (train), "
-        f"{nm['heldout']['relative_error_pct']:.2f} % (held out).</p>",
+        f"{nm.train.relative_error_pct:.2f} % (train), "
+        f"{nm.heldout.relative_error_pct:.2f} % (held out).</p>",
         "<h2>Causes</h2>",
         _table(cause_rows, ["effect", "fitted", "channels", "p (LR test)", "BIC drop",
                             "held-out RMSE drop %"]) if cause_rows else
         "<p>No candidate explains the discrepancy better than chance on held-out runs.</p>",
         "<h2>Residual against the variable that explains it</h2>", _explaining_plot(d),
         "<h2>Gain on held-out runs</h2>",
-        f"<p>{html.escape(g['signal'])} RMSE {g['before']:.4g} &rarr; {g['after']:.4g} "
-        f"({100 * g['relative']:.1f} %, 95 % CI {100 * g['ci95'][0]:.1f} to "
-        f"{100 * g['ci95'][1]:.1f} %).</p>",
+        f"<p>{html.escape(g.signal)} RMSE {g.before:.4g} &rarr; {g.after:.4g} "
+        f"({100 * g.relative:.1f} %, 95 % CI {100 * g.ci95[0]:.1f} to "
+        f"{100 * g.ci95[1]:.1f} %).</p>",
         _table(gain_rows, ["channel", "RMSE before", "RMSE after", "drop %", "95 % CI %"]),
         _before_after_plot(d),
         "<h2>Validity tests (held-out)</h2>", _validity_plot(d),
         "<h2>Closed loop</h2>", _closed_loop_plot(d) or
-        f"<p>{html.escape(str(d.closed_loop.get('reason', 'not available')))}</p>",
+        f"<p>{html.escape(d.closed_loop.reason or 'not available')}</p>",
         "<h2>What the nominal model gets wrong</h2>",
         _table(disc, ["signal", "channel", "RMS", "share", "band (Hz)", "whiteness p",
                       "follows"]),
@@ -219,9 +217,9 @@ def render(d: Diagnosis) -> str:
     if d.blackbox:
         bb = d.blackbox
         parts.append("<h2>Black-box comparison</h2><p>A TCN-Transformer trained on the nominal "
-                     f"residual explains {100 * bb['heldout_explained_share_blackbox']:.1f} % "
+                     f"residual explains {100 * bb.blackbox:.1f} % "
                      "of it on held-out runs; the named physics explains "
-                     f"{100 * bb['heldout_explained_share_physics']:.1f} %.</p>")
+                     f"{100 * bb.physics:.1f} %.</p>")
     timings = {k: round(v, 1) for k, v in d.timings.items()}
     parts.append(f"<p class='small'>Timings (s): {html.escape(str(timings))}</p></body></html>")
     return "\n".join(parts)

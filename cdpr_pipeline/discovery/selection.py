@@ -29,6 +29,7 @@ vocabulary cannot borrow a name from a candidate that only partly imitates it.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -102,13 +103,17 @@ class SelectionSettings:
     seed: int = 0
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class Judgement:
-    """One fitted candidate (or free-form model) and the verdict of the tests."""
+    """One fitted candidate (or free-form model) and the verdict of the tests.
+
+    Frozen: a step of the selection records what was tested, and later steps make new
+    judgements (:func:`dataclasses.replace`) rather than editing old ones.
+    """
 
     effect: str
     label: str
-    effects: list[Effect]
+    effects: tuple[Effect, ...]
     n_params: int
     train_sse: dict[str, tuple[float, float]]
     heldout_sse: dict[str, tuple[float, float]]
@@ -118,13 +123,16 @@ class Judgement:
     channel: str
     heldout_gain: float
     ci: tuple[float, float]
-    channels: list[str]
+    channels: tuple[str, ...]
+    passed: bool = False
+    reason: str = ""
     fit: Fit | None = None
     candidate: Candidate | None = None
     freeform: FreeFormResult | None = None
-    passed: bool = False
-    reason: str = ""
-    confirmed_by: str | None = None
+
+    def failed(self, reason: str) -> Judgement:
+        """The same judgement, not passed, for ``reason``."""
+        return replace(self, passed=False, reason=reason)
 
     def evidence(self) -> dict[str, Any]:
         return {"pvalue": self.pvalue, "lr": self.lr, "n_params": self.n_params,
@@ -132,8 +140,7 @@ class Judgement:
                     1 - np.sqrt(max(1 - self.heldout_gain, 0.0))),
                 "heldout_sse_drop_pct": 100 * self.heldout_gain,
                 "heldout_sse_drop_ci95_pct": [100 * self.ci[0], 100 * self.ci[1]],
-                "signal": self.channel, "variant": self.label,
-                **({"confirmed_by_freeform": self.confirmed_by} if self.confirmed_by else {})}
+                "signal": self.channel, "variant": self.label}
 
 
 def _row_sq(res: Residuals, channel: str) -> list[np.ndarray]:
@@ -178,25 +185,24 @@ class Judge:
         level = 1 - 2 * self.settings.alpha / max(n_tests, 1)
         ci = self._interval(held, channel, level)
         names = self._channels_explained(train, chans, n_tests)
-        j = Judgement(effect, label, effects, n_params, tr, ho, lr, pvalue, float(bic),
-                      channel, float(gain), ci, names)
         total_before = sum(ho[c][0] * self.ctx.weights[c] ** 2 for c in chans)
         total_after = sum(ho[c][1] * self.ctx.weights[c] ** 2 for c in chans)
+        reason = ""
         if pvalue >= self.settings.alpha / max(n_tests, 1):
-            j.reason = f"not significant on training runs (p = {pvalue:.2g})"
+            reason = f"not significant on training runs (p = {pvalue:.2g})"
         elif gain < self.settings.min_gain:
-            j.reason = (f"held-out {channel} gain {100 * gain:.1f} % below "
-                        f"{100 * self.settings.min_gain:.0f} %")
+            reason = (f"held-out {channel} gain {100 * gain:.1f} % below "
+                      f"{100 * self.settings.min_gain:.0f} %")
         elif explained < self.settings.min_share:
-            j.reason = (f"explains {100 * explained:.1f} % of the nominal held-out {channel} "
-                        f"error, below {100 * self.settings.min_share:.0f} %")
+            reason = (f"explains {100 * explained:.1f} % of the nominal held-out {channel} "
+                      f"error, below {100 * self.settings.min_share:.0f} %")
         elif ci[0] <= 0:
-            j.reason = f"held-out gain interval includes zero ({100 * ci[0]:.1f} %)"
+            reason = f"held-out gain interval includes zero ({100 * ci[0]:.1f} %)"
         elif total_after >= total_before:
-            j.reason = "worse on held-out runs over all channels"
-        else:
-            j.passed = True
-        return j
+            reason = "worse on held-out runs over all channels"
+        return Judgement(effect, label, tuple(effects), n_params, tr, ho, lr, pvalue,
+                         float(bic), channel, float(gain), ci, tuple(names),
+                         passed=not reason, reason=reason)
 
     def _interval(self, held: Residuals, channel: str, level: float) -> tuple[float, float]:
         before, after = _row_sq(self.base_held, channel), _row_sq(held, channel)
@@ -227,13 +233,17 @@ class Judge:
         return out
 
 
-@dataclass
+@dataclass(frozen=True)
 class Selection:
-    """Outcome of :func:`select_causes`."""
+    """Outcome of :func:`select_causes`: the causes kept (strongest first), every step's
+    judgements, the effects that extend the model, and the seconds spent on the named
+    candidates and on the free-form search."""
 
-    causes: list[Judgement]
-    steps: list[list[Judgement]]
-    effects: list[Effect]
+    causes: tuple[Judgement, ...]
+    steps: tuple[tuple[Judgement, ...], ...]
+    effects: tuple[Effect, ...]
+    seconds_candidates: float = 0.0
+    seconds_freeform: float = 0.0
 
 
 def _data_scale(signals: Sequence[RunSignals], kind: str, nominal: Model) -> DataScale:
@@ -313,9 +323,8 @@ class _Search:
                 parts = parts + [_freeform_part(best.freeform)]
             else:
                 parts = _split(parts, best)
-            causes.append(best)
-            for cause, (cand, x) in zip(causes, parts, strict=True):
-                cause.effects = list(cand.build(x))        # re-fitted jointly
+            causes = [replace(cause, effects=tuple(cand.build(x)))     # re-fitted jointly
+                      for cause, (cand, x) in zip(causes + [best], parts, strict=True)]
             freeform = freeform and best.effect != "unnamed"    # one free-form part
             # the same variant again adds nothing (winches are re-identified one by one)
             candidates = [c for c in candidates if c.label != best.label
@@ -387,7 +396,9 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
     candidates = candidates_for(rig, search.scale, settings.effects, settings.refit_winches)
     # free-form terms with a candidate's shape are that candidate's to explain
     search.shapes = vocabulary_shapes(rig, search.scale, settings.effects)
+    start = time.perf_counter()
     causes = search.forward([], candidates, False, settings.max_causes)
+    seconds_candidates = time.perf_counter() - start
     if freeform is not None:
         n_tests = len(candidates) + 1
         ctx, judge = search.context(_effects(causes))
@@ -400,9 +411,10 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
             others = [o for o in causes if o is not c]
             without = search.refit(rest, _effects(others), n_tests)
             with_c = search.refit(rest, _effects(others + [c]), n_tests)
-            bic_with = search.bic(_effects(others + [c]) + with_c.effects,
+            bic_with = search.bic(_effects(others + [c]) + list(with_c.effects),
                                   c.n_params + with_c.n_params)
-            bic_without = search.bic(_effects(others) + without.effects, without.n_params)
+            bic_without = search.bic(_effects(others) + list(without.effects),
+                                     without.n_params)
             # the free-form parameters that take c's place
             replacing = without.n_params - with_c.n_params
             if bic_without + search.log_n() < bic_with and (rest.passed
@@ -419,7 +431,9 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
                 search.refit(rest, _effects(keep), n_tests)
             causes = keep + ([final] if final.passed else [])
     causes = sorted(causes, key=lambda c: -c.bic_drop)
-    return Selection(_merge(causes), search.steps, _effects(causes))
+    return Selection(tuple(_merge(causes)), tuple(tuple(step) for step in search.steps),
+                     tuple(_effects(causes)), seconds_candidates,
+                     time.perf_counter() - start - seconds_candidates)
 
 
 def _build(parts: Sequence[tuple[Candidate, np.ndarray]]) -> list[Effect]:
@@ -492,22 +506,18 @@ def _judge_joint(parts: list[tuple[Candidate, np.ndarray]], cand: Candidate, ctx
         fit = fit_at_start(cand, ctx)
     else:
         fit = fit_candidate(_joint(parts, cand) if parts else cand, ctx)
-    j = judge(cand.effect, cand.label, fit.effects, cand.n_params, n_tests)
-    j.fit, j.candidate = fit, cand
-    if not fit.success and not fit.effects:
-        j.passed, j.reason = False, "fit failed"
-    return j
+    j = replace(judge(cand.effect, cand.label, fit.effects, cand.n_params, n_tests),
+                fit=fit, candidate=cand)
+    return j.failed("fit failed") if not fit.success and not fit.effects else j
 
 
 def _judge_candidate(cand: Candidate, ctx: FitContext, judge: Judge, n_tests: int
                      ) -> Judgement:
     cand = _on_winches(cand, ctx, judge)
     fit = fit_candidate(cand, ctx)
-    j = judge(cand.effect, cand.label, fit.effects, fit.n_params, n_tests)
-    j.fit, j.candidate = fit, cand
-    if not fit.success and not fit.effects:
-        j.passed, j.reason = False, "fit failed"
-    return j
+    j = replace(judge(cand.effect, cand.label, fit.effects, fit.n_params, n_tests),
+                fit=fit, candidate=cand)
+    return j.failed("fit failed") if not fit.success and not fit.effects else j
 
 
 def _judge_freeform(search: FreeFormSearch, ctx: FitContext, judge: Judge, scale: DataScale,
@@ -516,13 +526,10 @@ def _judge_freeform(search: FreeFormSearch, ctx: FitContext, judge: Judge, scale
     torque = judge.base_train.stacked("torque")
     result = search.fit(ctx.train, torque, scale.speed_rms, kind == "cdpr", use_gp=gp,
                         exclude=shapes)
-    j = judge("unnamed", "free-form",
-              judge.base_effects + ([result.effect] if result.terms else []),
-              result.n_params, n_tests)
-    j.freeform = result
-    if not result.terms:
-        j.passed, j.reason = False, "no term selected"
-    return j
+    j = replace(judge("unnamed", "free-form",
+                      judge.base_effects + ([result.effect] if result.terms else []),
+                      result.n_params, n_tests), freeform=result)
+    return j if result.terms else j.failed("no term selected")
 
 
 def _merge(causes: list[Judgement]) -> list[Judgement]:
@@ -531,9 +538,10 @@ def _merge(causes: list[Judgement]) -> list[Judgement]:
     for j in causes:
         if j.effect in out and j.effect == "winch_parameter_error":
             first = out[j.effect]
-            first.effects = first.effects + j.effects
-            first.channels = sorted(set(first.channels) | set(j.channels))
-            first.n_params += j.n_params
+            out[j.effect] = replace(first, effects=first.effects + j.effects,
+                                    channels=tuple(sorted(set(first.channels)
+                                                          | set(j.channels))),
+                                    n_params=first.n_params + j.n_params)
         else:
             out.setdefault(j.effect, j)
     return list(out.values())

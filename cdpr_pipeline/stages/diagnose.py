@@ -103,13 +103,14 @@ def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str,
 
 def summary_metrics(d: Diagnosis) -> dict[str, float]:
     """Flat figures for ``dvc metrics show`` and MLflow."""
-    out = {"causes": len(d.causes), "gain_relative": d.gain["relative"],
-           "gain_before": d.gain["before"], "gain_after": d.gain["after"],
+    out = {"causes": len(d.causes), "gain_relative": d.gain.relative,
+           "gain_before": d.gain.before, "gain_after": d.gain.after,
            "time_total_s": d.timings["total"]}
     for part in ("train", "heldout"):
-        out[f"nominal_{part}_relative_error_pct"] = d.nominal_metrics[part]["relative_error_pct"]
+        out[f"nominal_{part}_relative_error_pct"] = \
+            getattr(d.nominal_metrics, part).relative_error_pct
         out[f"extended_{part}_relative_error_pct"] = \
-            d.extended_metrics[part]["relative_error_pct"]
+            getattr(d.extended_metrics, part).relative_error_pct
     return out
 
 
@@ -127,18 +128,19 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
                                                      "verdict": d.verdict})
     with finished_or_failed(logger):
         logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
-        metrics = {"gain/before": d.gain["before"], "gain/after": d.gain["after"],
-                   "gain/relative": d.gain["relative"], "causes/count": len(d.causes),
-                   "time/total_s": d.timings["total"]}
+        metrics = {"gain/before": d.gain.before, "gain/after": d.gain.after,
+                   "gain/relative": d.gain.relative, "causes/count": len(d.causes)}
+        metrics.update({f"time/{phase.replace(' ', '_')}_s": v
+                        for phase, v in d.timings.items()})
         for part in ("train", "heldout"):
-            for sig, m in d.nominal_metrics["by_signal"].items():
-                metrics[f"nominal/{part}/{sig}/rmse"] = m[part]["rmse"]
+            for sig, m in d.nominal_metrics.by_signal.items():
+                metrics[f"nominal/{part}/{sig}/rmse"] = m[part].rmse
                 metrics[f"extended/{part}/{sig}/rmse"] = \
-                    d.extended_metrics["by_signal"][sig][part]["rmse"]
+                    d.extended_metrics.by_signal[sig][part].rmse
             metrics[f"nominal/{part}/relative_error_pct"] = \
-                d.nominal_metrics[part]["relative_error_pct"]
+                getattr(d.nominal_metrics, part).relative_error_pct
             metrics[f"extended/{part}/relative_error_pct"] = \
-                d.extended_metrics[part]["relative_error_pct"]
+                getattr(d.extended_metrics, part).relative_error_pct
         log_metrics(logger.experiment, logger.run_id, metrics)
         for p in paths.values():
             logger.experiment.log_artifact(logger.run_id, str(p))

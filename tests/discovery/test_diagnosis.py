@@ -106,3 +106,24 @@ def test_two_hidden_effects_both_appear(paper_rig, seed):
     assert set(names) <= found, f"{case}; diagnosed: {d.sentence}"
     assert record["verdict"] in names, f"{case}; diagnosed: {d.sentence}"
     _assert_gain(record, case)
+
+
+def test_the_same_data_and_seed_give_the_same_diagnosis_json(quiet_lab):
+    """diagnosis.json depends on the data and the settings only: no clock, no global
+    random state (the timings live in ``Diagnosis.timings`` and MLflow, not the file);
+    results are frozen."""
+    import dataclasses
+    import json
+    import random
+
+    first = diagnose(quiet_lab, fast_settings())
+    random.seed(123)
+    np.random.seed(123)                 # global state the diagnosis must not read
+    second = diagnose(quiet_lab, fast_settings())
+    a, b = (json.dumps(d.as_json(), sort_keys=True, default=str) for d in (first, second))
+    assert a == b
+    assert "timings" not in a and "train_s" not in a
+    assert {"signals", "candidates", "free-form", "validity", "total"} <= set(first.timings)
+    for frozen in (first, first.gain, *first.steps[0]):
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            frozen.sentence = "edited"

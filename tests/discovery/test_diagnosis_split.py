@@ -39,12 +39,12 @@ def test_a_single_run_is_diagnosed_on_its_last_block(quiet_lab, tmp_path):
     assert held.t_start == pytest.approx(run.t[-1] - 3.0, abs=0.01)
 
     d = diagnose(one, settings)
-    assert d.train == list(split.train) and d.heldout == list(split.heldout)
+    assert d.train == tuple(split.train) and d.heldout == tuple(split.heldout)
     assert d.heldout[0].startswith(f"{run.name}@")
     # a block inside a run cannot be re-simulated from rest: skipped with the reason
-    assert not d.closed_loop["available"] and "time blocks" in d.closed_loop["reason"]
+    assert not d.closed_loop.available and "time blocks" in d.closed_loop.reason
     write_outputs(d, tmp_path, "one_run", split)
     record = json.loads((tmp_path / "diagnosis.json").read_text())
-    assert record["split"]["heldout"] == d.heldout
+    assert record["split"]["heldout"] == list(d.heldout)
     (block,) = record["split"]["blocks"]["heldout"]
     assert block["run"] == run.name and block["stop"] == run.n_samples

@@ -21,17 +21,17 @@ def test_a_cause_that_makes_held_out_runs_worse_is_withdrawn(paper_rig, monkeypa
     data = lab_dataset(paper_rig, [], seed, duration_s=6.0)
     wrong = float(rng_for(seed).uniform(0.2, 0.5))       # a heavier platform than true
     harmful = Judgement("payload_mass_error", "payload_mass_error",
-                        [PayloadMassError(wrong)], 1, {}, {}, 100.0, 1e-9, 90.0, "torque",
-                        0.5, (0.4, 0.6), ["u1"], passed=True)
+                        (PayloadMassError(wrong),), 1, {}, {}, 100.0, 1e-9, 90.0, "torque",
+                        0.5, (0.4, 0.6), ("u1",), passed=True)
 
     def fake_select(*args, **kwargs):
-        return Selection([harmful], [[harmful]], list(harmful.effects))
+        return Selection((harmful,), ((harmful,),), harmful.effects)
 
     monkeypatch.setattr(diagnosis_module, "select_causes", fake_select)
     d = diagnose(data, fast_settings())
     assert d.verdict == "none", seed
-    assert d.effects == [] and d.causes == []
-    assert d.gain["withdrawn"] == ["payload_mass_error"]
+    assert d.effects == [] and d.causes == ()
+    assert d.gain.withdrawn == ("payload_mass_error",)
     assert "withdrawn" in d.sentence
 
 
@@ -47,7 +47,7 @@ def test_an_unusable_stated_model_is_re_identified_first(paper_rig):
                        coulomb=w.coulomb * rng.uniform(4, 8, w.n))
     data.rig = paper_rig.replace(winch_nominal=stated)
     d = diagnose(data, fast_settings())
-    assert d.nominal_metrics["train"]["relative_error_pct"] > 100, seed
+    assert d.nominal_metrics.train.relative_error_pct > 100, seed
     record = d.as_json()
     assert record["nominal"]["unusable"]["relative_error_pct"] > 100
     assert record["causes"][0]["effect"] == "winch_parameter_error", seed
@@ -56,5 +56,5 @@ def test_an_unusable_stated_model_is_re_identified_first(paper_rig):
     for key in ("inertia", "viscous", "coulomb"):
         np.testing.assert_allclose(found[key], getattr(w, key), rtol=0.05,
                                    err_msg=f"{key}, seed {seed}")
-    assert d.extended_metrics["heldout"]["relative_error_pct"] == pytest.approx(
-        0, abs=0.1 * d.nominal_metrics["heldout"]["relative_error_pct"])
+    assert d.extended_metrics.heldout.relative_error_pct == pytest.approx(
+        0, abs=0.1 * d.nominal_metrics.heldout.relative_error_pct)

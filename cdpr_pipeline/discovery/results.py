@@ -1,0 +1,239 @@
+"""Typed, frozen results of a diagnosis, each with ``as_dict()`` for ``diagnosis.json``.
+
+The diagnosis reads its own results through attributes, never by string key; the
+dictionaries exist only at the file boundary (:meth:`Diagnosis.as_json
+<cdpr_pipeline.discovery.diagnosis.Diagnosis.as_json>`), where their layout is the one
+``../shared/spec/diagnosis.md`` states.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from cdpr_pipeline.discovery.validity import ValidityTests
+
+
+def _pair(ci: tuple[float, float]) -> list[float]:
+    return [float(ci[0]), float(ci[1])]
+
+
+@dataclass(frozen=True)
+class ErrorMetrics:
+    """RMSE and relative error (``100 |r| / |y|``) of one channel on some runs."""
+
+    rmse: float
+    relative_error_pct: float
+    rmse_per_channel: tuple[float, ...]
+
+    def as_dict(self, per_channel: bool = True) -> dict[str, Any]:
+        out: dict[str, Any] = {"rmse": self.rmse, "relative_error_pct": self.relative_error_pct}
+        if per_channel:
+            out["rmse_per_channel"] = list(self.rmse_per_channel)
+        return out
+
+
+@dataclass(frozen=True)
+class ModelMetrics:
+    """A model's torque (force) error on the training and held-out runs, and every
+    channel's in ``by_signal[channel][part]``."""
+
+    train: ErrorMetrics
+    heldout: ErrorMetrics
+    by_signal: Mapping[str, Mapping[str, ErrorMetrics]]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"train": self.train.as_dict(per_channel=False),
+                "heldout": self.heldout.as_dict(per_channel=False),
+                "by_signal": {ch: {part: m.as_dict() for part, m in parts.items()}
+                              for ch, parts in self.by_signal.items()}}
+
+
+@dataclass(frozen=True)
+class ChannelGain:
+    """Held-out RMSE of one column before and after, its relative drop and 95 % CI."""
+
+    before: float
+    after: float
+    relative: float
+    ci95: tuple[float, float]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"before": self.before, "after": self.after, "relative": self.relative,
+                "ci95": _pair(self.ci95)}
+
+
+@dataclass(frozen=True)
+class HeldoutGain:
+    """What extending the model buys on held-out runs (the never-worse rule reads
+    ``ci95[0]``), on the channel the first cause explains; causes withdrawn by that
+    rule are listed."""
+
+    signal: str
+    before: float
+    after: float
+    relative: float
+    ci95: tuple[float, float]
+    by_channel: Mapping[str, ChannelGain]
+    withdrawn: tuple[str, ...] = ()
+    metric: str = "heldout_rmse"
+
+    def best_column(self) -> str:
+        """The column whose RMSE dropped most."""
+        return max(self.by_channel, key=lambda k: self.by_channel[k].relative)
+
+    def as_dict(self) -> dict[str, Any]:
+        out = {"metric": self.metric, "signal": self.signal, "before": self.before,
+               "after": self.after, "relative": self.relative, "ci95": _pair(self.ci95),
+               "by_channel": {k: v.as_dict() for k, v in self.by_channel.items()}}
+        if self.withdrawn:
+            out["withdrawn"] = list(self.withdrawn)
+        return out
+
+
+@dataclass(frozen=True)
+class Unusable:
+    """The stated model was grossly wrong and every winch was re-identified first."""
+
+    relative_error_pct: float
+    threshold_pct: float
+    reidentified: Mapping[str, list[float]]
+    kept: bool = False
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"relative_error_pct": self.relative_error_pct,
+                "threshold_pct": self.threshold_pct,
+                "reidentified": dict(self.reidentified), "kept": self.kept}
+
+
+@dataclass(frozen=True)
+class Band:
+    """Share of a residual's energy in one wavelet band."""
+
+    band: str
+    lo_hz: float
+    hi_hz: float
+    share: float
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"band": self.band, "lo_hz": self.lo_hz, "hi_hz": self.hi_hz,
+                "share": self.share}
+
+
+@dataclass(frozen=True)
+class Discrepancy:
+    """What the nominal model gets wrong on one channel column: its size and share, and
+    (for the regression channels) its band, whiteness, what it follows and the
+    correlation tests. Closed-loop rows carry only size and share."""
+
+    signal: str
+    channel: str
+    rms: float
+    share_of_error: float
+    bands: tuple[Band, ...] = ()
+    whiteness_pvalue: float | None = None
+    correlates_with: tuple[str, ...] = ()
+    correlations: Mapping[str, float] | None = None
+    validity: ValidityTests | None = None
+
+    @property
+    def band_hz(self) -> tuple[float, float] | None:
+        """The band holding the largest share of the residual energy."""
+        if not self.bands:
+            return None
+        top = max(self.bands, key=lambda b: b.share)
+        return top.lo_hz, top.hi_hz
+
+    def strongest_correlate(self) -> str | None:
+        if not self.correlations:
+            return None
+        return max(self.correlations, key=lambda k: abs(self.correlations[k]))
+
+    def as_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"signal": self.signal, "channel": self.channel,
+                               "rms": self.rms, "share_of_error": self.share_of_error}
+        if self.correlations is not None:
+            out.update({"band_hz": list(self.band_hz or ()),
+                        "bands": [b.as_dict() for b in self.bands],
+                        "whiteness_pvalue": self.whiteness_pvalue,
+                        "correlates_with": list(self.correlates_with),
+                        "correlations": dict(self.correlations),
+                        "validity": self.validity.as_dict() if self.validity else None})
+        return out
+
+
+@dataclass(frozen=True)
+class ResidualValidity:
+    """The correlation tests and Ljung-Box whiteness of one column's innovations."""
+
+    tests: ValidityTests
+    ljung_box_pvalue: float
+
+    def as_dict(self) -> dict[str, Any]:
+        return self.tests.as_dict() | {"ljung_box_pvalue": self.ljung_box_pvalue}
+
+
+@dataclass(frozen=True)
+class ValidityComparison:
+    """Validity tests of the held-out residual before (nominal) and after (extended)."""
+
+    signal: str
+    before: Mapping[str, ResidualValidity]
+    after: Mapping[str, ResidualValidity]
+    prewhitened: str = ("AR noise model of the extended model's training residual, order "
+                        "by BIC")
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"signal": self.signal, "prewhitened": self.prewhitened,
+                "before": {k: v.as_dict() for k, v in self.before.items()},
+                "after": {k: v.as_dict() for k, v in self.after.items()}}
+
+
+@dataclass(frozen=True)
+class ClosedLoopErrors:
+    """Held-out closed-loop RMSE per column before and after, for one signal."""
+
+    heldout_rmse_before: tuple[float, ...]
+    heldout_rmse_after: tuple[float, ...]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"heldout_rmse_before": list(self.heldout_rmse_before),
+                "heldout_rmse_after": list(self.heldout_rmse_after)}
+
+
+@dataclass(frozen=True)
+class ClosedLoopComparison:
+    """The recorded runs re-simulated in closed loop with both models, or why not."""
+
+    available: bool
+    reason: str | None = None
+    position: ClosedLoopErrors | None = None
+    torque: ClosedLoopErrors | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        if not self.available:
+            return {"available": False, "reason": self.reason}
+        return {"available": True, "runs": {}, "position": self.position.as_dict(),
+                "torque": self.torque.as_dict()}
+
+
+@dataclass(frozen=True)
+class BlackBoxShare:
+    """Held-out share of the nominal residual a network explains, against the named
+    physics' share on the same rows."""
+
+    signal: str
+    blackbox: float
+    physics: float
+    model: str = "tcn_transformer on the nominal residual"
+
+    @property
+    def physics_recovers_pct(self) -> float | None:
+        return 100 * self.physics / self.blackbox if self.blackbox > 0 else None
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"model": self.model, "signal": self.signal,
+                "heldout_explained_share_blackbox": self.blackbox,
+                "heldout_explained_share_physics": self.physics,
+                "physics_recovers_pct_of_blackbox": self.physics_recovers_pct}
