@@ -498,6 +498,17 @@ def heldout_split(runs: Sequence[Trajectory], heldout: Sequence[str] | None = No
     train = [n for n in pool if n not in held]
     if not train:
         raise ValueError(f"{source}: no runs left to fit on after holding out {held}")
+    by_name = {tr.name: tr for tr in runs}
+    short = [by_name[n] for n in train + held if by_name[n].n_samples < min_samples]
+    if short:
+        tr = short[0]
+        rate = _rate(tr)
+        raise ValueError(
+            f"{source}: run {tr.name} (trajectories/{tr.name}.csv) has "
+            f"{_samples_label(tr.n_samples, rate)}; the analysis needs at least "
+            f"{_samples_label(min_samples, rate)} per run (both filter trims and the "
+            "regression rows); record a longer run, or leave it out of the dataset"
+            + (f" (also too short: {[t.name for t in short[1:]]})" if len(short) > 1 else ""))
     return Split.build({"train": [Segment(n) for n in train],
                         "heldout": [Segment(n) for n in held]})
 

@@ -137,6 +137,12 @@ def test_too_short_run_names_the_dataset_and_the_run():
         model_split(runs, 0.1, 0.1, [], seed=0, gap=WINDOW, min_samples=35, source="my_rig")
     with pytest.raises(ValueError, match=r"my_rig: run 000_a has 100 samples"):
         heldout_split(runs, min_samples=80, source="my_rig")
+    # one short run among several: named with its file, before any filtering fails on it
+    runs = [run("000_a", 10.0), run("001_b", 0.5), run("002_spiral", 10.0)]
+    with pytest.raises(ValueError, match=r"my_rig: run 001_b \(trajectories/001_b.csv\) "
+                                         r"has 50 samples .* at least 80 samples"):
+        heldout_split(runs, min_samples=80, source="my_rig")
+    assert heldout_split(runs, train_runs=["000_a"], min_samples=80).train == ("000_a",)
 
 
 # ---------------------------------------------------------------- held-out runs
