@@ -3,26 +3,39 @@ the independent generator of the tests (tests/independent_sim, no code shared wi
 cdpr_pipeline/sim). Targets (issue 13): at most 20 s for five 15 s runs at 250 Hz with
 three winches, at most 60 s for a three-run six-axis recording, on 2 cores.
 
-Each case prints the time per phase (signals, causes, discrepancies, closed loop, black
-box) and, as the reference run in the same process, the time the generator took to write
-the dataset (work of known size on this machine).
+Each case prints the time per phase (whatever ``Diagnosis.timings`` holds: signals,
+candidates, free-form, validity, closed loop, black box) and two references measured in
+the same process, so that figures taken on other machines, or on a busy one, compare:
+
+* ``gen``: the seconds the generator took to write the dataset;
+* ``ref``: the seconds of a fixed workload of the kind diagnose is made of (zero-phase
+  IIR filtering of run-length blocks, small dense least squares, numpy on (N, 3)
+  arrays), taken right before and right after the diagnosis (their mean: a machine
+  whose load changes during the case shows it as a spread). ``units`` is the diagnosis
+  in those references (diagnose seconds / ref seconds).
 
     python benchmarks/bench_foreign_diagnose.py [--effects none stribeck_friction ...]
+        [--kinds cdpr axes] [--seeds 11 12 13]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
+from scipy.signal import cheby1, sosfiltfilt
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # tests.independent_sim
 
 from cdpr_pipeline.config import compose_config  # noqa: E402
 from cdpr_pipeline.data.io import load_dataset  # noqa: E402
 from cdpr_pipeline.discovery.diagnosis import diagnose  # noqa: E402
+from cdpr_pipeline.discovery.fitting import one_blas_thread  # noqa: E402
 from cdpr_pipeline.stages.diagnose import settings_from_config  # noqa: E402
 from tests.independent_sim import (  # noqa: E402
     random_axes_rig,
@@ -30,6 +43,29 @@ from tests.independent_sim import (  # noqa: E402
     simulate_axes_dataset,
     simulate_dataset,
 )
+
+#: repetitions of the reference workload (about 0.5 s on one core of the 2-core
+#: machine this was written on)
+REFERENCE_REPEATS = 200
+
+
+def reference_seconds(repeats: int = REFERENCE_REPEATS) -> float:
+    """Seconds for a fixed workload shaped like diagnose's inner loop: per repeat, a
+    zero-phase Chebyshev filter of a 15 s, 250 Hz block of six signals, the smooth-sign
+    friction of three winches on it, and a least-squares solve of 3000 rows by ten
+    columns (BLAS on one thread, as diagnose's fits). Fixed inputs (a private
+    generator), so every machine does the same work."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(3750, 6))
+    a = rng.normal(size=(3000, 10))
+    sos = cheby1(8, 0.05, 0.8 / 21, output="sos")
+    with one_blas_thread():
+        start = time.perf_counter()
+        for _ in range(repeats):
+            y = sosfiltfilt(sos, x, axis=0)
+            np.tanh(20.0 * y[:, :3]) * np.exp(-(y[:, 3:] / 0.3) ** 2)
+            np.linalg.lstsq(a, a[:, 0] + y[:3000, 0], rcond=None)
+        return time.perf_counter() - start
 
 
 def _case(kind: str, effect: str, seed: int, root: Path) -> None:
@@ -44,17 +80,21 @@ def _case(kind: str, effect: str, seed: int, root: Path) -> None:
         rig = random_axes_rig(seed, n_axes=6, rate_hz=250.0)
         truth = simulate_axes_dataset(out, rig, effects, n_runs=3, duration_s=10.0, seed=seed)
         target = 60.0
-    t_ref = time.perf_counter() - start
+    t_gen = time.perf_counter() - start
     cfg = compose_config("diagnose", [f"data.path={out}", "blackbox.enabled=false"])
     data = load_dataset(out)
+    ref_before = reference_seconds()
     start = time.perf_counter()
     d = diagnose(data, settings_from_config(cfg))
     t = time.perf_counter() - start
+    ref_after = reference_seconds()
+    ref = 0.5 * (ref_before + ref_after)
     hidden = [e.name for e in truth.effects] or ["none"]
     parts = ", ".join(f"{k} {v:.1f} s" for k, v in d.timings.items() if k != "total")
-    print(f"{kind:4s} hidden {'+'.join(hidden):28s} verdict {d.verdict:28s} "
+    print(f"{kind:4s} seed {seed} hidden {'+'.join(hidden):28s} verdict {d.verdict:28s} "
           f"diagnose {t:5.1f} s (target {target:.0f} s; {parts}); "
-          f"reference: generating the data {t_ref:.1f} s", flush=True)
+          f"reference: gen {t_gen:.1f} s, ref {ref:.2f} s "
+          f"({ref_before:.2f}/{ref_after:.2f}), units {t / ref:.1f}", flush=True)
 
 
 def main() -> None:
@@ -62,12 +102,16 @@ def main() -> None:
     parser.add_argument("--effects", nargs="+", default=["none", "stribeck_friction",
                                                          "asymmetric_viscous_friction"])
     parser.add_argument("--kinds", nargs="+", default=["cdpr", "axes"])
-    parser.add_argument("--seed", type=int, default=11)
+    parser.add_argument("--seeds", "--seed", nargs="+", type=int, default=[11])
     args = parser.parse_args()
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"{os.cpu_count()} CPUs, load average {load:.1f}; reference workload "
+          f"{reference_seconds():.2f} s", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
-        for kind in args.kinds:
-            for effect in args.effects:
-                _case(kind, effect, args.seed, Path(tmp))
+        for seed in args.seeds:
+            for kind in args.kinds:
+                for effect in args.effects:
+                    _case(kind, effect, seed, Path(tmp))
 
 
 if __name__ == "__main__":

@@ -10,14 +10,22 @@ variances (to first order).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.optimize._numdiff import approx_derivative
 
 from cdpr_pipeline.discovery.candidates import TORQUE, Candidate, WinchPart, on_winches
-from cdpr_pipeline.discovery.residuals import Model, Residuals, residual_rows, residuals
+from cdpr_pipeline.discovery.residuals import (
+    Model,
+    Residuals,
+    residuals,
+    runs_rows,
+    statistics_rows,
+)
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.sim.effects import Effect, WinchParameterError
 from cdpr_pipeline.sim.plant import smooth_sign
@@ -31,7 +39,7 @@ def winch_columns(sig: RunSignals, nominal: Model) -> np.ndarray:
     cols = np.stack([w.inertia * sig.alpha, w.viscous * sig.omega,
                      w.coulomb * smooth_sign(sig.omega, nominal.sign_sharpness),
                      np.ones_like(sig.omega)], axis=-1)
-    return sig.rows(cols)
+    return statistics_rows(sig, cols)
 
 
 @dataclass
@@ -65,11 +73,9 @@ class FitContext:
         model = self.nominal.with_effects([*self.base, *effects])
         if getattr(model, "elastic", False) or not self._base_by_run:
             return residuals(model, self.nominal, self.train)
-        out = []
-        for sig, base in zip(self.train, self._base_by_run, strict=True):
-            r = residual_rows(model, self.nominal, sig, channels)
-            out.append({c: r.get(c, base[c]) for c in base})
-        return Residuals([s.name for s in self.train], out)
+        rows = runs_rows(model, self.nominal, self.train, channels)
+        return Residuals([s.name for s in self.train], [
+            {c: r.get(c, b[c]) for c in b} for r, b in zip(rows, self._base_by_run, strict=True)])
 
     def winch_refit(self, torque_residual: np.ndarray) -> np.ndarray:
         """Least-squares winch parameter changes (n, 4) that best explain the stacked
@@ -84,6 +90,18 @@ class FitContext:
                 delta = self.winch_refit(r)
                 r = r - np.einsum("tnk,nk->tn", self.columns, delta)
             parts.append(self.weights[ch] * r.ravel())
+        return np.concatenate(parts)
+
+    @staticmethod
+    def blocks(res: Residuals) -> np.ndarray:
+        """Which channel column (``u2``, ``l1``: one block each) every entry of
+        :meth:`vector` belongs to. An entry depends on its own column only: the
+        filter, the encoder zero and the winch re-fit all act column by column."""
+        parts, start = [], 0
+        for ch in res.channels:
+            rows, n = res.stacked(ch).shape
+            parts.append(start + np.tile(np.arange(n), rows))
+            start += n
         return np.concatenate(parts)
 
 
@@ -214,18 +232,141 @@ def refit_effects(delta: np.ndarray) -> list[Effect]:
             for i, d in enumerate(np.asarray(delta, float))]
 
 
+_BLAS: list = []
+
+
+def one_blas_thread() -> AbstractContextManager:
+    """BLAS limited to one thread while in the context. Diagnosis does thousands of small
+    dense products and factorisations (trust-region steps on Jacobians of a few thousand
+    rows and a few columns, free-form terms against the vocabulary's shapes): a second
+    BLAS thread gains nothing there, and on a machine whose cores are busy it waits for
+    them (on two loaded cores a 3000 x 10 SVD took 20-90 ms with two threads, 0.4 ms with
+    one; an 80 x 8000 matrix-vector product 0.95 ms against 0.14 ms)."""
+    try:
+        from threadpoolctl import ThreadpoolController
+    except ImportError:       # pragma: no cover - a scikit-learn dependency
+        return nullcontext()
+    if not _BLAS:
+        _BLAS.append(ThreadpoolController())
+    return _BLAS[0].limit(limits=1, user_api="blas")
+
+
 def fit_candidate(candidate: Candidate, ctx: FitContext) -> Fit:
     """Best of the candidate's starts (bounded trust-region least squares)."""
+    with one_blas_thread():
+        return _fit_candidate(candidate, ctx)
+
+
+class GroupedJacobian:
+    """The finite-difference Jacobian :func:`~scipy.optimize.least_squares` takes
+    (``'2-point'``: the same steps, the same bound handling, the same numbers) for a
+    residual vector made of blocks (channel columns, :meth:`FitContext.blocks`), with
+    parameters that move disjoint blocks perturbed together in one evaluation.
+
+    Which blocks a parameter moves is read off the first Jacobian, taken one parameter
+    at a time: a winch's Stribeck size moves that winch's torque column and nothing
+    else, so a joint fit of a kept per-winch effect with a new candidate needs one
+    evaluation per group of winch-disjoint parameters instead of one per parameter. A
+    parameter that moved nothing there may move anything (it is never grouped), and a
+    grouped evaluation that moves a block outside its group's blocks makes every later
+    Jacobian of the fit one parameter at a time again.
+
+    Use :meth:`fun` as the residual function and the object itself as ``jac``;
+    ``blocks(size)`` gives the block of every entry of a residual vector of that size
+    (None: unknown, every Jacobian one parameter at a time).
+    """
+
+    def __init__(self, fun, blocks, bounds: tuple[np.ndarray, np.ndarray]) -> None:
+        self._fun, self._blocks, self._bounds = fun, blocks, bounds
+        self._recent: list[tuple[np.ndarray, np.ndarray]] = []
+        self._support: np.ndarray | None = None      # (blocks, parameters) moved
+        self._groups: np.ndarray | None = None
+        self.evaluations = 0
+
+    def fun(self, x: np.ndarray) -> np.ndarray:
+        f = self._evaluate(x)
+        self._recent = [(np.array(x, float), f), *self._recent[:3]]
+        return f
+
+    def _evaluate(self, x: np.ndarray) -> np.ndarray:
+        self.evaluations += 1
+        return np.atleast_1d(np.asarray(self._fun(x), float))
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, float)
+        f0 = next((f for xr, f in self._recent if np.array_equal(xr, x)), None)
+        if f0 is None:
+            f0 = self.fun(x)
+        if self._groups is not None:
+            J = self._grouped(x, f0)
+            if J is not None:
+                return J
+        J = approx_derivative(self._evaluate, x, method="2-point", f0=f0, bounds=self._bounds)
+        if self._support is None:
+            self._learn(J)
+        return J
+
+    def _learn(self, J: np.ndarray) -> None:
+        blocks = self._blocks(len(J))
+        if blocks is None:
+            return
+        moved = np.zeros((int(blocks.max()) + 1, J.shape[1]), bool)
+        np.logical_or.at(moved, blocks, J != 0)
+        moved[:, ~moved.any(axis=0)] = True      # moved nothing: may move anything
+        groups = np.full(J.shape[1], -1)
+        taken: list[np.ndarray] = []
+        for j in range(J.shape[1]):
+            g = next((g for g, used in enumerate(taken) if not (used & moved[:, j]).any()),
+                     len(taken))
+            if g == len(taken):
+                taken.append(np.zeros(len(moved), bool))
+            taken[g] |= moved[:, j]
+            groups[j] = g
+        self._support = moved
+        self._groups = groups if len(taken) < J.shape[1] else None
+
+    def _grouped(self, x: np.ndarray, f0: np.ndarray) -> np.ndarray | None:
+        blocks = self._blocks(len(f0))
+        if blocks is None:
+            return None
+        seen: list[np.ndarray] = []
+
+        def evaluate(xg: np.ndarray) -> np.ndarray:
+            f = self._evaluate(xg)
+            seen.append(f)
+            return f
+
+        structure = self._support[blocks]
+        J = approx_derivative(evaluate, x, method="2-point", f0=f0, bounds=self._bounds,
+                              sparsity=(structure, self._groups))
+        for g, f in enumerate(seen):
+            allowed = self._support[:, self._groups == g].any(axis=1)
+            if not allowed[blocks[f != f0]].all():
+                self._groups = None       # a parameter moved more than it did: one by one
+                return None
+        # column-major like scipy's own: the trust-region algebra rounds by layout
+        return np.asfortranarray(J.toarray(), float)
+
+
+def _fit_candidate(candidate: Candidate, ctx: FitContext) -> Fit:
+    layout: list[np.ndarray] = []
 
     def fun(x: np.ndarray) -> np.ndarray:
         res = ctx.training_residuals(candidate.build(x), candidate.affects)
+        if not layout:
+            layout.append(ctx.blocks(res))
         return ctx.vector(res, candidate.refit_winches)
 
+    def blocks(size: int) -> np.ndarray | None:
+        return layout[0] if layout and len(layout[0]) == size else None
+
     best = None
+    bounds = (candidate.lower, candidate.upper)
     for x0 in candidate.starts:
         x0 = np.clip(x0, candidate.lower, candidate.upper)
+        jac = GroupedJacobian(fun, blocks, bounds)
         try:
-            sol = least_squares(fun, x0, bounds=(candidate.lower, candidate.upper),
+            sol = least_squares(jac.fun, x0, jac=jac, bounds=bounds,
                                 x_scale=candidate.x_scale, method="trf",
                                 max_nfev=(8 if candidate.linear else ctx.max_nfev)
                                 * max(1, candidate.n_params))

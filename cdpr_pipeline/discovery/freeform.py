@@ -33,10 +33,12 @@ import operator
 import random
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from functools import partial
+from functools import lru_cache, partial
 
 import numpy as np
 
+from cdpr_pipeline.discovery.fitting import one_blas_thread
+from cdpr_pipeline.discovery.residuals import statistics_rows
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.evolution import MaxTree, deap_random
 from cdpr_pipeline.sim.effects import SymbolicWinchTorque
@@ -53,6 +55,7 @@ _SHAPE_SAMPLES = 8000
 
 
 # ------------------------------------------------------------------ term evaluation
+@lru_cache(maxsize=16384)
 def readable(expression: str) -> bool:
     """True if no function is nested inside a transcendental one (``exp``, ``tanh``,
     ``sin``, ``cos`` of a plain variable only), and a term holds at most one
@@ -137,7 +140,8 @@ def term_columns(expressions: Sequence[str], signals: Sequence[RunSignals]) -> n
         if missing:
             cols = np.stack([evaluate(e, {"omega": sig.omega, "theta": sig.theta})
                              for e in missing], axis=-1)
-            for e, col in zip(missing, np.moveaxis(sig.rows(cols), -1, 0), strict=True):
+            for e, col in zip(missing, np.moveaxis(statistics_rows(sig, cols), -1, 0),
+                              strict=True):
                 known[e] = col
         out.append(np.stack([known[e] for e in expressions], axis=-1))
     return np.concatenate(out)
@@ -382,8 +386,8 @@ class GrammarGP:
         state = row_state(signals)
         vocabulary = ShapeFilter(exclude, state)
 
-        def fitness(ind) -> tuple[float]:
-            expr = self.expression(ind)
+        def fitness(ind, expr: str | None = None) -> tuple[float]:
+            expr = self.expression(ind) if expr is None else expr
             if expr not in cache and not readable(expr):
                 cache[expr] = 0.0          # not a term to report: the search looks elsewhere
             if expr not in cache:
@@ -427,9 +431,11 @@ class GrammarGP:
                 expr = self.expression(ind)
                 if expr in seen:
                     offspring[k] = ind = toolbox.individual()
-                seen.add(expr)
+                    expr = None            # a newcomer: fitness writes its expression
+                else:
+                    seen.add(expr)
                 if not ind.fitness.valid:
-                    ind.fitness.values = fitness(ind)
+                    ind.fitness.values = fitness(ind, expr)
             pop = tools.selBest(pop, 2) + offspring[:-2]       # elitism
             top = max(cache.values())
             best, stalled = (top, 0) if top > best + 1e-6 else (best, stalled + 1)
@@ -566,6 +572,11 @@ class FreeFormSearch:
         """Sparse torque terms explaining ``residual`` (stacked rows, n) of ``signals``,
         at most :data:`MAX_TERMS_PER_CHANNEL` per winch, none with a shape of
         ``exclude`` (the vocabulary's, see :class:`ShapeFilter`)."""
+        with one_blas_thread():     # thousands of small products (see one_blas_thread)
+            return self._fit(signals, residual, speed_rms, angles, use_gp, exclude)
+
+    def _fit(self, signals: Sequence[RunSignals], residual: np.ndarray, speed_rms: float,
+             angles: bool, use_gp: bool, exclude: Sequence[str]) -> FreeFormResult:
         library = base_library(speed_rms, angles, self.harmonics)
         library += [e for e in self.extra_terms if e not in library]
         found: list[tuple[str, float]] = []

@@ -15,14 +15,24 @@ Residuals are measured minus predicted, on the statistics rows of
 
 from __future__ import annotations
 
+import dataclasses
+import logging
+import pickle
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
+from scipy.signal import cheby1, sosfilt, sosfilt_zi
+
+try:  # the compiled kernel of scipy.signal.sosfilt
+    from scipy.signal._sosfilt import _sosfilt
+except ImportError:     # pragma: no cover - another SciPy layout
+    _sosfilt = None
 
 from cdpr_pipeline.data.rig import CdprRig, Rig
 from cdpr_pipeline.discovery.signals import RunSignals
-from cdpr_pipeline.sim.plant import Drives, Plant
+from cdpr_pipeline.sim.plant import Drives, Plant, smooth_sign
 from cdpr_pipeline.sim.sensors import Sensors
 
 #: channel -> column prefix in the data contract
@@ -31,6 +41,7 @@ CHANNEL_PREFIX = {"torque": "u", "length": "l"}
 _EXACT_ENCODERS = Sensors(mocap_noise_m=0.0, encoder_counts_per_rev=0, torque_noise_nm=0.0)
 
 Model = Plant | Drives
+log = logging.getLogger(__name__)
 
 
 def nominal_model(rig: Rig, sign_sharpness: float | None) -> Model:
@@ -65,31 +76,249 @@ def predict(model: Model, nominal: Model, sig: RunSignals,
     return {"torque": model.inverse_dynamics(sig.theta, sig.omega, sig.alpha, sig.t)["torque"]}
 
 
+def _memo(sig: RunSignals, group: str, key, make, size: int = 64):
+    """``make()`` memoised on the run under ``key``, at most ``size`` entries per
+    ``group`` (the oldest goes first)."""
+    store = sig.cache.setdefault(("residuals", group), {})
+    if key not in store:
+        if len(store) >= size:
+            del store[next(iter(store))]
+        store[key] = make()
+    return store[key]
+
+
 def _load(model: Plant, sig: RunSignals, acceleration: np.ndarray):
     """:meth:`Plant.load_tensions` of a run, memoised on the run: most candidates leave
     geometry and mass alone, and the per-sample solves are the costliest part of a fit."""
     # tensions are linear in the mass: cache them per unit mass, so fitting a payload
     # error does not repeat the per-sample solves
     key = (model.anchors.tobytes(), float(model.gravity), id(acceleration))
-    if key not in sig.cache:
-        if len(sig.cache) > 64:
-            sig.cache.clear()
-        sig.cache[key] = model.replace(mass=1.0).load_tensions(sig.position, acceleration)
-    unit, g, units = sig.cache[key]
+    unit, g, units = _memo(sig, "load", key, lambda: model.replace(mass=1.0).load_tensions(
+        sig.position, acceleration), size=16)      # full-rate arrays, 0.5 MB a run each
     return float(model.mass) * unit, g, units
+
+
+@lru_cache(maxsize=16)
+def _decimation_filter(q: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`scipy.signal.decimate`'s anti-alias filter for factor ``q`` (order-8
+    Chebyshev I, ``zero_phase``), its step-response initial state and filtfilt's pad
+    length, designed once: the design costs several times the filtering itself."""
+    sos = np.ascontiguousarray(cheby1(8, 0.05, 0.8 / q, output="sos"), float)
+    ntaps = 2 * len(sos) + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum()))
+    return sos, sosfilt_zi(sos), 3 * ntaps
+
+
+def _sections(sos: np.ndarray, x: np.ndarray, zi: np.ndarray) -> None:
+    """:func:`scipy.signal.sosfilt` along the last axis of ``x`` (signals, samples),
+    in place, from the initial state ``zi`` (signals, sections, 2): its compiled kernel
+    without the argument checks and axis moves (a fit filters thousands of small
+    blocks), or the public function where the kernel is not found."""
+    if _sosfilt is not None:
+        _sosfilt(sos, x, zi)
+    else:       # pragma: no cover - another SciPy layout
+        x[...] = sosfilt(sos, x, axis=-1, zi=np.moveaxis(zi, 0, 1))[0]
+
+
+def statistics_rows(sig: RunSignals, x: np.ndarray) -> np.ndarray:
+    """``sig.rows(x)``, the same numbers, faster: with the protocol's decimation,
+    :func:`scipy.signal.decimate` (``zero_phase``: :func:`scipy.signal.sosfiltfilt`
+    with its odd extension, along axis 0) written out, with its filter designed once
+    (every model evaluation of a fit filters what it changed)."""
+    q = int(sig.settings.decimate)
+    x = np.asarray(x)
+    if q <= 1 or x.dtype != np.float64:
+        return sig.rows(x)
+    trim = int(round(sig.settings.filter.trim_s * sig.fs))
+    sos, zi, pad = _decimation_filter(q)
+    length = len(x) - 2 * trim
+    if length <= pad:
+        return sig.rows(x)
+    shape = x.shape[1:]
+    # (signals, samples): each signal a contiguous row, as the kernel filters them
+    xt = x[trim:len(x) - trim].reshape(length, -1).T
+    ext = np.empty((len(xt), length + 2 * pad))
+    ext[:, pad:pad + length] = xt
+    ext[:, :pad] = 2 * xt[:, :1] - xt[:, pad:0:-1]
+    ext[:, pad + length:] = 2 * xt[:, -1:] - xt[:, -2:-pad - 2:-1]
+    _sections(sos, ext, zi[None] * ext[:, :1, None])
+    back = np.ascontiguousarray(ext[:, ::-1])
+    _sections(sos, back, zi[None] * back[:, :1, None])
+    rows = back[:, ::-1][:, pad:pad + length:q]
+    return rows.T.reshape((rows.shape[1], *shape))
+
+
+# ---------------------------------------------------------------- residual rows
+def _direct_rows(model: Model, nominal: Model, sig: RunSignals,
+                 channels: frozenset[str] | None = None) -> dict[str, np.ndarray]:
+    """Measured minus predicted, parallel-filtered: the prediction at the full rate,
+    then the filter."""
+    pred = predict(model, nominal, sig, channels)
+    measured = {"torque": sig.torque, "length": sig.lengths}
+    names = [c for c in pred if c == "length" or channels is None or "torque" in channels]
+    # every channel through the filter in one pass (one array, n columns each)
+    r = statistics_rows(sig, np.concatenate([measured[c] - pred[c] for c in names], axis=1))
+    out = dict(zip(names, np.split(r, len(names), axis=1), strict=True))
+    if "length" in out:
+        out["length"] = out["length"] - out["length"].mean(axis=0)   # the encoder zero
+    return out
+
+
+class _Filtered:
+    """A full-rate column block ``x`` (N, n) of a run on the statistics rows, and (on
+    demand) the rows of its time derivative ``np.gradient(x, t)``: what an actuator lag
+    adds to a commanded torque (``u + tau u'``)."""
+
+    __slots__ = ("_sig", "_x", "rows", "_slope")
+
+    def __init__(self, sig: RunSignals, x: np.ndarray) -> None:
+        self._sig, self._x = sig, x
+        self.rows = statistics_rows(sig, x)
+        self._slope = None
+
+    def commanded(self, tau: float) -> np.ndarray:
+        """Rows of ``x + tau x'`` (:func:`~cdpr_pipeline.sim.plant.commanded_torque`)."""
+        if tau <= 0.0:
+            return self.rows
+        if self._slope is None:
+            self._slope = statistics_rows(self._sig, np.gradient(self._x, self._sig.t, axis=0))
+        return self.rows + tau * self._slope
+
+
+def _fingerprint(obj) -> bytes | None:
+    """Exact identity of an effect's (or a model's) parameters, None if not picklable."""
+    try:
+        return pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception:       # noqa: BLE001 - an effect holding something odd: not memoised
+        return None
+
+
+def _model_key(model: Model) -> bytes | None:
+    """The model's own parameters (its effects left out)."""
+    return _fingerprint([getattr(model, f.name) for f in dataclasses.fields(model)
+                         if f.name != "effects"])
+
+
+def _effect_keys(model: Model) -> list[tuple | None]:
+    """Per effect of ``model``, what its extra torque depends on (its own parameters and
+    the model's), for the memo of :func:`_extra_rows`; None where not fingerprinted."""
+    if not model.effects:
+        return []
+    key = _model_key(model)
+    tokens = [None if key is None else _fingerprint(e) for e in model.effects]
+    return [None if t is None else (t, key) for t in tokens]
+
+
+def _extra_rows(sig: RunSignals, effect, model: Model, key: tuple | None
+                ) -> _Filtered | None:
+    """The filtered extra torque of one effect on ``model`` (None: it adds none),
+    memoised on the run under ``key`` (:func:`_effect_keys`)."""
+    def make() -> _Filtered | None:
+        extra = effect.winch_torque(sig.theta, sig.omega, model)
+        return None if extra is None else _Filtered(sig, extra)
+
+    return make() if key is None else _memo(sig, "extra", key, make, size=256)
+
+
+def _linear_rows(model: Model, nominal: Model, sig: RunSignals,
+                 channels: frozenset[str] | None, keys: list[tuple | None]
+                 ) -> dict[str, np.ndarray]:
+    """:func:`_direct_rows` by the linearity of the filter. The predicted torque is
+
+        u = c(R t + I a + F_v w + F_c s(w) + d + sum_e f_e(theta, w)),
+        c(x) = x + tau x'          (commanded_torque),
+
+    with the tensions ``t = m t_1`` linear in the mass (:func:`_load`), so its rows are
+    the same combination of the rows of ``t_1, a, w, s(w), 1`` (filtered once per run)
+    and of each effect's extra torque ``f_e`` (filtered once per value of the effect).
+    The encoder length is affine in the reeled length, ``l_enc = L_0 - (R_0/R)(L - l)``,
+    and the reeled length is the geometric one for rigid cables (filtered once per
+    anchor geometry). A fit's evaluations mostly move one effect at a time: only what
+    moves goes through the filter again.
+    """
+    plant = isinstance(model, Plant)
+    k = model.sign_sharpness
+    winch = _memo(sig, "winch", None if k is None else float(k), lambda: [
+        _Filtered(sig, c) for c in (sig.alpha, sig.omega, smooth_sign(sig.omega, k),
+                                    np.ones_like(sig.omega))])
+    out = {}
+    if channels is None or "torque" in channels:
+        tau = float(model.actuator_time_constant)
+        w = model.winch
+        pred = sum(p * f.commanded(tau) for p, f in zip(
+            (w.inertia, w.viscous, w.coulomb, w.offset), winch, strict=True))
+        if plant:
+            unit = _memo(sig, "tension", (model.anchors.tobytes(), float(model.gravity)),
+                         lambda: _Filtered(sig, _load(model.replace(mass=1.0), sig,
+                                                      sig.acceleration)[0]))
+            pred = pred + model.drum_radius * float(model.mass) * unit.commanded(tau)
+        for effect, key in zip(model.effects, keys, strict=True):
+            extra = _extra_rows(sig, effect, model, key)
+            if extra is not None:
+                pred = pred + extra.commanded(tau)
+        out["torque"] = _memo(sig, "measured", "torque",
+                              lambda: statistics_rows(sig, sig.torque)) - pred
+    if plant and (channels is None or "length" in channels):
+        g = _load(model, sig, sig.acceleration)[1]
+        if model.elastic:   # quasi-static stretch, from the slow acceleration (see signals)
+            reeled = _memo(sig, "stretched", (
+                model.anchors.tobytes(), float(model.gravity), float(model.mass),
+                model.cable_stiffness.tobytes()), lambda: statistics_rows(
+                    sig, model.reeled_length(g, _load(model, sig, sig.slow_acceleration)[0])))
+        else:
+            reeled = _memo(sig, "geometric", model.anchors.tobytes(),
+                           lambda: statistics_rows(sig, g))
+        one = winch[3].rows
+        length = nominal.home_lengths * one - nominal.drum_radius / model.drum_radius * (
+            model.home_lengths * one - reeled)
+        r = _memo(sig, "measured", "length",
+                  lambda: statistics_rows(sig, sig.lengths)) - length
+        out["length"] = r - r.mean(axis=0)      # the encoder zero is not the model's
+    return out
+
+
+#: model structures whose rows :func:`_linear_rows` has matched with :func:`_direct_rows`
+_CHECKED: dict[tuple, bool] = {}
+
+
+def _structure(model: Model, channels: frozenset[str] | None) -> tuple:
+    return (type(model), tuple(type(e) for e in model.effects),
+            getattr(model, "elastic", False), model.actuator_time_constant > 0,
+            model.sign_sharpness is None or np.isinf(model.sign_sharpness),
+            None if channels is None else tuple(sorted(channels)))
 
 
 def residual_rows(model: Model, nominal: Model, sig: RunSignals,
                   channels: frozenset[str] | None = None) -> dict[str, np.ndarray]:
-    """Measured minus predicted, parallel-filtered, on the statistics rows (rows, n)."""
-    pred = predict(model, nominal, sig, channels)
-    out = {}
-    if channels is None or "torque" in channels:
-        out["torque"] = sig.rows(sig.torque - pred["torque"])
-    if "length" in pred:
-        r = sig.rows(sig.lengths - pred["length"])
-        out["length"] = r - r.mean(axis=0)      # the encoder zero is not the model's
-    return out
+    """Measured minus predicted, parallel-filtered, on the statistics rows (rows, n).
+
+    Computed by the filter's linearity (:func:`_linear_rows`), which matches the direct
+    computation (the plant's prediction, then the filter) to rounding: the first time a
+    model of a new structure (its effect types, elastic cables, actuator lag) comes by,
+    both are computed and compared, and a structure that does not match is computed
+    directly from then on."""
+    return runs_rows(model, nominal, [sig], channels)[0]
+
+
+def runs_rows(model: Model, nominal: Model, signals: Sequence[RunSignals],
+              channels: frozenset[str] | None = None) -> list[dict[str, np.ndarray]]:
+    """:func:`residual_rows` of several runs of one model."""
+    if type(model) not in (Plant, Drives):
+        return [_direct_rows(model, nominal, s, channels) for s in signals]
+    keys = _effect_keys(model)
+    structure = _structure(model, channels)
+    if structure not in _CHECKED and signals:
+        direct = _direct_rows(model, nominal, signals[0], channels)
+        fast = _linear_rows(model, nominal, signals[0], channels, keys)
+        _CHECKED[structure] = direct.keys() == fast.keys() and all(
+            np.allclose(fast[c], direct[c], rtol=0.0,
+                        atol=1e-9 * max(1.0, float(np.max(np.abs(direct[c])))))
+            for c in direct)
+        if not _CHECKED[structure]:
+            log.warning("residual rows by linearity do not match the direct computation "
+                        "for %s; computed directly", structure)
+    if _CHECKED.get(structure):
+        return [_linear_rows(model, nominal, s, channels, keys) for s in signals]
+    return [_direct_rows(model, nominal, s, channels) for s in signals]
 
 
 @dataclass
@@ -117,14 +346,13 @@ class Residuals:
 
 
 def residuals(model: Model, nominal: Model, signals: Sequence[RunSignals]) -> Residuals:
-    return Residuals([s.name for s in signals],
-                     [residual_rows(model, nominal, s) for s in signals])
+    return Residuals([s.name for s in signals], runs_rows(model, nominal, signals))
 
 
 def measured_rows(signals: Sequence[RunSignals], channel: str = "torque") -> np.ndarray:
     """The measured channel itself on the statistics rows (for relative errors)."""
     if channel == "torque":
-        return np.concatenate([s.rows(s.torque) for s in signals])
-    parts = [s.rows(s.lengths) for s in signals]
+        return np.concatenate([statistics_rows(s, s.torque) for s in signals])
+    parts = [statistics_rows(s, s.lengths) for s in signals]
     return np.concatenate([p - p.mean(axis=0) for p in parts])
 

@@ -1,0 +1,85 @@
+"""The fast residual paths of diagnosis compute what the direct ones compute: the
+filter written out (``statistics_rows``) is ``RunSignals.rows`` bit for bit, the rows by
+the filter's linearity (``_linear_rows``) match the plant's prediction filtered
+(``_direct_rows``) to rounding for every candidate effect, and the grouped
+finite-difference Jacobian is scipy's own."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from cdpr_pipeline.discovery import residuals as R
+from cdpr_pipeline.discovery.candidates import DataScale, candidates_for, nominal_winch
+from cdpr_pipeline.discovery.fitting import GroupedJacobian
+from cdpr_pipeline.discovery.signals import dataset_signals
+from cdpr_pipeline.identification.regressors import RegressionSettings, resolve_settings
+from cdpr_pipeline.sim.effects import SymbolicWinchTorque
+
+
+@pytest.fixture(scope="module")
+def lab(quiet_lab):
+    regression = resolve_settings(RegressionSettings(), quiet_lab.trajectories, quiet_lab.rig)
+    return quiet_lab, dataset_signals(quiet_lab.trajectories[:2], quiet_lab.rig, regression)
+
+
+def test_statistics_rows_are_the_runs_rows(lab):
+    _, sigs = lab
+    rng = np.random.default_rng(0)
+    for sig in sigs:
+        for x in (sig.torque, sig.lengths, rng.normal(size=(len(sig.t), 3, 4))):
+            assert np.array_equal(R.statistics_rows(sig, x), sig.rows(x))
+
+
+@pytest.mark.parametrize("sharpness", [None, 30.0])
+def test_rows_by_linearity_match_the_direct_rows(lab, sharpness):
+    data, sigs = lab
+    regression = dataclasses.replace(sigs[0].settings, sign_sharpness=sharpness)
+    sigs = dataset_signals(data.trajectories[:2], data.rig, regression)
+    nominal = R.nominal_model(data.rig, sharpness)
+    omega = np.concatenate([s.omega for s in sigs])
+    scale = DataScale(float(np.sqrt(np.mean(omega ** 2))), omega.shape[1], "cdpr",
+                      nominal_winch(data.rig))
+    rng = np.random.default_rng(1)
+    sets = []
+    for cand in candidates_for(data.rig, scale, None, True):
+        lo = np.where(np.isfinite(cand.lower), cand.lower, -1e9)
+        hi = np.where(np.isfinite(cand.upper), cand.upper, 1e9)
+        x = np.clip(cand.starts[0] + 2 * cand.x_scale * rng.normal(size=cand.n_params), lo, hi)
+        sets.append(list(cand.build(x)))
+    sets.append([e for s in sets[::2] for e in s])
+    sets.append([SymbolicWinchTorque([{"cable": 1, "expression": "sin_k(theta, 3)",
+                                       "coefficient": 0.2}])] + sets[-1])
+    for effects in sets:
+        model = nominal.with_effects(effects)
+        keys = R._effect_keys(model)
+        for channels in (None, frozenset({"torque"}), frozenset({"length"})):
+            for sig in sigs:
+                direct = R._direct_rows(model, nominal, sig, channels)
+                fast = R._linear_rows(model, nominal, sig, channels, keys)
+                assert direct.keys() == fast.keys()
+                for c in direct:
+                    scale_c = max(1.0, float(np.max(np.abs(direct[c]))))
+                    assert np.max(np.abs(fast[c] - direct[c])) <= 1e-9 * scale_c, (
+                        [type(e).__name__ for e in effects], c)
+
+
+def test_grouped_jacobian_is_scipys():
+    """Two blocks, parameters acting on one each: the same fit as scipy's 2-point."""
+    t = np.linspace(0, 1, 200)
+
+    def fun(x):
+        return np.concatenate([np.exp(-x[0] * t) * x[1] - np.exp(-2 * t),
+                               np.sin(x[2] * t) - np.sin(3 * t)])
+
+    blocks = np.repeat([0, 1], 200)
+    bounds = (np.array([0.1, -5, 0.5]), np.array([10, 5, 6.0]))
+    x0 = np.array([1.0, 0.5, 2.0])
+    ref = least_squares(fun, x0, bounds=bounds, method="trf")
+    jac = GroupedJacobian(fun, lambda size: blocks, bounds)
+    sol = least_squares(jac.fun, x0, jac=jac, bounds=bounds, method="trf")
+    assert np.array_equal(sol.x, ref.x) and sol.cost == ref.cost
+    assert jac._groups is not None and len(set(jac._groups)) == 2
