@@ -1,16 +1,29 @@
-"""Detection and false-alarm rates of `cdpr diagnose`, and the smallest magnitude of each
-effect it detects reliably.
+"""Detection and false-alarm rates of `cdpr diagnose` on both simulators, and the smallest
+magnitude of each effect it detects reliably (virtual lab).
 
-For every drawable effect (and for no effect) the virtual lab simulates the
-``trajectory=diagnosis`` experiment (five 15 s runs, spiral held out) with the effect
-hidden at a magnitude drawn from its documented range, for several seeds; the
-diagnosis (closed loop and black box off: they do not take part in naming causes) must
-return the right verdict. Then each effect's magnitude is scaled down by factors until
-detection drops below 90 %.
+For every drawable effect (and for no effect) each simulator hides the effect at a
+magnitude drawn from its documented range, for several seeds, and the diagnosis (closed
+loop and black box off: they take no part in naming causes) must give the right verdict:
 
-    python benchmarks/bench_detection.py --seeds 5 --scales 1 0.5 0.25 --out results/detection.json
+* ``lab``: the project's virtual lab (``cdpr_pipeline/sim``), the paper rig, the
+  ``trajectory=diagnosis`` experiment (five 15 s runs, spiral held out); each effect's
+  magnitude is then scaled down by factors until detection drops below 90 %;
+* ``independent``: the independent simulator of the tests (``tests/independent_sim``, no
+  code shared with ``cdpr_pipeline/sim``), a random rig per seed: cable robots (3 or 4
+  cables, 100-1000 Hz, five 15 s runs) and drive axes (1-6 axes, 100-2000 Hz, three
+  10 s runs), magnitudes per channel in absolute units; its datasets are written to disk
+  and loaded like a user's. Where the truth gives a number the cause can express, the
+  fitted magnitude is compared with it (``foreign_cases.parameter_errors``).
 
-Prints a table and writes JSON.
+A hit needs the verdict among the hidden labels (``unnamed`` for an effect outside the
+vocabulary), every hidden label among the causes, and for an effect outside the
+vocabulary no vocabulary name at all.
+
+    python benchmarks/bench_detection.py --simulator both --seeds 3 --scales 1 \
+        [--settings cli|fast] [--out results/detection.json]
+
+Prints a table (detection per effect per simulator, false alarms per simulator) and
+writes JSON.
 """
 
 from __future__ import annotations
@@ -18,71 +31,182 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
+import platform
+import shutil
+import sys
+import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
 
-from cdpr_pipeline.config import compose_config
-from cdpr_pipeline.discovery.study import run_case
-from cdpr_pipeline.sim.effects import EFFECTS
-from cdpr_pipeline.stages.simulate import rig_from_config
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests" / "discovery")]
+
+from foreign_cases import (  # noqa: E402
+    KINDS,
+    OUTSIDE,
+    VOCABULARY,
+    foreign_case,
+    foreign_settings,
+    grade,
+    parameter_errors,
+    parameters_ok,
+)
+from lab_cases import fast_settings  # noqa: E402
+
+from cdpr_pipeline.config import compose_config  # noqa: E402
+from cdpr_pipeline.discovery.study import run_case  # noqa: E402
+from cdpr_pipeline.sim.effects import EFFECTS  # noqa: E402
+from cdpr_pipeline.stages.simulate import rig_from_config  # noqa: E402
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--first-seed", type=int, default=1000)
-    parser.add_argument("--scales", type=float, nargs="*", default=[1.0, 0.5, 0.25])
-    parser.add_argument("--effects", nargs="*", default=None)
-    parser.add_argument("--out", type=Path, default=Path("results/detection.json"))
-    args = parser.parse_args()
-    logging.basicConfig(level=logging.WARNING)
-
+def lab_cases(args, settings, record) -> None:
+    """The virtual lab: every drawable effect at decreasing scales."""
     cfg = compose_config("simulate", ["trajectory=diagnosis"])
     rig = rig_from_config(cfg.rig)
     counts, duration = dict(cfg.trajectory.counts), float(cfg.trajectory.duration_s)
     names = args.effects or sorted(n for n, c in EFFECTS.items() if c.drawable)
+    names = [n for n in names if n in EFFECTS]
     seeds = range(args.first_seed, args.first_seed + args.seeds)
-    results: dict = {"machine": "see README", "seeds": list(seeds), "cases": []}
-
-    def record(name: str, scale: float, case: dict) -> None:
-        case.update(effect=name, scale=scale)
-        results["cases"].append(case)
-        print(f"{name:30s} x{scale:<5g} seed {case['seed']}: verdict {case['verdict']:28s} "
-              f"{'ok' if case['hit'] else 'MISS'} ({case['seconds']:.1f} s)", flush=True)
-
     for seed in seeds:
-        record("none", 1.0, run_case(rig, counts, duration, [], seed))
+        record("lab", "cdpr", "none", 1.0, _lab(run_case(rig, counts, duration, [], seed,
+                                                       settings)))
     for name in names:
         for scale in sorted(args.scales, reverse=True):
             hits = 0
             for seed in seeds:
                 effect = EFFECTS[name].sample(np.random.default_rng([seed, 17]), rig.n)
-                case = run_case(rig, counts, duration, [effect.scaled(scale)], seed)
-                record(name, scale, case)
+                case = _lab(run_case(rig, counts, duration, [effect.scaled(scale)], seed,
+                                     settings))
+                record("lab", "cdpr", name, scale, case)
                 hits += case["hit"]
             if hits < 0.9 * len(seeds):
                 break      # smaller scales will not do better
 
-    summary = {}
-    for name in ["none", *names]:
-        by_scale: dict[float, list[bool]] = {}
-        for c in results["cases"]:
-            if c["effect"] == name:
-                by_scale.setdefault(c["scale"], []).append(c["hit"])
-        rates = {s: float(np.mean(h)) for s, h in sorted(by_scale.items(), reverse=True)}
-        reliable = [s for s, r in rates.items() if r >= 0.9]
-        summary[name] = {"rate_by_scale": rates,
-                         "smallest_reliable_scale": min(reliable) if reliable else None}
-    results["summary"] = summary
-    results["false_alarm_rate"] = 1 - summary["none"]["rate_by_scale"].get(1.0, 0.0)
+
+def _lab(case: dict) -> dict:
+    return {**case, "misnamed": case["wrong_names"]}
+
+
+def independent_cases(args, settings, record, tmp: Path) -> None:
+    """The independent simulator: every effect of each kind (and none), a random rig
+    per seed, full magnitude."""
+    for kind in args.kinds:
+        names = ["none", *VOCABULARY[kind], *OUTSIDE[kind]]
+        if args.effects:
+            names = [n for n in names if n in args.effects or n == "none"]
+        for name in names:
+            for k in range(args.seeds):
+                seed = args.first_seed + k
+                case = foreign_case(tmp, kind, [] if name == "none" else [name], seed)
+                rec = case.diagnose(settings)
+                out = {**grade(rec, case.hidden), "seed": case.seed,
+                       "seconds": case.seconds, "rig": case.describe().split(", hidden")[0],
+                       "effects": [e.to_dict() for e in case.truth.effects],
+                       "summary": rec["summary"]}
+                if name != "none" and rec["causes"] and rec["verdict"] == name:
+                    errs = parameter_errors(case, rec["causes"][0])
+                    ok, why = parameters_ok(case, rec["causes"][0])
+                    out.update(parameter_errors=errs, parameters_ok=ok, parameter_issue=why)
+                record("independent", kind, name, 1.0, out)
+                shutil.rmtree(case.path, ignore_errors=True)
+
+
+def summarise(cases: list[dict]) -> dict:
+    out: dict = {}
+    for sim in sorted({c["simulator"] for c in cases}):
+        mine = [c for c in cases if c["simulator"] == sim]
+        nulls = [c for c in mine if c["effect"] == "none"]
+        per: dict = {}
+        for c in mine:
+            key = c["effect"] if sim == "lab" else f"{c['kind']}:{c['effect']}"
+            per.setdefault(key, {}).setdefault(c["scale"], []).append(c)
+        table = {}
+        for key, by_scale in per.items():
+            rates = {s: float(np.mean([c["hit"] for c in cs]))
+                     for s, cs in sorted(by_scale.items(), reverse=True)}
+            reliable = [s for s, r in rates.items() if r >= 0.9]
+            full = by_scale.get(1.0, [])
+            params = [c["parameters_ok"] for c in full if "parameters_ok" in c]
+            table[key] = {"rate_by_scale": rates, "cases": len(full),
+                          "smallest_reliable_scale": min(reliable) if reliable else None,
+                          "misnamed": float(np.mean([bool(c["misnamed"]) for c in full]))
+                          if full else None,
+                          "parameters_ok": float(np.mean(params)) if params else None}
+        out[sim] = {"per_effect": table,
+                    "detection_rate": float(np.mean([c["hit"] for c in mine
+                                                     if c["effect"] != "none"
+                                                     and c["scale"] == 1.0])),
+                    "false_alarm_rate": float(np.mean([c["verdict"] != "none"
+                                                       for c in nulls])) if nulls else None,
+                    "null_datasets": len(nulls),
+                    "seconds_median": float(np.median([c["seconds"] for c in mine]))}
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--simulator", choices=["lab", "independent", "both"], default="both")
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--first-seed", type=int, default=1000)
+    parser.add_argument("--scales", type=float, nargs="*", default=[1.0, 0.5, 0.25],
+                        help="lab only: magnitude scales tried, largest first")
+    parser.add_argument("--effects", nargs="*", default=None)
+    parser.add_argument("--kinds", nargs="*", default=list(KINDS),
+                        help="independent simulator: rig kinds")
+    parser.add_argument("--settings", choices=["cli", "fast"], default="cli",
+                        help="cli: conf/diagnose.yaml (closed loop, black box off); fast: "
+                             "the discovery tests' settings (lab_cases.fast_settings)")
+    parser.add_argument("--out", type=Path, default=Path("results/detection.json"))
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.WARNING)
+    settings = foreign_settings() if args.settings == "cli" else fast_settings()
+
+    cases: list[dict] = []
+    start = time.perf_counter()
+
+    def record(sim: str, kind: str, name: str, scale: float, case: dict) -> None:
+        case.update(simulator=sim, kind=kind, effect=name, scale=scale)
+        cases.append(case)
+        extra = "" if case.get("parameters_ok", True) else \
+            f" parameters: {case['parameter_issue']}"
+        print(f"{sim:11s} {kind:4s} {name:28s} x{scale:<4g} seed {case['seed']}: verdict "
+              f"{case['verdict']:28s} {'ok' if case['hit'] else 'MISS'} "
+              f"({case['seconds']:.1f} s){extra}", flush=True)
+
+    if args.simulator in ("lab", "both"):
+        lab_cases(args, settings, record)
+    if args.simulator in ("independent", "both"):
+        with tempfile.TemporaryDirectory() as tmp:
+            independent_cases(args, settings, record, Path(tmp))
+
+    summary = summarise(cases)
+    results = {"benchmark": "detection rates of cdpr diagnose", "settings": args.settings,
+               "seeds": list(range(args.first_seed, args.first_seed + args.seeds)),
+               "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
+                           "load_avg_at_end": os.getloadavg(),
+                           "wall_s": time.perf_counter() - start},
+               "cases": cases, "summary": summary}
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(results, indent=1))
-    print("\neffect                          detection rate by scale         smallest reliable")
-    for name, s in summary.items():
-        rates = ", ".join(f"x{k:g}: {100 * v:.0f} %" for k, v in s["rate_by_scale"].items())
-        print(f"{name:30s}  {rates:32s} {s['smallest_reliable_scale']}")
-    print(f"false-alarm rate (no effect): {100 * results['false_alarm_rate']:.0f} %")
+    args.out.write_text(json.dumps(results, indent=1, default=str))
+    for sim, s in summary.items():
+        print(f"\n{sim} simulator: detection rate per effect (scale 1 unless stated)")
+        print(f"  {'effect':38s} {'detected':>10s} {'misnamed':>9s} {'params ok':>9s}  "
+              "by scale / smallest reliable")
+        for key, t in s["per_effect"].items():
+            rates = ", ".join(f"x{k:g}: {100 * v:.0f} %" for k, v in t["rate_by_scale"].items())
+            r1 = t["rate_by_scale"].get(1.0)
+            mis = "" if t["misnamed"] is None else f"{100 * t['misnamed']:.0f} %"
+            par = "" if t["parameters_ok"] is None else f"{100 * t['parameters_ok']:.0f} %"
+            print(f"  {key:38s} {'' if r1 is None else f'{100 * r1:.0f} %':>10s} {mis:>9s} "
+                  f"{par:>9s}  {rates}; {t['smallest_reliable_scale']}")
+        fa = s["false_alarm_rate"]
+        print(f"  overall detection {100 * s['detection_rate']:.0f} %; false alarms "
+              f"{'n/a' if fa is None else f'{100 * fa:.0f} %'} of {s['null_datasets']} "
+              "effect-free datasets")
+    print(f"\nwritten {args.out}")
 
 
 if __name__ == "__main__":

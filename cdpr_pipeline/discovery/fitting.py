@@ -39,7 +39,7 @@ def winch_columns(sig: RunSignals, nominal: Model) -> np.ndarray:
     cols = np.stack([w.inertia * sig.alpha, w.viscous * sig.omega,
                      w.coulomb * smooth_sign(sig.omega, nominal.sign_sharpness),
                      np.ones_like(sig.omega)], axis=-1)
-    return statistics_rows(sig, cols)
+    return statistics_rows(sig, sig.torque_weighted(cols))   # like the torque residual
 
 
 @dataclass

@@ -140,7 +140,9 @@ def term_columns(expressions: Sequence[str], signals: Sequence[RunSignals]) -> n
         if missing:
             cols = np.stack([evaluate(e, {"omega": sig.omega, "theta": sig.theta})
                              for e in missing], axis=-1)
-            for e, col in zip(missing, np.moveaxis(statistics_rows(sig, cols), -1, 0),
+            # weighted like the torque residual the terms are fitted to
+            rows = statistics_rows(sig, sig.torque_weighted(cols))
+            for e, col in zip(missing, np.moveaxis(rows, -1, 0),
                               strict=True):
                 known[e] = col
         out.append(np.stack([known[e] for e in expressions], axis=-1))

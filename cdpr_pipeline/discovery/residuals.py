@@ -155,8 +155,12 @@ def _direct_rows(model: Model, nominal: Model, sig: RunSignals,
     pred = predict(model, nominal, sig, channels)
     measured = {"torque": sig.torque, "length": sig.lengths}
     names = [c for c in pred if c == "length" or channels is None or "torque" in channels]
-    # every channel through the filter in one pass (one array, n columns each)
-    r = statistics_rows(sig, np.concatenate([measured[c] - pred[c] for c in names], axis=1))
+    # every channel through the filter in one pass (one array, n columns each); torque
+    # samples whose friction the stated law does not give are left out before the filter
+    # (RunSignals.friction_known: stick, stop, start, reversal under a hard sign)
+    r = statistics_rows(sig, np.concatenate([
+        sig.torque_weighted(measured[c] - pred[c]) if c == "torque" else measured[c] - pred[c]
+        for c in names], axis=1))
     out = dict(zip(names, np.split(r, len(names), axis=1), strict=True))
     if "length" in out:
         out["length"] = out["length"] - out["length"].mean(axis=0)   # the encoder zero
@@ -164,15 +168,17 @@ def _direct_rows(model: Model, nominal: Model, sig: RunSignals,
 
 
 class _Filtered:
-    """A full-rate column block ``x`` (N, n) of a run on the statistics rows, and (on
-    demand) the rows of its time derivative ``np.gradient(x, t)``: what an actuator lag
-    adds to a commanded torque (``u + tau u'``)."""
+    """A full-rate torque-side column block ``x`` (N, n) of a run on the statistics
+    rows, and (on demand) the rows of its time derivative ``np.gradient(x, t)``: what an
+    actuator lag adds to a commanded torque (``u + tau u'``). Both are weighted like the
+    torque residual (:meth:`RunSignals.torque_weighted`, after the derivative) before the
+    filter."""
 
     __slots__ = ("_sig", "_x", "rows", "_slope")
 
     def __init__(self, sig: RunSignals, x: np.ndarray) -> None:
         self._sig, self._x = sig, x
-        self.rows = statistics_rows(sig, x)
+        self.rows = statistics_rows(sig, sig.torque_weighted(x))
         self._slope = None
 
     def commanded(self, tau: float) -> np.ndarray:
@@ -180,7 +186,8 @@ class _Filtered:
         if tau <= 0.0:
             return self.rows
         if self._slope is None:
-            self._slope = statistics_rows(self._sig, np.gradient(self._x, self._sig.t, axis=0))
+            self._slope = statistics_rows(self._sig, self._sig.torque_weighted(
+                np.gradient(self._x, self._sig.t, axis=0)))
         return self.rows + tau * self._slope
 
 
@@ -255,8 +262,8 @@ def _linear_rows(model: Model, nominal: Model, sig: RunSignals,
             extra = _extra_rows(sig, effect, model, key)
             if extra is not None:
                 pred = pred + extra.commanded(tau)
-        out["torque"] = _memo(sig, "measured", "torque",
-                              lambda: statistics_rows(sig, sig.torque)) - pred
+        out["torque"] = _memo(sig, "measured", "torque", lambda: statistics_rows(
+            sig, sig.torque_weighted(sig.torque))) - pred
     if plant and (channels is None or "length" in channels):
         g = _load(model, sig, sig.acceleration)[1]
         if model.elastic:   # quasi-static stretch, from the slow acceleration (see signals)
@@ -267,7 +274,8 @@ def _linear_rows(model: Model, nominal: Model, sig: RunSignals,
         else:
             reeled = _memo(sig, "geometric", model.anchors.tobytes(),
                            lambda: statistics_rows(sig, g))
-        one = winch[3].rows
+        # the length side is not weighted (its own ones column)
+        one = _memo(sig, "ones", None, lambda: statistics_rows(sig, np.ones_like(sig.omega)))
         length = nominal.home_lengths * one - nominal.drum_radius / model.drum_radius * (
             model.home_lengths * one - reeled)
         r = _memo(sig, "measured", "length",
@@ -352,7 +360,8 @@ def residuals(model: Model, nominal: Model, signals: Sequence[RunSignals]) -> Re
 def measured_rows(signals: Sequence[RunSignals], channel: str = "torque") -> np.ndarray:
     """The measured channel itself on the statistics rows (for relative errors)."""
     if channel == "torque":
-        return np.concatenate([statistics_rows(s, s.torque) for s in signals])
+        return np.concatenate([statistics_rows(s, s.torque_weighted(s.torque))
+                               for s in signals])
     parts = [statistics_rows(s, s.lengths) for s in signals]
     return np.concatenate([p - p.mean(axis=0) for p in parts])
 

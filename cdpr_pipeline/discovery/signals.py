@@ -1,12 +1,26 @@
 """Measured signals of a run, prepared once for every model the diagnosis compares.
 
 Positions are low-passed and differentiated the way the identification does it
-(:class:`~cdpr_pipeline.identification.regressors.DerivativeFilter`). A model predicts
-the raw measured channels (motor torque, encoder length) from these smooth signals; the
-residual, measured minus predicted, then goes through the *same* parallel low-pass and
-is sampled on the *statistics rows*: trimmed at both ends and thinned to twice
-the cut-off, so neighbouring rows carry nearly independent noise and likelihood-ratio
-tests count honest degrees of freedom.
+(:mod:`~cdpr_pipeline.identification.regressors`): a zero-phase Butterworth, the central
+difference for the speed and the *compact* second difference for the acceleration, which
+is exactly the acceleration averaged over the triangle of half-width ``T`` around each
+sample, the window a torque held over each sample (``zero_order_hold``) is averaged
+with. A model predicts the raw measured channels (motor torque, encoder length) from
+these smooth signals; the residual, measured minus predicted, then goes through the
+*same* parallel low-pass and is sampled on the *statistics rows*: trimmed at both ends
+and thinned to twice the cut-off, so neighbouring rows carry nearly independent noise
+and likelihood-ratio tests count honest degrees of freedom.
+
+With the hard sign (set-valued Coulomb friction, the spec's default law) the friction is
+``+-F_c`` only while a winch slides one way. Where the encoder shows it sticking,
+stopping, starting or reversing, the friction is whatever balances the rest, which no
+model of the form ``F_c sign(w)`` predicts: :attr:`RunSignals.friction_known` marks those
+samples (weight 0) so that the torque residual leaves them out *before* the parallel
+filter (:meth:`RunSignals.torque_rows`), as the identification's regression does. Left
+in, their residual (holding torque minus ``+-F_c``, a pulse at every reversal placed by
+the stick) is fitted by any candidate with a pulse there: an ``actuator_lag`` of a few ms
+(whose ``tau du/dt`` has one at every sign switch), or a free-form low-speed term, on
+effect-free data with true stick-slip.
 """
 
 from __future__ import annotations
@@ -25,6 +39,9 @@ from cdpr_pipeline.identification.regressors import (
     DerivativeFilter,
     RegressionSettings,
     _held_torque,
+    _second_difference,
+    _shows_standstill,
+    _sliding,
 )
 from cdpr_pipeline.sim.plant import Plant
 
@@ -85,6 +102,10 @@ class RunSignals:
     acceleration: np.ndarray | None = None
     lengths: np.ndarray | None = None
     slow_acceleration: np.ndarray | None = None
+    #: (N, n) weights of the torque residual: 1 where the friction law predicts the
+    #: friction, 0 where the winch sticks, stops, starts or reverses under a hard sign
+    #: (:func:`friction_known`); None: everywhere (a smooth law, or no standstill seen)
+    friction_known: np.ndarray | None = None
     cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @cached_property
@@ -112,6 +133,22 @@ class RunSignals:
                             zero_phase=True)
         return zero_phase_lowpass(x, filt, self.fs)[trim:len(x) - trim:self.thin]
 
+    def torque_rows(self, x: np.ndarray) -> np.ndarray:
+        """:meth:`rows` of a per-winch torque quantity ``x`` (N, n, ...): a torque
+        residual, or a column a torque residual is regressed on. Samples whose friction
+        the law does not give (:attr:`friction_known` 0) are taken out before the
+        filter, so every model is compared, and every column fitted, on the same
+        samples."""
+        return self.rows(self.torque_weighted(x))
+
+    def torque_weighted(self, x: np.ndarray) -> np.ndarray:
+        """``x`` (N, n, ...) times :attr:`friction_known` (unchanged when None), before
+        any filter (for callers with their own row filter)."""
+        if self.friction_known is None:
+            return x
+        w = self.friction_known
+        return w.reshape(w.shape + (1,) * (np.ndim(x) - 2)) * x
+
     def row_index(self) -> np.ndarray:
         """Full-rate sample index of every statistics row."""
         trim = int(round(self.settings.filter.trim_s * self.fs))
@@ -124,6 +161,35 @@ class RunSignals:
         return self.t[self.row_index()]
 
 
+def derivatives(filt: DerivativeFilter, x: np.ndarray, t: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Butterworth-filtered ``x``, its central difference and its compact second
+    difference ``(x_k+1 - 2 x_k + x_k-1) / T^2`` (what the regression uses, see the
+    module docstring; two central differences in a row would average the acceleration
+    over twice that window and miss a held torque's high frequencies)."""
+    step = float(np.median(np.diff(t)))
+    xf = filt.smooth(x, 1.0 / step)
+    return xf, np.gradient(xf, t, axis=0), _second_difference(xf, step)
+
+
+def friction_known(position: np.ndarray, speed: np.ndarray, settings: RegressionSettings
+                   ) -> np.ndarray | None:
+    """(N, n) weights, 1 where a hard-sign Coulomb law gives the friction (the winch or
+    axis slides one way through the sample's triangle, as the recorded ``position``
+    shows), 0 elsewhere; None for a smooth law or when nothing is dropped.
+
+    The rule is the identification's
+    (:func:`~cdpr_pipeline.identification.regressors._sliding`), applied only to
+    channels whose recorded position shows standstill (an encoder resolving rest);
+    ``speed`` is the filtered speed."""
+    if settings.sign_sharpness is not None:
+        return None
+    position = np.asarray(position, float)
+    keep = _sliding(position, speed)
+    keep[:, ~_shows_standstill(position)] = True
+    return None if keep.all() else keep.astype(float)
+
+
 def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
                 nominal: Plant | None = None) -> RunSignals:
     """Prepare one measured run. ``nominal`` (``cdpr``) gives the encoder zero and radius
@@ -134,15 +200,17 @@ def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
         if nominal is None:
             nominal = Plant.from_rig(rig)
         theta_raw = (nominal.home_lengths - traj.lengths) / nominal.drum_radius
-        theta, omega, alpha = filt.derivatives(theta_raw, traj.t)
-        pos, vel, acc = filt.derivatives(traj.position, traj.t)
+        theta, omega, alpha = derivatives(filt, theta_raw, traj.t)
+        pos, vel, acc = derivatives(filt, traj.position, traj.t)
         slow = replace(filt, cutoff_hz=min(STRETCH_CUTOFF_HZ, filt.cutoff_hz))
-        slow_acc = slow.derivatives(traj.position, traj.t)[2]
+        slow_acc = derivatives(slow, traj.position, traj.t)[2]
         return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque,
                           settings, pos, vel, acc, np.asarray(traj.lengths, float),
-                          slow_acc)
-    theta, omega, alpha = filt.derivatives(np.asarray(traj.position, float), traj.t)
-    return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque, settings)
+                          slow_acc, friction_known(theta_raw, omega, settings))
+    position = np.asarray(traj.position, float)
+    theta, omega, alpha = derivatives(filt, position, traj.t)
+    return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque, settings,
+                      friction_known=friction_known(position, omega, settings))
 
 
 def dataset_signals(trajectories: Sequence[Trajectory], rig: Rig,

