@@ -76,13 +76,14 @@ def test_unresolved_filter_refuses_to_run():
         DerivativeFilter("auto").smooth(np.zeros(100), 100.0)
 
 
-def test_identify_emps_with_default_settings_reproduces_the_published_idim_ls(tmp_path):
+def test_identify_emps_with_default_settings_reproduces_the_published_idim_ls(
+        tmp_path, new_mlflow_store):
     """``cdpr identify data.path=<converted EMPS>`` and nothing else: the published
     IDIM-LS parameters within 1 % and its relative errors (training 4.08 %, cross-test
     5.98 %) within 0.2 point."""
     data = convert_emps(emps_path(), tmp_path / "emps")
     cfg = compose_config("identify", [f"data.path={data}", f"out_dir={tmp_path / 'id'}",
-                                      f"tracking.uri=sqlite:///{tmp_path / 'm.db'}"])
+                                      f"tracking.uri={new_mlflow_store(tmp_path / 'm.db')}"])
     identify(cfg)
     out = json.loads((tmp_path / "id" / "identification.json").read_text())
     assert out["heldout_runs"] == ["001_pulses"]

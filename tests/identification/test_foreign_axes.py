@@ -41,14 +41,14 @@ STD_UNDERSTATEMENT = 2.5
 
 @pytest.mark.parametrize("n_axes, rate, inertia, viscous, noise", CASES)
 def test_default_identification_of_foreign_axes(tmp_path, n_axes, rate, inertia, viscous,
-                                                noise):
+                                                noise, new_mlflow_store):
     seed = int(os.environ.get("CDPR_TEST_SEED", secrets.randbelow(2 ** 31)))
     rig = random_axes_rig(seed, n_axes=n_axes, rate_hz=rate, inertia=inertia,
                           viscous=viscous)
     data = tmp_path / "axes"
     simulate_axes_dataset(data, rig, n_runs=1, duration_s=40.0, seed=seed, noise=noise)
     identify(compose_config("identify", [f"data.path={data}", f"out_dir={tmp_path / 'id'}",
-                                         f"tracking.uri=sqlite:///{tmp_path / 'm.db'}"]))
+                                         f"tracking.uri={new_mlflow_store(tmp_path / 'm.db')}"]))
     out = json.loads((tmp_path / "id" / "identification.json").read_text())
     case = f"seed {seed}, {rig.n} axes at {rig.rate_hz:g} Hz, noise {noise}"
     assert out["heldout_runs"], case              # one run: a held-out time block

@@ -51,8 +51,8 @@ def test_a_single_run_holds_out_its_last_block(one_run):
     assert all(0 < e < 20 for e in result.metrics["heldout_relative_error_pct"])
 
 
-def test_identify_and_reconstruct_stages_on_one_run(one_run, tmp_path):
-    tracking = f"sqlite:///{tmp_path / 'mlflow.db'}"
+def test_identify_and_reconstruct_stages_on_one_run(one_run, tmp_path, new_mlflow_store):
+    tracking = new_mlflow_store(tmp_path / "mlflow.db")
     identify(compose_config("identify", [f"data.path={one_run}", f"out_dir={tmp_path}",
                                          f"tracking.uri={tracking}"]))
     ident = json.loads((tmp_path / "identification.json").read_text())

@@ -53,8 +53,9 @@ def test_one_run_splits_into_blocks_inside_the_run(datasets):
 
 
 @pytest.mark.parametrize("name", ["one", "two", "five"])
-def test_train_runs_on_small_datasets_and_logs_val_loss(name, datasets, tmp_path):
-    tracking = f"sqlite:///{tmp_path / 'mlflow.db'}"
+def test_train_runs_on_small_datasets_and_logs_val_loss(name, datasets, tmp_path,
+                                                        new_mlflow_store):
+    tracking = new_mlflow_store(tmp_path / "mlflow.db")
     result = train(compose_config("train", [*TINY, f"data.path={datasets[name]}",
                                             f"tracking.uri={tracking}",
                                             "tracking.experiment=blocks",

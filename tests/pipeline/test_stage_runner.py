@@ -42,9 +42,9 @@ def failing(cfg):
 
 
 @pytest.fixture
-def pipeline(tmp_path, monkeypatch):
+def pipeline(tmp_path, monkeypatch, new_mlflow_store):
     """A params file to add toy sections to, and a fresh MLflow store with a parent run."""
-    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    uri = new_mlflow_store(tmp_path / "mlflow.db")
     monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
     client = MlflowClient(uri)
     parent = client.create_run(client.create_experiment("toy"), run_name="pipeline")

@@ -28,8 +28,8 @@ TINY_HYBRID = ["physics.hybrid.epochs=1", "physics.hybrid.max_windows=256",
 
 
 @pytest.fixture(scope="module")
-def tracking(tmp_path_factory):
-    return f"sqlite:///{tmp_path_factory.mktemp('mlflow') / 'mlflow.db'}"
+def tracking(tmp_path_factory, new_mlflow_store):
+    return new_mlflow_store(tmp_path_factory.mktemp('mlflow') / 'mlflow.db')
 
 
 class _Messages(logging.Handler):

@@ -25,8 +25,8 @@ from cdpr_pipeline.wavelet import WaveletSplit
 
 
 @pytest.fixture(scope="module")
-def tracking(tmp_path_factory):
-    return f"sqlite:///{tmp_path_factory.mktemp('mlflow') / 'mlflow.db'}"
+def tracking(tmp_path_factory, new_mlflow_store):
+    return new_mlflow_store(tmp_path_factory.mktemp('mlflow') / 'mlflow.db')
 
 
 @pytest.mark.parametrize("method", ["lsm", "rls", "lms", "ga"])

@@ -167,8 +167,9 @@ def _dataset_config(tmp_path, *extra):
     return compose_config("dataset", [*TINY_DATASET, f"out_dir={tmp_path / 'ds'}", *extra])
 
 
-def test_stage_runs_as_a_nested_mlflow_run_and_swaps_its_output_in(tmp_path, monkeypatch):
-    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+def test_stage_runs_as_a_nested_mlflow_run_and_swaps_its_output_in(tmp_path, monkeypatch,
+                                                                   new_mlflow_store):
+    uri = new_mlflow_store(tmp_path / "mlflow.db")
     monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
     client = MlflowClient(uri)
     exp = client.create_experiment("pipe")
@@ -192,8 +193,9 @@ def test_stage_runs_as_a_nested_mlflow_run_and_swaps_its_output_in(tmp_path, mon
     assert {a.path for a in client.list_artifacts(run.info.run_id)} >= {"dataset.json"}
 
 
-def test_failing_stage_keeps_the_previous_output_and_names_the_input(tmp_path, monkeypatch):
-    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path / 'mlflow.db'}")
+def test_failing_stage_keeps_the_previous_output_and_names_the_input(tmp_path, monkeypatch,
+                                                                     new_mlflow_store):
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", new_mlflow_store(tmp_path / "mlflow.db"))
     monkeypatch.delenv(PARENT_RUN_ENV, raising=False)
     good = tmp_path / "foreign"
     shutil.copytree(foreign_rig_path(), good)
@@ -233,13 +235,13 @@ def test_ingest_copies_data_written_by_others(tmp_path):
 
 
 def test_an_interrupted_training_stage_resumes_from_its_checkpoint(
-        tmp_path, monkeypatch, small_lab, caplog):
+        tmp_path, monkeypatch, small_lab, caplog, new_mlflow_store):
     """A training stage that dies after its epochs (here: in the evaluation) leaves its
     checkpoints in the partial output; rerun with the same params it resumes from them
     instead of training again."""
     import cdpr_pipeline.stages.train as train_module
 
-    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path / 'mlflow.db'}")
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", new_mlflow_store(tmp_path / "mlflow.db"))
     monkeypatch.delenv(PARENT_RUN_ENV, raising=False)
     config = compose_config("train", [
         "model=tcn", f"data.path={small_lab}", "trainer.max_epochs=2", "data.window=16",

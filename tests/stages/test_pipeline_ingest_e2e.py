@@ -112,8 +112,10 @@ def ingest_runs(request, tmp_path_factory) -> dict[str, Ingested]:
 
 
 @pytest.fixture(params=list(DATASETS))
-def ingested(request, ingest_runs) -> Ingested:
-    return ingest_runs[request.param]
+def ingested(request, ingest_runs, record_property) -> Ingested:
+    run = ingest_runs[request.param]
+    record_property(f"repro_s {run.name}", round(run.seconds))   # in the terminal summary
+    return run
 
 
 def test_every_stage_finished_or_was_skipped_with_its_reason(ingested):

@@ -19,8 +19,8 @@ def _write(path, content):
     path.write_text(json.dumps(content))
 
 
-def test_report_lists_ran_and_skipped_stages(tmp_path, monkeypatch):
-    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path / 'mlflow.db'}")
+def test_report_lists_ran_and_skipped_stages(tmp_path, monkeypatch, new_mlflow_store):
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", new_mlflow_store(tmp_path / "mlflow.db"))
     monkeypatch.delenv(PARENT_RUN_ENV, raising=False)
     r = tmp_path
     _write(r / "ds" / "dataset.json", {"runs": 5, "samples": 1500, "source": "simulate"})

@@ -23,8 +23,8 @@ MOCAP_NOISE_M = 1e-4
 
 
 @pytest.fixture(scope="module")
-def tracking(tmp_path_factory):
-    return f"sqlite:///{tmp_path_factory.mktemp('mlflow') / 'mlflow.db'}"
+def tracking(tmp_path_factory, new_mlflow_store):
+    return new_mlflow_store(tmp_path_factory.mktemp('mlflow') / 'mlflow.db')
 
 
 def _overrides(small_lab, tracking, out):

@@ -42,13 +42,14 @@ def _post(base: str, path: str, body: dict) -> dict:
 
 
 @pytest.fixture
-def mlflow_server(tmp_path):
+def mlflow_server(tmp_path, new_mlflow_store):
+    store = new_mlflow_store(tmp_path / "server.db")     # the schema made once per session
     port = _free_port()
     base = f"http://127.0.0.1:{port}"
     server_log = open(tmp_path / "server.log", "w")  # noqa: SIM115 (closed below)
     proc = subprocess.Popen(
         [sys.executable, "-m", "mlflow", "server", "--host", "127.0.0.1", "--port", str(port),
-         "--workers", "1", "--backend-store-uri", f"sqlite:///{tmp_path / 'server.db'}",
+         "--workers", "1", "--backend-store-uri", store,
          "--artifacts-destination", str(tmp_path / "artifacts")],
         stdout=subprocess.DEVNULL, stderr=server_log)
     try:
