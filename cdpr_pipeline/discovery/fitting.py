@@ -24,7 +24,6 @@ from cdpr_pipeline.discovery.residuals import (
     Residuals,
     residuals,
     runs_rows,
-    statistics_rows,
 )
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.sim.effects import Effect, WinchParameterError
@@ -39,7 +38,7 @@ def winch_columns(sig: RunSignals, nominal: Model) -> np.ndarray:
     cols = np.stack([w.inertia * sig.alpha, w.viscous * sig.omega,
                      w.coulomb * smooth_sign(sig.omega, nominal.sign_sharpness),
                      np.ones_like(sig.omega)], axis=-1)
-    return statistics_rows(sig, sig.torque_weighted(cols))   # like the torque residual
+    return sig.rows(sig.torque_weighted(cols))   # like the torque residual
 
 
 @dataclass

@@ -38,7 +38,6 @@ from functools import lru_cache, partial
 import numpy as np
 
 from cdpr_pipeline.discovery.fitting import one_blas_thread
-from cdpr_pipeline.discovery.residuals import statistics_rows
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.evolution import MaxTree, deap_random
 from cdpr_pipeline.sim.effects import SymbolicWinchTorque
@@ -141,7 +140,7 @@ def term_columns(expressions: Sequence[str], signals: Sequence[RunSignals]) -> n
             cols = np.stack([evaluate(e, {"omega": sig.omega, "theta": sig.theta})
                              for e in missing], axis=-1)
             # weighted like the torque residual the terms are fitted to
-            rows = statistics_rows(sig, sig.torque_weighted(cols))
+            rows = sig.rows(sig.torque_weighted(cols))
             for e, col in zip(missing, np.moveaxis(rows, -1, 0),
                               strict=True):
                 known[e] = col

@@ -20,15 +20,8 @@ import logging
 import pickle
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
-from scipy.signal import cheby1, sosfilt, sosfilt_zi
-
-try:  # the compiled kernel of scipy.signal.sosfilt
-    from scipy.signal._sosfilt import _sosfilt
-except ImportError:     # pragma: no cover - another SciPy layout
-    _sosfilt = None
 
 from cdpr_pipeline.data.rig import CdprRig, Rig
 from cdpr_pipeline.discovery.signals import RunSignals
@@ -98,55 +91,6 @@ def _load(model: Plant, sig: RunSignals, acceleration: np.ndarray):
     return float(model.mass) * unit, g, units
 
 
-@lru_cache(maxsize=16)
-def _decimation_filter(q: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """:func:`scipy.signal.decimate`'s anti-alias filter for factor ``q`` (order-8
-    Chebyshev I, ``zero_phase``), its step-response initial state and filtfilt's pad
-    length, designed once: the design costs several times the filtering itself."""
-    sos = np.ascontiguousarray(cheby1(8, 0.05, 0.8 / q, output="sos"), float)
-    ntaps = 2 * len(sos) + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum()))
-    return sos, sosfilt_zi(sos), 3 * ntaps
-
-
-def _sections(sos: np.ndarray, x: np.ndarray, zi: np.ndarray) -> None:
-    """:func:`scipy.signal.sosfilt` along the last axis of ``x`` (signals, samples),
-    in place, from the initial state ``zi`` (signals, sections, 2): its compiled kernel
-    without the argument checks and axis moves (a fit filters thousands of small
-    blocks), or the public function where the kernel is not found."""
-    if _sosfilt is not None:
-        _sosfilt(sos, x, zi)
-    else:       # pragma: no cover - another SciPy layout
-        x[...] = sosfilt(sos, x, axis=-1, zi=np.moveaxis(zi, 0, 1))[0]
-
-
-def statistics_rows(sig: RunSignals, x: np.ndarray) -> np.ndarray:
-    """``sig.rows(x)``, the same numbers, faster: with the protocol's decimation,
-    :func:`scipy.signal.decimate` (``zero_phase``: :func:`scipy.signal.sosfiltfilt`
-    with its odd extension, along axis 0) written out, with its filter designed once
-    (every model evaluation of a fit filters what it changed)."""
-    q = int(sig.settings.decimate)
-    x = np.asarray(x)
-    if q <= 1 or x.dtype != np.float64:
-        return sig.rows(x)
-    trim = int(round(sig.settings.filter.trim_s * sig.fs))
-    sos, zi, pad = _decimation_filter(q)
-    length = len(x) - 2 * trim
-    if length <= pad:
-        return sig.rows(x)
-    shape = x.shape[1:]
-    # (signals, samples): each signal a contiguous row, as the kernel filters them
-    xt = x[trim:len(x) - trim].reshape(length, -1).T
-    ext = np.empty((len(xt), length + 2 * pad))
-    ext[:, pad:pad + length] = xt
-    ext[:, :pad] = 2 * xt[:, :1] - xt[:, pad:0:-1]
-    ext[:, pad + length:] = 2 * xt[:, -1:] - xt[:, -2:-pad - 2:-1]
-    _sections(sos, ext, zi[None] * ext[:, :1, None])
-    back = np.ascontiguousarray(ext[:, ::-1])
-    _sections(sos, back, zi[None] * back[:, :1, None])
-    rows = back[:, ::-1][:, pad:pad + length:q]
-    return rows.T.reshape((rows.shape[1], *shape))
-
-
 # ---------------------------------------------------------------- residual rows
 def _direct_rows(model: Model, nominal: Model, sig: RunSignals,
                  channels: frozenset[str] | None = None) -> dict[str, np.ndarray]:
@@ -158,7 +102,7 @@ def _direct_rows(model: Model, nominal: Model, sig: RunSignals,
     # every channel through the filter in one pass (one array, n columns each); torque
     # samples whose friction the stated law does not give are left out before the filter
     # (RunSignals.friction_known: stick, stop, start, reversal under a hard sign)
-    r = statistics_rows(sig, np.concatenate([
+    r = sig.rows(np.concatenate([
         sig.torque_weighted(measured[c] - pred[c]) if c == "torque" else measured[c] - pred[c]
         for c in names], axis=1))
     out = dict(zip(names, np.split(r, len(names), axis=1), strict=True))
@@ -178,7 +122,7 @@ class _Filtered:
 
     def __init__(self, sig: RunSignals, x: np.ndarray) -> None:
         self._sig, self._x = sig, x
-        self.rows = statistics_rows(sig, sig.torque_weighted(x))
+        self.rows = sig.rows(sig.torque_weighted(x))
         self._slope = None
 
     def commanded(self, tau: float) -> np.ndarray:
@@ -186,7 +130,7 @@ class _Filtered:
         if tau <= 0.0:
             return self.rows
         if self._slope is None:
-            self._slope = statistics_rows(self._sig, self._sig.torque_weighted(
+            self._slope = self._sig.rows(self._sig.torque_weighted(
                 np.gradient(self._x, self._sig.t, axis=0)))
         return self.rows + tau * self._slope
 
@@ -262,24 +206,24 @@ def _linear_rows(model: Model, nominal: Model, sig: RunSignals,
             extra = _extra_rows(sig, effect, model, key)
             if extra is not None:
                 pred = pred + extra.commanded(tau)
-        out["torque"] = _memo(sig, "measured", "torque", lambda: statistics_rows(
-            sig, sig.torque_weighted(sig.torque))) - pred
+        out["torque"] = _memo(sig, "measured", "torque",
+                              lambda: sig.rows(sig.torque_weighted(sig.torque))) - pred
     if plant and (channels is None or "length" in channels):
         g = _load(model, sig, sig.acceleration)[1]
         if model.elastic:   # quasi-static stretch, from the slow acceleration (see signals)
             reeled = _memo(sig, "stretched", (
                 model.anchors.tobytes(), float(model.gravity), float(model.mass),
-                model.cable_stiffness.tobytes()), lambda: statistics_rows(
-                    sig, model.reeled_length(g, _load(model, sig, sig.slow_acceleration)[0])))
+                model.cable_stiffness.tobytes()), lambda: sig.rows(
+                    model.reeled_length(g, _load(model, sig, sig.slow_acceleration)[0])))
         else:
             reeled = _memo(sig, "geometric", model.anchors.tobytes(),
-                           lambda: statistics_rows(sig, g))
+                           lambda: sig.rows(g))
         # the length side is not weighted (its own ones column)
-        one = _memo(sig, "ones", None, lambda: statistics_rows(sig, np.ones_like(sig.omega)))
+        one = _memo(sig, "ones", None, lambda: sig.rows(np.ones_like(sig.omega)))
         length = nominal.home_lengths * one - nominal.drum_radius / model.drum_radius * (
             model.home_lengths * one - reeled)
         r = _memo(sig, "measured", "length",
-                  lambda: statistics_rows(sig, sig.lengths)) - length
+                  lambda: sig.rows(sig.lengths)) - length
         out["length"] = r - r.mean(axis=0)      # the encoder zero is not the model's
     return out
 
@@ -360,8 +304,8 @@ def residuals(model: Model, nominal: Model, signals: Sequence[RunSignals]) -> Re
 def measured_rows(signals: Sequence[RunSignals], channel: str = "torque") -> np.ndarray:
     """The measured channel itself on the statistics rows (for relative errors)."""
     if channel == "torque":
-        return np.concatenate([statistics_rows(s, s.torque_weighted(s.torque))
+        return np.concatenate([s.rows(s.torque_weighted(s.torque))
                                for s in signals])
-    parts = [statistics_rows(s, s.lengths) for s in signals]
+    parts = [s.rows(s.lengths) for s in signals]
     return np.concatenate([p - p.mean(axis=0) for p in parts])
 

@@ -1,5 +1,5 @@
 """The fast residual paths of diagnosis compute what the direct ones compute: the
-filter written out (``statistics_rows``) is ``RunSignals.rows`` bit for bit, the rows by
+decimation written out (``RunSignals.rows``) is ``scipy.signal.decimate`` to rounding, the rows by
 the filter's linearity (``_linear_rows``) match the plant's prediction filtered
 (``_direct_rows``) to rounding for every candidate effect, and the grouped
 finite-difference Jacobian is scipy's own."""
@@ -26,12 +26,29 @@ def lab(quiet_lab):
     return quiet_lab, dataset_signals(quiet_lab.trajectories[:2], quiet_lab.rig, regression)
 
 
-def test_statistics_rows_are_the_runs_rows(lab):
-    _, sigs = lab
+def test_rows_are_scipys_decimation(tmp_path):
+    """EMPS with default settings decimates by 10 (the published protocol)."""
+    from scipy.signal import decimate
+
+    from cdpr_pipeline.data import load_dataset
+    from cdpr_pipeline.data.convert import convert_emps
+    from cdpr_pipeline.resources import emps_path
+
+    data = load_dataset(convert_emps(emps_path(), tmp_path / "emps"))
+    from cdpr_pipeline.identification.regressors import DerivativeFilter
+
+    auto = RegressionSettings(DerivativeFilter("auto", 4, "auto"), "auto", "rig", "auto")
+    regression = resolve_settings(auto, data.trajectories, data.rig)
+    assert regression.decimate > 1
     rng = np.random.default_rng(0)
-    for sig in sigs:
-        for x in (sig.torque, sig.lengths, rng.normal(size=(len(sig.t), 3, 4))):
-            assert np.array_equal(R.statistics_rows(sig, x), sig.rows(x))
+    for sig in dataset_signals(data.trajectories, data.rig, regression):
+        trim = int(round(sig.settings.filter.trim_s * sig.fs))
+        for x in (sig.torque, sig.theta, rng.normal(size=(len(sig.t), 3, 4))):
+            expected = decimate(x[trim:len(x) - trim], regression.decimate, axis=0,
+                                zero_phase=True)
+            np.testing.assert_allclose(sig.rows(x), expected, rtol=0,
+                                       atol=1e-12 * np.abs(x).max())
+            assert len(sig.rows(x)) == len(sig.row_index())
 
 
 @pytest.mark.parametrize("sharpness", [None, 30.0])
