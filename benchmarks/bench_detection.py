@@ -48,13 +48,13 @@ from foreign_cases import (  # noqa: E402
     KINDS,
     OUTSIDE,
     VOCABULARY,
+    add_settings_option,
     foreign_case,
-    foreign_settings,
     grade,
+    named_settings,
     parameter_errors,
     parameters_ok,
 )
-from lab_cases import fast_settings  # noqa: E402
 
 from cdpr_pipeline.config import compose_config  # noqa: E402
 from cdpr_pipeline.discovery.study import run_case  # noqa: E402
@@ -156,13 +156,11 @@ def main() -> None:
     parser.add_argument("--effects", nargs="*", default=None)
     parser.add_argument("--kinds", nargs="*", default=list(KINDS),
                         help="independent simulator: rig kinds")
-    parser.add_argument("--settings", choices=["cli", "fast"], default="cli",
-                        help="cli: conf/diagnose.yaml (closed loop, black box off); fast: "
-                             "the discovery tests' settings (lab_cases.fast_settings)")
+    add_settings_option(parser)
     parser.add_argument("--out", type=Path, default=Path("results/detection.json"))
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    settings = foreign_settings() if args.settings == "cli" else fast_settings()
+    settings = named_settings(args.settings)
 
     cases: list[dict] = []
     start = time.perf_counter()

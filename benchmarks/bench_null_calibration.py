@@ -41,8 +41,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests" / "discovery")]
 
-from foreign_cases import foreign_settings, null_datasets, run_null, summarise  # noqa: E402
-from lab_cases import fast_settings  # noqa: E402
+from foreign_cases import (  # noqa: E402
+    add_settings_option,
+    named_settings,
+    null_datasets,
+    run_null,
+    summarise,
+)
 
 from cdpr_pipeline.config import compose_config  # noqa: E402
 from cdpr_pipeline.stages.simulate import rig_from_config  # noqa: E402
@@ -94,14 +99,12 @@ def main() -> None:
     parser.add_argument("--cdpr", type=int, default=10, help="independent cable-robot datasets")
     parser.add_argument("--axes", type=int, default=8, help="independent drive-axes datasets")
     parser.add_argument("--first-seed", type=int, default=5000)
-    parser.add_argument("--settings", choices=["cli", "fast"], default="cli",
-                        help="cli: conf/diagnose.yaml (closed loop, black box off); fast: "
-                             "the discovery tests' settings (lab_cases.fast_settings)")
+    add_settings_option(parser)
     parser.add_argument("--out", type=Path, default=Path("results/null_calibration.json"))
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
 
-    settings = foreign_settings() if args.settings == "cli" else fast_settings()
+    settings = named_settings(args.settings)
     paper_rig = rig_from_config(compose_config("simulate").rig)
     specs = null_datasets(args.lab, args.cdpr, args.axes, args.first_seed)
     records = []

@@ -44,7 +44,6 @@ from cdpr_pipeline.identification.regressors import (
     DerivativeFilter,
     RegressionSettings,
     _held_torque,
-    _second_difference,
     _shows_standstill,
     _sliding,
 )
@@ -210,17 +209,6 @@ class RunSignals:
         return self.t[self.row_index()]
 
 
-def derivatives(filt: DerivativeFilter, x: np.ndarray, t: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Butterworth-filtered ``x``, its central difference and its compact second
-    difference ``(x_k+1 - 2 x_k + x_k-1) / T^2`` (what the regression uses, see the
-    module docstring; two central differences in a row would average the acceleration
-    over twice that window and miss a held torque's high frequencies)."""
-    step = float(np.median(np.diff(t)))
-    xf = filt.smooth(x, 1.0 / step)
-    return xf, np.gradient(xf, t, axis=0), _second_difference(xf, step)
-
-
 def friction_known(position: np.ndarray, speed: np.ndarray, settings: RegressionSettings
                    ) -> np.ndarray | None:
     """(N, n) weights, 1 where a hard-sign Coulomb law gives the friction (the winch or
@@ -249,15 +237,15 @@ def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
         if nominal is None:
             nominal = Plant.from_rig(rig)
         theta_raw = (nominal.home_lengths - traj.lengths) / nominal.drum_radius
-        theta, omega, alpha = derivatives(filt, theta_raw, traj.t)
-        pos, vel, acc = derivatives(filt, traj.position, traj.t)
+        theta, omega, alpha = filt.compact_derivatives(theta_raw, traj.t)
+        pos, vel, acc = filt.compact_derivatives(traj.position, traj.t)
         slow = replace(filt, cutoff_hz=min(STRETCH_CUTOFF_HZ, filt.cutoff_hz))
-        slow_acc = derivatives(slow, traj.position, traj.t)[2]
+        slow_acc = slow.compact_derivatives(traj.position, traj.t)[2]
         return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque,
                           settings, pos, vel, acc, np.asarray(traj.lengths, float),
                           slow_acc, friction_known(theta_raw, omega, settings))
     position = np.asarray(traj.position, float)
-    theta, omega, alpha = derivatives(filt, position, traj.t)
+    theta, omega, alpha = filt.compact_derivatives(position, traj.t)
     return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque, settings,
                       friction_known=friction_known(position, omega, settings))
 

@@ -87,6 +87,17 @@ class DerivativeFilter:
         a = np.gradient(v, t, axis=0)
         return xf, v, a
 
+    def compact_derivatives(self, x: np.ndarray, t: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Filtered signal, its central difference and its *compact* second difference
+        ``(x_k+1 - 2 x_k + x_k-1) / T^2``: the acceleration averaged over the triangle of
+        half-width ``T`` around each sample, the window a torque held over each sample
+        is averaged with (:func:`_held_torque`); two central differences in a row would
+        average over twice that window."""
+        step = float(np.median(np.diff(t)))
+        xf = self.smooth(x, 1.0 / step)
+        return xf, np.gradient(xf, t, axis=0), _second_difference(xf, step)
+
 
 @dataclass(frozen=True)
 class RegressionSettings:
@@ -341,9 +352,7 @@ def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
     step = float(np.median(np.diff(t)))
     fs = 1.0 / step
     filt = settings.filter
-    xf = filt.smooth(position, fs)
-    b = np.gradient(xf, t, axis=0)
-    a = _second_difference(xf, step)
+    _, b, a = filt.compact_derivatives(position, t)
     torque = _held_torque(torque, settings.zero_order_hold)
     if settings.sign_sharpness is not None:       # a smooth law: friction known everywhere
         c, one = smooth_sign(b, settings.sign_sharpness), np.ones_like(b)

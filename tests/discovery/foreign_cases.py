@@ -67,6 +67,20 @@ def foreign_settings(**changes: Any):
     return dataclasses.replace(settings_from_config(cfg), **changes)
 
 
+def add_settings_option(parser) -> None:
+    """The benchmarks' ``--settings`` option (read back by :func:`named_settings`)."""
+    parser.add_argument("--settings", choices=["cli", "fast"], default="cli",
+                        help="cli: conf/diagnose.yaml (closed loop, black box off); fast: "
+                             "the discovery tests' settings (lab_cases.fast_settings)")
+
+
+def named_settings(name: str):
+    """``cli``: :func:`foreign_settings`; ``fast``: ``lab_cases.fast_settings``."""
+    from lab_cases import fast_settings
+
+    return foreign_settings() if name == "cli" else fast_settings()
+
+
 @dataclass
 class ForeignCase:
     """A simulated dataset, its truth, and (after :meth:`diagnose`) the diagnosis."""

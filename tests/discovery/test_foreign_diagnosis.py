@@ -26,6 +26,12 @@ def _diagnosed(tmp_path, kind: str, effects: list[str], seed: int):
     return case
 
 
+def _one_hidden(tmp_path, kind: str, names: list[str], seed: int):
+    """One effect drawn from ``names`` by the seed, hidden and diagnosed."""
+    name = names[rng_for(seed).integers(len(names))]
+    return name, _diagnosed(tmp_path, kind, [name], seed)
+
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_no_effect_gives_none(tmp_path, seed, kind):
     case = _diagnosed(tmp_path, kind, [], seed)
@@ -48,9 +54,7 @@ KNOWN_GAPS = pytest.mark.xfail(strict=False, reason="known detection gaps on the
 @KNOWN_GAPS
 @pytest.mark.parametrize("kind", KINDS)
 def test_a_hidden_vocabulary_effect_is_named(tmp_path, seed, kind):
-    rng = rng_for(seed)
-    name = VOCABULARY[kind][rng.integers(len(VOCABULARY[kind]))]
-    case = _diagnosed(tmp_path, kind, [name], seed)
+    name, case = _one_hidden(tmp_path, kind, VOCABULARY[kind], seed)
     record = case.record
     assert record["verdict"] == name, case.describe()
     gain = record["gain"]
@@ -62,9 +66,7 @@ def test_a_hidden_vocabulary_effect_is_named(tmp_path, seed, kind):
 @KNOWN_GAPS
 @pytest.mark.parametrize("kind", KINDS)
 def test_an_effect_outside_the_vocabulary_gets_no_name(tmp_path, seed, kind):
-    rng = rng_for(seed)
-    name = OUTSIDE[kind][rng.integers(len(OUTSIDE[kind]))]
-    case = _diagnosed(tmp_path, kind, [name], seed)
+    _, case = _one_hidden(tmp_path, kind, OUTSIDE[kind], seed)
     record = case.record
     found = {c["effect"] for c in record["causes"]}
     # never a vocabulary name, not even as a second cause; `none` (too small to show on
