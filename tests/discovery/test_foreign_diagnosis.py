@@ -41,14 +41,34 @@ def test_no_effect_gives_none(tmp_path, seed, kind):
     assert record["gain"]["after"] == record["gain"]["before"]
 
 
+@pytest.mark.parametrize("kind", [
+    "axes",
+    # found in review, not fixed: on one long cable-robot run the free-form search fits
+    # angle harmonics (sin(14 theta) ...) to a residual that repeats with the periodic
+    # motion, and the held-out block (the same motion, later) confirms them: a false
+    # alarm in most draws. Multi-run datasets hold out other motions and do not show it.
+    pytest.param("cdpr", marks=pytest.mark.xfail(strict=False, raises=AssertionError,
+                                                 reason="one-run cable-robot false alarm")),
+])
+def test_one_long_run_without_effect_gives_none(tmp_path, seed, kind):
+    """A user's recording is often one long run: its last 25 % is held out."""
+    case = foreign_case(tmp_path, kind, [], seed, n_runs=1, duration_s=40.0)
+    case.diagnose()
+    record = case.record
+    assert len(record["split"]["heldout"]) == 1 and "@" in record["split"]["heldout"][0]
+    assert record["verdict"] == "none", f"false alarm: {case.describe()}"
+
+
 #: Known gaps on the independent simulator (measured with ``benchmarks/bench_detection.py
 #: --simulator independent``: 71 % detection over its effects, against 100 % on the lab):
 #: an actuator lag with a different time constant per winch (the lag candidate has one
 #: for all), drum-radius errors (named winch_parameter_error), out-of-vocabulary torques
 #: on drive axes (absorbed by re-identified winch parameters). These two tests report a
-#: miss as XFAIL with the case printed instead of failing CI; the null test gates.
-KNOWN_GAPS = pytest.mark.xfail(strict=False, reason="known detection gaps on the independent "
-                               "simulator (see KNOWN_GAPS); the rates are in the README")
+#: miss as XFAIL with the case printed instead of failing CI (a crash still fails); the
+#: null tests gate.
+KNOWN_GAPS = pytest.mark.xfail(strict=False, raises=AssertionError,
+                               reason="known detection gaps on the independent simulator "
+                               "(see KNOWN_GAPS); the rates are in the README")
 
 
 @KNOWN_GAPS
