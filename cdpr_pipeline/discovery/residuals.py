@@ -125,9 +125,10 @@ class _Filtered:
         self.rows = sig.rows(sig.torque_weighted(x))
         self._slope = None
 
-    def commanded(self, tau: float) -> np.ndarray:
-        """Rows of ``x + tau x'`` (:func:`~cdpr_pipeline.sim.plant.commanded_torque`)."""
-        if tau <= 0.0:
+    def commanded(self, tau: float | np.ndarray) -> np.ndarray:
+        """Rows of ``x + tau x'`` (:func:`~cdpr_pipeline.sim.plant.commanded_torque`);
+        ``tau`` one lag or one per column (n,)."""
+        if not np.any(np.asarray(tau) > 0.0):
             return self.rows
         if self._slope is None:
             self._slope = self._sig.rows(self._sig.torque_weighted(
@@ -193,7 +194,7 @@ def _linear_rows(model: Model, nominal: Model, sig: RunSignals,
                                     np.ones_like(sig.omega))])
     out = {}
     if channels is None or "torque" in channels:
-        tau = float(model.actuator_time_constant)
+        tau = model.actuator_time_constant       # a number, or one per drive
         w = model.winch
         pred = sum(p * f.commanded(tau) for p, f in zip(
             (w.inertia, w.viscous, w.coulomb, w.offset), winch, strict=True))
@@ -234,7 +235,8 @@ _CHECKED: dict[tuple, bool] = {}
 
 def _structure(model: Model, channels: frozenset[str] | None) -> tuple:
     return (type(model), tuple(type(e) for e in model.effects),
-            getattr(model, "elastic", False), model.actuator_time_constant > 0,
+            getattr(model, "elastic", False), bool(np.any(model.lags > 0)),
+            np.ndim(model.actuator_time_constant),      # one lag, or one per drive
             model.sign_sharpness is None or np.isinf(model.sign_sharpness),
             None if channels is None else tuple(sorted(channels)))
 

@@ -245,12 +245,15 @@ def _score_rows(piece: _Piece, settings: PhysicsSettings, warmup: int) -> np.nda
 
 
 # ---------------------------------------------------------------------- cdpr: forward
-def _drum_torque(u: np.ndarray, t: np.ndarray, tau: float) -> np.ndarray:
+def _drum_torque(u: np.ndarray, t: np.ndarray, tau: float | np.ndarray) -> np.ndarray:
     """The lagged drum torque that the recorded commands (held over each sample) give,
-    ``tau u_d' = u - u_d``, exact for the held input; it starts at the first command."""
+    ``tau u_d' = u - u_d``, exact for the held input; it starts at the first command.
+    ``tau`` is one lag or one per drive; a drive without lag (0) holds its command."""
     out = np.empty_like(u)
     out[0] = u[0]
-    decay = np.exp(-np.diff(t) / tau)[:, None]
+    tau = np.broadcast_to(np.asarray(tau, dtype=float), u.shape[1:])
+    safe = np.where(tau > 0.0, tau, 1.0)
+    decay = np.where(tau > 0.0, np.exp(-np.diff(t)[:, None] / safe), 0.0)
     for i in range(len(u) - 1):
         out[i + 1] = u[i] + (out[i] - u[i]) * decay[i]
     return out

@@ -185,7 +185,8 @@ def plant_record(plant: Plant) -> dict[str, Any]:
         "cable_stiffness_n": None if plant.cable_stiffness is None
         else plant.cable_stiffness.tolist(),
         "cable_damping_time_s": float(plant.cable_damping_time),
-        "actuator_time_constant_s": float(plant.actuator_time_constant),
+        # one lag for every drive as a number, per-drive lags as a list
+        "actuator_time_constant_s": np.asarray(plant.actuator_time_constant).tolist(),
         "sign_sharpness": float(plant.sign_sharpness),
     }
 

@@ -62,12 +62,38 @@ def resisting_torque(model: Plant | Drives, theta: np.ndarray, omega: np.ndarray
     return torque
 
 
-def commanded_torque(drum_torque: np.ndarray, t: np.ndarray, time_constant: float) -> np.ndarray:
+def commanded_torque(drum_torque: np.ndarray, t: np.ndarray,
+                     time_constant: float | np.ndarray) -> np.ndarray:
     """The command that makes a first-order actuator (``tau u' = u_cmd - u``) deliver
-    ``drum_torque`` (N, n) on the time grid ``t``: ``u_cmd = u + tau u'``."""
-    if time_constant <= 0.0:
+    ``drum_torque`` (N, n) on the time grid ``t``: ``u_cmd = u + tau u'``.
+
+    ``time_constant`` is one lag for every drive or one per drive (n,), 0 where a drive
+    has none."""
+    tau = np.asarray(time_constant, dtype=float)
+    if not np.any(tau > 0.0):
         return drum_torque
-    return drum_torque + time_constant * np.gradient(drum_torque, t, axis=0)
+    return drum_torque + tau * np.gradient(drum_torque, t, axis=0)
+
+
+def actuator_lags(time_constant: float | np.ndarray, n: int) -> np.ndarray:
+    """The (n,) per-drive lags of a plant's ``actuator_time_constant`` (a scalar: the
+    same on every drive)."""
+    return np.broadcast_to(np.asarray(time_constant, dtype=float), (n,)).copy()
+
+
+def _checked_lag(time_constant: Any, n: int) -> float | np.ndarray:
+    """An ``actuator_time_constant`` as stored: a float when one lag serves every drive,
+    else an (n,) array; negative lags are refused (a lag cannot lead)."""
+    tau = np.asarray(time_constant, dtype=float)
+    if tau.ndim == 0:
+        value: float | np.ndarray = float(tau)
+    elif tau.shape == (n,):
+        value = tau.copy()
+    else:
+        raise ValueError(f"actuator_time_constant: {tau.size} values for {n} drives")
+    if np.any(tau < 0.0) or not np.all(np.isfinite(tau)):
+        raise ValueError(f"actuator_time_constant must be finite and >= 0, not {tau}")
+    return value
 
 
 def cable_geometry(anchors: np.ndarray, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -100,8 +126,9 @@ class Plant:
         Axial stiffness ``EA`` in N; ``None`` means rigid cables.
     cable_damping_time : float
         Kelvin-Voigt time constant of the cable material, s (``t = EA (eps + tau eps')``).
-    actuator_time_constant : float
-        First-order lag between commanded and delivered drum torque, s (0: none).
+    actuator_time_constant : float or (n,) array
+        First-order lag between commanded and delivered drum torque, s: one for every
+        drive or one per drive (0: none on that drive).
     home : (3,) array
         Platform position at which the encoders were zeroed (``theta = 0``, encoder length
         equals the geometric length there).
@@ -120,7 +147,7 @@ class Plant:
     home: np.ndarray = field(default_factory=lambda: np.zeros(3))
     cable_stiffness: np.ndarray | None = None
     cable_damping_time: float = 2e-3
-    actuator_time_constant: float = 0.0
+    actuator_time_constant: float | np.ndarray = 0.0
     sign_sharpness: float = SIGN_SHARPNESS
     effects: tuple[Effect, ...] = ()
 
@@ -138,6 +165,8 @@ class Plant:
             )
         if self.winch.n != self.n:
             raise ValueError(f"{self.winch.n} winch parameter sets for {self.n} cables")
+        object.__setattr__(self, "actuator_time_constant",
+                           _checked_lag(self.actuator_time_constant, self.n))
         if self.n < 3:
             raise ValueError("a point-mass CDPR needs at least 3 cables")
 
@@ -189,7 +218,22 @@ class Plant:
 
     @property
     def lagged(self) -> bool:
-        return self.actuator_time_constant > 0.0
+        """Whether any drive has a lag (the state then holds every drive's drum torque;
+        a drive without one takes its command directly)."""
+        return bool(np.any(self.lags > 0.0))
+
+    @property
+    def lags(self) -> np.ndarray:
+        """The actuator lag of every drive (n,), 0 where a drive has none."""
+        return actuator_lags(self.actuator_time_constant, self.n)
+
+    def drum_input(self, u_drum: np.ndarray | None, u_cmd: np.ndarray) -> np.ndarray:
+        """The torque the drums receive: the lagged state on lagged drives, the command
+        itself on the others."""
+        if u_drum is None:
+            return u_cmd
+        lagged = self.lags > 0.0
+        return u_drum if lagged.all() else np.where(lagged, u_drum, u_cmd)
 
     @property
     def gravity_vector(self) -> np.ndarray:
@@ -296,12 +340,12 @@ class Plant:
     def derivative(self, state: np.ndarray, u_cmd: np.ndarray) -> np.ndarray:
         """Time derivative of a ``(B, state_size)`` state under commanded torque ``u_cmd``.
 
-        The drum receives ``u_cmd`` directly or, with an actuator lag, the lagged torque
-        held in the state.
+        The drum receives ``u_cmd`` directly or, on a drive with an actuator lag, the
+        lagged torque held in the state.
         """
         s = self.split_state(state)
         p, v = s["p"], s["v"]
-        u = s["u_drum"] if self.lagged else u_cmd
+        u = self.drum_input(s.get("u_drum"), u_cmd)
         g, units = cable_geometry(self.anchors, p)
         R = self.drum_radius
         I_m = self.winch.inertia
@@ -317,7 +361,10 @@ class Plant:
         else:
             out[:, 3:6] = self.rigid_acceleration(p, v, u, g, units)
         if self.lagged:
-            out[:, -self.n:] = (u_cmd - s["u_drum"]) / self.actuator_time_constant
+            tau = self.lags
+            # a drive without lag keeps its (unused) state still instead of dividing by 0
+            out[:, -self.n:] = np.where(tau > 0.0, (u_cmd - s["u_drum"])
+                                        / np.where(tau > 0.0, tau, 1.0), 0.0)
         return out
 
     def rigid_acceleration(
@@ -352,7 +399,7 @@ class Plant:
         ``deriv`` is :meth:`derivative` at this state, if the caller already has it."""
         s = self.split_state(state)
         p, v = s["p"], s["v"]
-        u = s["u_drum"] if self.lagged else u_cmd
+        u = self.drum_input(s.get("u_drum"), u_cmd)
         g, units = cable_geometry(self.anchors, p)
         if deriv is None:
             deriv = self.derivative(state, u_cmd)
@@ -384,12 +431,21 @@ class Drives:
 
     winch: WinchParams
     sign_sharpness: float | None = SIGN_SHARPNESS
-    actuator_time_constant: float = 0.0
+    actuator_time_constant: float | np.ndarray = 0.0
     effects: tuple[Effect, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "actuator_time_constant",
+                           _checked_lag(self.actuator_time_constant, self.n))
 
     @property
     def n(self) -> int:
         return self.winch.n
+
+    @property
+    def lags(self) -> np.ndarray:
+        """The actuator lag of every axis (n,), 0 where an axis has none."""
+        return actuator_lags(self.actuator_time_constant, self.n)
 
     def replace(self, **changes: Any) -> Drives:
         return replace(self, **changes)

@@ -129,8 +129,8 @@ def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5) -> int
         rates.append(plant.n * k * plant.cable_damping_time / plant.mass)
         # winch side of the cable spring
         rates.append(math.sqrt(k * plant.drum_radius.max() ** 2 / plant.winch.inertia.min()))
-    if plant.lagged:
-        rates.append(1.0 / plant.actuator_time_constant)
+    if plant.lagged:      # the fastest of the drives' lags
+        rates.append(1.0 / plant.lags[plant.lags > 0.0].min())
     return max(1, math.ceil(max(rates) * control_dt / accuracy))
 
 

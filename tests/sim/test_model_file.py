@@ -8,7 +8,12 @@ import yaml
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import load_dataset
-from cdpr_pipeline.sim.effects import AnchorOffset, StribeckFriction, SymbolicWinchTorque
+from cdpr_pipeline.sim.effects import (
+    ActuatorLag,
+    AnchorOffset,
+    StribeckFriction,
+    SymbolicWinchTorque,
+)
 from cdpr_pipeline.sim.model_file import read_model, write_model
 
 
@@ -20,6 +25,17 @@ def test_round_trip_keeps_rig_and_effects(tmp_path, paper_rig):
     rig, back = read_model(path)
     assert np.allclose(rig.anchors_m, paper_rig.anchors_m)
     assert back == effects
+
+
+def test_round_trip_keeps_per_winch_actuator_lags(tmp_path, paper_rig, nominal_plant):
+    effects = [ActuatorLag(time_constant_s=[0.0041, 0.005], cables=[2, 3]),
+               ActuatorLag(0.002)]
+    path = write_model(tmp_path / "m.yaml", paper_rig, effects, source="test")
+    _, back = read_model(path)
+    assert back == effects
+    assert nominal_plant.with_effects(back).lags == pytest.approx([0.002, 0.0061, 0.007])
+    described = yaml.safe_load(path.read_text())["effects"][0]["description"]
+    assert "winch 2: 4.1 ms, winch 3: 5.0 ms" in described
 
 
 def test_unknown_effect_names_the_file_and_entry(tmp_path, paper_rig):
