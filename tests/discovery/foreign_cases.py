@@ -264,8 +264,8 @@ def _outside(found: float, true: np.ndarray) -> float:
 def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
     """Relative errors of the fitted magnitudes in ``cause`` (a ``diagnosis.json``
     cause record) against the simulated first effect, per channel, where the truth
-    gives a number the cause's form can express: per-winch effects always; one
-    magnitude for every channel (``actuator_lag``, ``drum_radius_error``,
+    gives a number the cause's form can express: per-winch effects (``actuator_lag``
+    included) always; one magnitude for every channel (``drum_radius_error``,
     ``cable_elasticity``) only when the effect hit every channel, and then against the
     range of the channels' values (:func:`_outside`; a subset has no single value to
     compare with); ``anchor_offset``: the cable named must be one that moved, and its
@@ -310,9 +310,13 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
                 delta = float(eff.params[key][c - 1])
                 if delta:
                     errors[f"{key}[{c}]"] = _rel(w["new"][key] - w["old"][key], delta)
-    elif name == "actuator_lag" and every:
-        errors["time_constant_s"] = _outside(p["time_constant_s"],
-                                             eff.params["time_constant_s"])
+    elif name == "actuator_lag":
+        at = dict(zip(p.get("cables", []), p.get("time_constant_s", []), strict=True))
+        for c in chans:
+            if c not in at:
+                missing.append(f"winch {c}")
+                continue
+            errors[f"time_constant_s[{c}]"] = _rel(at[c], eff.params["time_constant_s"][c - 1])
     elif name == "payload_mass_error":
         errors["delta_mass_kg"] = _rel(p["relative"] * rig.mass,
                                        float(eff.params["delta_mass_kg"]))
