@@ -43,6 +43,14 @@ class DataScale:
     n: int
     kind: str
     winch: WinchParams | None = None
+    #: the speed below which the data say little: :data:`SLOW_SHARE` of the rows whose
+    #: friction the law gives turn slower (0: unknown). A low-speed shape narrower than
+    #: that rests on a handful of rows and fits noise with any size
+    slow_speed: float = 0.0
+
+
+#: share of the friction-known rows below :attr:`DataScale.slow_speed`
+SLOW_SHARE = 0.01
 
 
 class WinchPart(NamedTuple):

@@ -31,13 +31,18 @@ from cdpr_pipeline.sim.plant import smooth_sign
 
 
 def winch_columns(sig: RunSignals, nominal: Model) -> np.ndarray:
-    """Sensitivities (rows, n, 4) of the torque residual to the four winch parameters of
+    """Sensitivities of the torque residual to the four winch parameters of
     :class:`~cdpr_pipeline.sim.effects.WinchParameterError` (three scales and an offset),
-    on the statistics rows: ``-(I a, F_v b, F_c s(b), 1)``."""
+    on the statistics rows: ``-(I a, F_v b, F_c s(b), 1)``. (rows, n, 4): winch ``i``'s
+    parameters move winch ``i``'s residual only; (rows, n, n, 4) where the torque
+    projection mixes winches (:attr:`RunSignals.mixes`): ``[r, i, j]`` is winch ``j``'s
+    parameters' share in winch ``i``'s residual."""
     w = nominal.winch
     cols = np.stack([w.inertia * sig.alpha, w.viscous * sig.omega,
                      w.coulomb * smooth_sign(sig.omega, nominal.sign_sharpness),
                      np.ones_like(sig.omega)], axis=-1)
+    if sig.mixes:
+        return sig.rows(sig.torque_spread(cols))
     return sig.rows(sig.torque_weighted(cols))   # like the torque residual
 
 
@@ -55,8 +60,14 @@ class FitContext:
     def __post_init__(self) -> None:
         if self.columns is None:
             self.columns = np.concatenate([winch_columns(s, self.nominal) for s in self.train])
-        # per-winch projectors of the linear winch re-fit (variable projection)
-        self._pinv = [np.linalg.pinv(self.columns[:, i, :]) for i in range(self.columns.shape[1])]
+        # projectors of the linear winch re-fit (variable projection): per winch, or one
+        # for every winch at once where the torque projection mixes them
+        if self.columns.ndim == 4:
+            rows, n = self.columns.shape[:2]
+            self._pinv = [np.linalg.pinv(self.columns.reshape(rows * n, -1))]
+        else:
+            self._pinv = [np.linalg.pinv(self.columns[:, i, :])
+                          for i in range(self.columns.shape[1])]
         self._base_by_run = self.residuals([]).by_run if self.weights else []
 
     def residuals(self, effects: Sequence[Effect], signals: Sequence[RunSignals] | None = None
@@ -79,15 +90,23 @@ class FitContext:
     def winch_refit(self, torque_residual: np.ndarray) -> np.ndarray:
         """Least-squares winch parameter changes (n, 4) that best explain the stacked
         torque residual (rows, n)."""
+        if self.columns.ndim == 4:
+            return (self._pinv[0] @ torque_residual.ravel()).reshape(-1, 4)
         return np.stack([p @ torque_residual[:, i] for i, p in enumerate(self._pinv)])
+
+    def winch_explained(self, delta: np.ndarray) -> np.ndarray:
+        """What winch parameter changes ``delta`` (n, 4) add to the stacked torque
+        residual's rows (rows, n)."""
+        if self.columns.ndim == 4:
+            return np.einsum("tijk,jk->ti", self.columns, delta)
+        return np.einsum("tnk,nk->tn", self.columns, delta)
 
     def vector(self, res: Residuals, refit: bool) -> np.ndarray:
         parts = []
         for ch in res.channels:
             r = res.stacked(ch)
             if ch == "torque" and refit:
-                delta = self.winch_refit(r)
-                r = r - np.einsum("tnk,nk->tn", self.columns, delta)
+                r = r - self.winch_explained(self.winch_refit(r))
             parts.append(self.weights[ch] * r.ravel())
         return np.concatenate(parts)
 
@@ -153,12 +172,24 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
     sse0 = np.maximum(np.sum(r0 ** 2, axis=0), 1e-300)
     bounds = np.array([form.magnitude(i) for i in range(n)], float)
 
+    mixes = any(s.mixes for s in ctx.train)
+
+    def unit(variant: Any, shapes: np.ndarray | None, winches: range) -> np.ndarray:
+        """What a unit magnitude on ``winches`` explains (rows, n)."""
+        parts = {i + 1: WinchPart(variant, 1.0, None if shapes is None else float(shapes[i]))
+                 for i in winches}
+        return r0 - ctx.training_residuals([*current, *form.make(parts)],
+                                           TORQUE).stacked("torque")
+
     def project(variant: Any, shapes: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """Best magnitude (n,) and SSE (n,) of every winch at the given shapes."""
-        parts = {i + 1: WinchPart(variant, 1.0, None if shapes is None else float(shapes[i]))
-                 for i in range(n)}
-        res = ctx.training_residuals([*current, *form.make(parts)], TORQUE)
-        col = r0 - res.stacked("torque")      # what a unit magnitude explains
+        if mixes:
+            # the internal-force projection carries a winch's effect into the others'
+            # residuals: each winch's own column comes from that winch alone
+            col = np.stack([unit(variant, shapes, range(i, i + 1))[:, i] for i in range(n)],
+                           axis=1)
+        else:
+            col = unit(variant, shapes, range(n))
         den = np.sum(col ** 2, axis=0)
         m = np.where(den > 0, np.sum(col * r0, axis=0) / np.where(den > 0, den, 1.0), 0.0)
         m = np.clip(m, bounds[:, 0], bounds[:, 1])
@@ -199,7 +230,53 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
     kept = [i for i in range(n) if margin[i] > 0 and best_sse[i] <= (1 - min_gain) * sse0[i]]
     if not kept:
         kept = [int(np.argmax(margin))]
+    if mixes and len(kept) > 1:
+        def column(i: int) -> np.ndarray:
+            shapes = None if form.shape is None else np.full(n, float(best[i].shape))
+            return unit(best[i].variant, shapes, range(i, i + 1))
+
+        kept, magnitudes = _joint_winches(kept, best, r0, form.k, bounds, column, min_gain)
+        best = [p._replace(magnitude=float(m)) if p is not None else None
+                for p, m in zip(best, magnitudes, strict=True)]
     return on_winches(template, {i + 1: best[i] for i in kept})
+
+
+def _joint_winches(kept: list[int], best: list, r0: np.ndarray, k: int, bounds: np.ndarray,
+                   column: Any, min_gain: float) -> tuple[list[int], np.ndarray]:
+    """Backward elimination of the winches an own-residual fit kept, where the torque
+    projection mixes winches: winch ``j``'s effect also shows, projected, in the other
+    winches' residuals, where another winch's own column can mimic it. The kept
+    winches' magnitudes are fitted jointly on every winch's residual (shapes and
+    variants as found); the winch whose removal costs least goes while that cost, the
+    sum over winches of ``rows log(SSE_without / SSE_with)``, is below BIC's
+    ``k log rows``, or while its own residual gains less than ``min_gain`` from it (the
+    own-residual test's practical significance, now in the joint fit). Returns the
+    winches left and every winch's magnitude (n,)."""
+    rows, n = r0.shape
+    cols = {i: column(i) for i in kept}
+
+    def solve(winches: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        a = np.stack([cols[i].ravel() for i in winches], axis=1)
+        m = np.linalg.lstsq(a, r0.ravel(), rcond=None)[0]
+        m = np.clip(m, bounds[winches, 0], bounds[winches, 1])
+        fit = r0 - (a @ m).reshape(rows, n)
+        return m, np.maximum(np.sum(fit ** 2, axis=0), 1e-300)
+
+    kept = list(kept)
+    while len(kept) > 1:
+        _, sse = solve(kept)
+        without = [solve([i for i in kept if i != j])[1] for j in kept]
+        cost = np.array([np.sum(rows * np.log(w / sse)) for w in without])
+        own = np.array([w[j] / sse[j] for w, j in zip(without, kept, strict=True)])
+        # a winch that passes neither test scores below every one that passes both
+        score = np.where(own >= 1.0 / (1.0 - min_gain), cost, cost - np.inf)
+        worst = int(np.argmin(score))
+        if score[worst] >= k * np.log(rows):
+            break
+        kept.pop(worst)
+    magnitudes = np.array([p.magnitude if p is not None else 0.0 for p in best], float)
+    magnitudes[kept] = solve(kept)[0]
+    return kept, magnitudes
 
 
 @dataclass

@@ -139,8 +139,9 @@ def term_columns(expressions: Sequence[str], signals: Sequence[RunSignals]) -> n
         if missing:
             cols = np.stack([evaluate(e, {"omega": sig.omega, "theta": sig.theta})
                              for e in missing], axis=-1)
-            # weighted like the torque residual the terms are fitted to
-            rows = sig.rows(sig.torque_weighted(cols))
+            # weighted like the torque residual the terms are fitted to, each winch's
+            # on its own residual (RunSignals.torque_own)
+            rows = sig.rows(sig.torque_own(cols))
             for e, col in zip(missing, np.moveaxis(rows, -1, 0),
                               strict=True):
                 known[e] = col

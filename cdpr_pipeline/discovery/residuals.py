@@ -114,26 +114,50 @@ def _direct_rows(model: Model, nominal: Model, sig: RunSignals,
 class _Filtered:
     """A full-rate torque-side column block ``x`` (N, n) of a run on the statistics
     rows, and (on demand) the rows of its time derivative ``np.gradient(x, t)``: what an
-    actuator lag adds to a commanded torque (``u + tau u'``). Both are weighted like the
-    torque residual (:meth:`RunSignals.torque_weighted`, after the derivative) before the
-    filter."""
+    actuator lag adds to a commanded torque (``u + tau u'``). Both go through the torque
+    residual's weights and projection (:meth:`RunSignals.torque_weighted`, after the
+    derivative) before the filter. Where the projection mixes winches
+    (:attr:`RunSignals.mixes`), a factor per winch (a parameter, a lag) must act before
+    it: those combinations are taken from the spread rows
+    (:meth:`RunSignals.torque_spread`), filtered once."""
 
-    __slots__ = ("_sig", "_x", "rows", "_slope")
+    __slots__ = ("_sig", "_x", "rows", "_slope", "_spread", "_slope_spread")
 
     def __init__(self, sig: RunSignals, x: np.ndarray) -> None:
         self._sig, self._x = sig, x
         self.rows = sig.rows(sig.torque_weighted(x))
-        self._slope = None
+        self._slope = self._spread = self._slope_spread = None
 
-    def commanded(self, tau: float | np.ndarray) -> np.ndarray:
-        """Rows of ``x + tau x'`` (:func:`~cdpr_pipeline.sim.plant.commanded_torque`);
-        ``tau`` one lag or one per column (n,)."""
-        if not np.any(np.asarray(tau) > 0.0):
-            return self.rows
-        if self._slope is None:
-            self._slope = self._sig.rows(self._sig.torque_weighted(
-                np.gradient(self._x, self._sig.t, axis=0)))
-        return self.rows + tau * self._slope
+    def _derivative(self) -> np.ndarray:
+        return np.gradient(self._x, self._sig.t, axis=0)
+
+    def commanded(self, tau: float | np.ndarray, scale: float | np.ndarray | None = None
+                  ) -> np.ndarray:
+        """Rows of ``scale (x + tau x')`` (:func:`~cdpr_pipeline.sim.plant.
+        commanded_torque`); ``tau`` and ``scale`` one number or one per column (n,)."""
+        sig = self._sig
+        tau = np.asarray(tau, float)
+        lagged = bool(np.any(tau > 0.0))
+        if not sig.mixes or (tau.ndim == 0 and (scale is None or np.ndim(scale) == 0)):
+            # numbers, or per-winch factors where winches do not mix, commute with the
+            # weights and the filter
+            out = self.rows
+            if lagged:
+                if self._slope is None:
+                    self._slope = sig.rows(sig.torque_weighted(self._derivative()))
+                out = out + tau * self._slope
+            return out if scale is None else scale * out
+        n = sig.n
+        s = np.ones(n) if scale is None else np.broadcast_to(np.asarray(scale, float), (n,))
+        if self._spread is None:
+            self._spread = sig.rows(sig.torque_spread(self._x))
+        out = np.einsum("rij,j->ri", self._spread, s)
+        if lagged:
+            if self._slope_spread is None:
+                self._slope_spread = sig.rows(sig.torque_spread(self._derivative()))
+            out = out + np.einsum("rij,j->ri", self._slope_spread,
+                                  s * np.broadcast_to(tau, (n,)))
+        return out
 
 
 def _fingerprint(obj) -> bytes | None:
@@ -196,13 +220,22 @@ def _linear_rows(model: Model, nominal: Model, sig: RunSignals,
     if channels is None or "torque" in channels:
         tau = model.actuator_time_constant       # a number, or one per drive
         w = model.winch
-        pred = sum(p * f.commanded(tau) for p, f in zip(
+        pred = sum(f.commanded(tau, p) for p, f in zip(
             (w.inertia, w.viscous, w.coulomb, w.offset), winch, strict=True))
         if plant:
-            unit = _memo(sig, "tension", (model.anchors.tobytes(), float(model.gravity)),
-                         lambda: _Filtered(sig, _load(model.replace(mass=1.0), sig,
-                                                      sig.acceleration)[0]))
-            pred = pred + model.drum_radius * float(model.mass) * unit.commanded(tau)
+            if sig.mixes:
+                # the drums' radii scale the tensions before the projection: kept with
+                # them, so a new geometry is filtered once, not once per winch
+                unit = _memo(sig, "tension", (model.anchors.tobytes(), float(model.gravity),
+                                              model.drum_radius.tobytes()),
+                             lambda: _Filtered(sig, model.drum_radius * _load(
+                                 model.replace(mass=1.0), sig, sig.acceleration)[0]))
+                pred = pred + unit.commanded(tau, float(model.mass))
+            else:
+                unit = _memo(sig, "tension", (model.anchors.tobytes(), float(model.gravity)),
+                             lambda: _Filtered(sig, _load(model.replace(mass=1.0), sig,
+                                                          sig.acceleration)[0]))
+                pred = pred + unit.commanded(tau, model.drum_radius * float(model.mass))
         for effect, key in zip(model.effects, keys, strict=True):
             extra = _extra_rows(sig, effect, model, key)
             if extra is not None:
@@ -306,7 +339,7 @@ def residuals(model: Model, nominal: Model, signals: Sequence[RunSignals]) -> Re
 def measured_rows(signals: Sequence[RunSignals], channel: str = "torque") -> np.ndarray:
     """The measured channel itself on the statistics rows (for relative errors)."""
     if channel == "torque":
-        return np.concatenate([s.rows(s.torque_weighted(s.torque))
+        return np.concatenate([s.rows(s.torque_masked(s.torque))
                                for s in signals])
     parts = [s.rows(s.lengths) for s in signals]
     return np.concatenate([p - p.mean(axis=0) for p in parts])

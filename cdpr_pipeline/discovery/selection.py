@@ -38,6 +38,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from cdpr_pipeline.discovery.candidates import (
+    SLOW_SHARE,
     Candidate,
     DataScale,
     candidates_for,
@@ -248,8 +249,14 @@ class Selection:
 
 def _data_scale(signals: Sequence[RunSignals], kind: str, nominal: Model) -> DataScale:
     omega = np.concatenate([s.omega for s in signals])
+    rows = [s.row_index() for s in signals]
+    speed = np.abs(np.concatenate([s.omega[i] for s, i in zip(signals, rows, strict=True)]))
+    known = np.concatenate([np.ones_like(s.omega[i]) if s.friction_known is None
+                            else s.friction_known[i] for s, i in zip(signals, rows,
+                                                                     strict=True)]) > 0
+    slow = float(np.quantile(speed[known], SLOW_SHARE)) if known.any() else 0.0
     return DataScale(float(np.sqrt(np.mean(omega ** 2))) or 1.0, omega.shape[1], kind,
-                     nominal.winch)
+                     nominal.winch, slow)
 
 
 @dataclass
@@ -499,7 +506,9 @@ def _on_winches(cand: Candidate, ctx: FitContext, judge: Judge) -> Candidate:
 
 def _judge_joint(parts: list[tuple[Candidate, np.ndarray]], cand: Candidate, ctx: FitContext,
                  judge: Judge, n_tests: int) -> Judgement:
-    projected = cand.form is not None and not cand.refit_winches
+    # variable projection per winch is exact only where winches do not mix
+    projected = cand.form is not None and not cand.refit_winches \
+        and not any(s.mixes for s in ctx.train)
     cand = _on_winches(cand, ctx, judge)
     if projected and not parts:
         # fitted alone on the model it extends, variable projection found the optimum

@@ -61,7 +61,7 @@ from cdpr_pipeline.identification.regressors import (
     _shows_standstill,
     _sliding,
 )
-from cdpr_pipeline.sim.plant import Plant
+from cdpr_pipeline.sim.plant import Plant, cable_geometry
 
 #: statistics rows per cut-off period: rows are thinned to ``2 * cutoff_hz`` (the
 #: low-pass band sampled at its Nyquist rate: band-limited white noise stays white)
@@ -169,6 +169,11 @@ class RunSignals:
     #: friction, 0 where the winch sticks, stops, starts or reverses under a hard sign
     #: (:func:`friction_known`); None: everywhere (a smooth law, or no standstill seen)
     friction_known: np.ndarray | None = None
+    #: (N, n, n) operator taking a torque-side quantity to what the data can tell of it:
+    #: the :attr:`friction_known` weights and, on a cable robot with more cables than
+    #: the platform has degrees of freedom, the internal-force direction projected out
+    #: (:func:`internal_force_projection`); None: the weights alone
+    torque_projection: np.ndarray | None = None
     cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @cached_property
@@ -203,9 +208,45 @@ class RunSignals:
         samples."""
         return self.rows(self.torque_weighted(x))
 
+    @property
+    def mixes(self) -> bool:
+        """Whether a torque quantity on one winch reaches the others' residuals (the
+        internal-force projection of a redundant cable robot)."""
+        return self.torque_projection is not None
+
     def torque_weighted(self, x: np.ndarray) -> np.ndarray:
-        """``x`` (N, n, ...) times :attr:`friction_known` (unchanged when None), before
-        any filter (for callers with their own row filter)."""
+        """``x`` (N, n, ...) as the torque residual sees it, before any filter (for
+        callers with their own row filter): times :attr:`friction_known` (unchanged when
+        None), and through :attr:`torque_projection` where there is one."""
+        if self.torque_projection is not None:
+            return np.einsum("kij,kj...->ki...", self.torque_projection, x)
+        return self.torque_masked(x)
+
+    def torque_spread(self, x: np.ndarray) -> np.ndarray:
+        """(N, n, n, ...): entry ``[k, i, j]`` is what winch ``j``'s ``x`` adds to winch
+        ``i``'s residual (:meth:`torque_weighted` is its sum over ``j``). A quantity
+        scaled per winch after the filter (a winch parameter, a per-winch lag) goes
+        through this when :attr:`mixes`: the projection does not commute with it."""
+        if self.torque_projection is None:
+            eye = np.eye(self.n)
+            w = np.ones(x.shape[:2]) if self.friction_known is None else self.friction_known
+            proj = w[:, :, None] * eye
+        else:
+            proj = self.torque_projection
+        return proj.reshape(proj.shape + (1,) * (np.ndim(x) - 2)) * x[:, None]
+
+    def torque_own(self, x: np.ndarray) -> np.ndarray:
+        """``x`` (N, n, ...) as each winch's own residual sees it (the diagonal of
+        :meth:`torque_spread`): the column a per-winch fit on that winch's residual
+        regresses on."""
+        if self.torque_projection is None:
+            return self.torque_masked(x)
+        d = np.einsum("kii->ki", self.torque_projection)
+        return d.reshape(d.shape + (1,) * (np.ndim(x) - 2)) * x
+
+    def torque_masked(self, x: np.ndarray) -> np.ndarray:
+        """``x`` (N, n, ...) times :attr:`friction_known` only (what a measured torque is
+        compared with in a relative error)."""
         if self.friction_known is None:
             return x
         w = self.friction_known
@@ -269,6 +310,49 @@ def friction_known(position: np.ndarray, speed: np.ndarray, settings: Regression
     return keep.astype(float)
 
 
+def internal_force_projection(units: np.ndarray, radius: np.ndarray,
+                              known: np.ndarray | None) -> np.ndarray | None:
+    """(N, n, n) projectors that remove what internal cable forces can do to the winch
+    torques, or None on a rig without redundancy (n <= 3).
+
+    With more cables than the point-mass platform has degrees of freedom, the measured
+    motion fixes only ``K^T t = m (p'' - g)``: tensions ``t + N lambda`` with ``N`` the
+    null space of ``K^T`` move the platform alike. How much internal force the rig
+    holds is the controller's choice (a pretension, a lower tension bound), which
+    rig.yaml does not state, so the inverse dynamics' least-norm tensions leave
+    ``R N lambda`` in every torque residual: a smooth, motion-locked signal that no
+    winch effect causes. Like the encoder zero, it is a nuisance fitted per sample and
+    removed: ``P = W - W B (B^T W B)^+ B^T W`` with ``B = diag(R) N`` and ``W`` the
+    :func:`friction_known` weights (winches whose friction is unknown at a sample take
+    no part in estimating ``lambda`` there).
+
+    Parameters
+    ----------
+    units : (N, n, 3) array
+        Cable unit vectors at the measured positions (nominal anchors).
+    radius : (n,) array
+        Drum radii.
+    known : (N, n) array or None
+        Friction-known weights (None: all 1).
+    """
+    size, n = units.shape[:2]
+    if n <= 3:
+        return None
+    # left singular vectors of K (n x 3) beyond its rank span the null space of K^T
+    basis = np.linalg.svd(units, full_matrices=True)[0][:, :, 3:]
+    b = np.asarray(radius, float)[None, :, None] * basis
+    w = np.ones((size, n)) if known is None else np.asarray(known, float)
+    wb = w[:, :, None] * b
+    gram = np.einsum("kia,kib->kab", wb, b)
+    scale = np.einsum("kia,kia->k", b, b)[:, None, None]
+    # a direction carried only by winches left out at that sample cannot be estimated
+    inv = np.linalg.pinv(gram, rcond=1e-9, hermitian=True)
+    inv = np.where(np.abs(gram).max(axis=(1, 2), keepdims=True) > 1e-6 * scale, inv, 0.0)
+    proj = -np.einsum("kia,kab,kjb->kij", wb, inv, wb)
+    proj[:, np.arange(n), np.arange(n)] += w
+    return proj
+
+
 def _rate(t: np.ndarray) -> float:
     return 1.0 / float(np.median(np.diff(t)))
 
@@ -287,9 +371,12 @@ def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
         pos, vel, acc = filt.compact_derivatives(traj.position, traj.t)
         slow = replace(filt, cutoff_hz=min(STRETCH_CUTOFF_HZ, filt.cutoff_hz))
         slow_acc = slow.compact_derivatives(traj.position, traj.t)[2]
+        known = friction_known(theta_raw, omega, settings, _rate(traj.t))
+        projection = internal_force_projection(
+            cable_geometry(nominal.anchors, pos)[1], nominal.drum_radius, known)
         return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque,
                           settings, pos, vel, acc, np.asarray(traj.lengths, float),
-                          slow_acc, friction_known(theta_raw, omega, settings, _rate(traj.t)))
+                          slow_acc, known, projection)
     position = np.asarray(traj.position, float)
     theta, omega, alpha = filt.compact_derivatives(position, traj.t)
     return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque, settings,

@@ -417,8 +417,10 @@ class StribeckFriction(Effect):
             magnitude=lambda i: (0.0, 19.0 * fc[i] if fc[i] > 0 else np.inf),
             typical=lambda i: 0.5 * fc[i] if fc[i] > 0 else 1.0,
             # a Stribeck velocity is a low speed: beyond the typical speed the "bump"
-            # covers most of the motion and only imitates another law
-            shape=(0.005 * w, 1.5 * w), names=("extra_static", "stribeck_velocity"))]
+            # covers most of the motion and only imitates another law; below the speeds
+            # the data resolve (scale.slow_speed) it rests on a handful of rows
+            shape=(max(0.005 * w, min(scale.slow_speed, 0.5 * w)), 1.5 * w),
+            names=("extra_static", "stribeck_velocity"))]
 
     @classmethod
     def shapes(cls, speed_rms):

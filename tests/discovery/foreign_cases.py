@@ -186,12 +186,15 @@ def foreign_case(out_dir: str | Path, kind: str, effects: list[str], seed: int,
     raise RuntimeError(f"seeds {seed}..{seed + SLACK_RETRIES - 1} all slacken a cable: {last}")
 
 
-def _effects(rig: Any, names: list[str], seed: int, channels: list[int] | None) -> list[Any]:
-    """Effects drawn the way the generator draws them from names, with ``channels``."""
+def _effects(rig: Any, names: list[Any], seed: int, channels: list[int] | None) -> list[Any]:
+    """Effects drawn the way the generator draws them from names, with ``channels``; an
+    entry that is not a name is called with the rig and the random generator (a test's
+    own draw within the documented range)."""
     from tests.independent_sim import draw_effect
 
     rng = np.random.default_rng([int(seed), 0xEFF])
-    return [draw_effect(name, rig, rng, channels=channels) for name in names]
+    return [draw_effect(name, rig, rng, channels=channels) if isinstance(name, str)
+            else name(rig, rng) for name in names]
 
 
 def rng_for(seed: int) -> np.random.Generator:
