@@ -174,7 +174,7 @@ class Diagnosis:
             "nominal": {"params": self.rig_params(), "metrics": self.nominal_metrics.as_dict(),
                         **({"unusable": self.unusable.as_dict()} if self.unusable else {})},
             "discrepancies": [e.as_dict() for e in self.discrepancies],
-            "causes": [cause_record(c, self.nominal) for c in self.causes],
+            "causes": [cause_record(c, self.nominal, self.causes) for c in self.causes],
             "verdict": self.verdict,
             "summary": self.sentence,
             "extended_model": extended_model_file,
@@ -202,29 +202,44 @@ def _winch_change(effect: WinchParameterError, nominal: Model) -> dict[str, Any]
     return {"winch": effect.cable, "old": old, "new": new}
 
 
-def cause_params(effects: Sequence[Effect], nominal: Model) -> dict[str, Any]:
-    """The fitted physical parameters of a cause, with old and new winch values."""
+def winch_reference(nominal: Model, causes: Sequence[Judgement]) -> Model:
+    """The nominal model with every cause's re-identified winch parameters: what an
+    effect's size is relative to in the extended model (a Stribeck size as a multiple of
+    the extended model's F_c, not of a nominal F_c another cause replaced)."""
+    return nominal.with_effects([e for c in causes for e in c.effects
+                                 if isinstance(e, WinchParameterError)])
+
+
+def cause_params(effects: Sequence[Effect], nominal: Model,
+                 reference: Model | None = None) -> dict[str, Any]:
+    """The fitted physical parameters of a cause, with old and new winch values; sizes
+    relative to winch parameters use ``reference`` (:func:`winch_reference`; the nominal
+    model when None)."""
     out: dict[str, Any] = {}
+    reference = nominal if reference is None else reference
     changes = [_winch_change(e, nominal) for e in effects if isinstance(e, WinchParameterError)]
     for e in effects:
         if not isinstance(e, WinchParameterError):
-            # per-winch sizes both absolute and relative to the nominal parameters
-            out.update({**e.params(), **e.derived(nominal)})
+            # per-winch sizes both absolute and relative to the extended winch parameters
+            out.update({**e.params(), **e.derived(reference)})
     if changes:
         out["winches" if all(isinstance(e, WinchParameterError) for e in effects)
             else "refit_winches"] = changes
     return out
 
 
-def cause_record(j: Judgement, nominal: Model) -> dict[str, Any]:
+def cause_record(j: Judgement, nominal: Model, causes: Sequence[Judgement] = ()
+                 ) -> dict[str, Any]:
     if j.freeform is not None:
         expression = j.freeform.describe()
     else:
         structural = [e for e in j.effects if not isinstance(e, WinchParameterError)]
         expression = (structural or j.effects)[0].expression if j.effects else ""
+    reference = winch_reference(nominal, causes)
     return {"effect": j.effect, "channels": list(j.channels),
-            "params": cause_params(j.effects, nominal), "expression": expression,
-            "description": describe_cause(j, nominal), "evidence": j.evidence()}
+            "params": cause_params(j.effects, nominal, reference),
+            "expression": expression,
+            "description": describe_cause(j, nominal, reference), "evidence": j.evidence()}
 
 
 def judgement_record(j: Judgement) -> dict[str, Any]:
@@ -235,8 +250,10 @@ def judgement_record(j: Judgement) -> dict[str, Any]:
             "reason": j.reason}
 
 
-def describe_cause(j: Judgement, nominal: Model) -> str:
-    """One sentence with the fitted physical parameter."""
+def describe_cause(j: Judgement, nominal: Model, reference: Model | None = None) -> str:
+    """One sentence with the fitted physical parameter; winch changes from ``nominal``,
+    other effects' sizes relative to ``reference`` (:func:`winch_reference`)."""
+    reference = nominal if reference is None else reference
     parts = []
     for e in j.effects:
         if isinstance(e, WinchParameterError):
@@ -248,7 +265,7 @@ def describe_cause(j: Judgement, nominal: Model) -> str:
             if diffs:
                 parts.append(f"winch {e.cable}: " + ", ".join(diffs))
         else:
-            parts.append(e.describe(nominal))
+            parts.append(e.describe(reference))
     return "; ".join(parts) if parts else j.label
 
 
@@ -600,7 +617,9 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
     name = "an effect outside the vocabulary (unnamed)" if top.effect == "unnamed" \
         else top.effect.replace("_", " ")
     text = prefix + (
-        f"Most likely cause: {name}: {describe_cause(top, nominal)}. Extending the model "
+        f"Most likely cause: {name}: "
+        f"{describe_cause(top, nominal, winch_reference(nominal, causes))}. "
+        f"Extending the model "
         f"lowers the held-out {gain.signal} RMSE by {100 * gain.relative:.1f} % "
         f"(95 % CI {100 * gain.ci95[0]:.1f} to {100 * gain.ci95[1]:.1f} %).")
     if len(causes) > 1:

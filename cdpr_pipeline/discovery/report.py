@@ -164,7 +164,7 @@ def _table(rows: list[list[Any]], header: list[str]) -> str:
 
 def render(d: Diagnosis) -> str:
     """The whole page as a string."""
-    causes = [cause_record(c, d.nominal) for c in d.causes]
+    causes = [cause_record(c, d.nominal, d.causes) for c in d.causes]
     cause_rows = [[c["effect"], c["description"], ", ".join(c["channels"]),
                    c["evidence"]["pvalue"], c["evidence"]["bic_drop"],
                    c["evidence"]["heldout_rmse_drop_pct"]] for c in causes]

@@ -128,8 +128,13 @@ def _finite(values: np.ndarray) -> list[float | None]:
 
 
 def _relative(size: np.ndarray, nominal: np.ndarray) -> np.ndarray:
-    """``size / nominal``, NaN where the nominal value is zero."""
-    return np.where(nominal != 0, size / np.where(nominal != 0, nominal, 1.0), np.nan)
+    """``size / nominal``, NaN where the nominal value is zero or under 1 % of the size
+    (a ratio to a parameter that is about zero, say a Coulomb level another cause
+    re-identified to nothing, tells nothing)."""
+    size, nominal = np.asarray(size, float), np.asarray(nominal, float)
+    ok = np.abs(nominal) > 0.01 * np.abs(size)
+    ok &= nominal != 0
+    return np.where(ok, size / np.where(ok, nominal, 1.0), np.nan)
 
 
 @dataclass

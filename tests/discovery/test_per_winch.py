@@ -311,3 +311,16 @@ def test_emps_names_its_friction_and_keeps_the_unnamed_part_small(tmp_path):
     before, after = rmse([]), rmse(d.effects)
     named = rmse([e for e in d.effects if not isinstance(e, SymbolicWinchTorque)])
     assert (named - after) <= 0.25 * (before - after)
+    # sizes relative to winch parameters are relative to the extended model's, which a
+    # winch_parameter_error may have changed (F_v re-identified, F_c set to about 0)
+    extended_winch = d.nominal.with_effects(d.effects).winch
+    for cause in record["causes"]:
+        p = cause["params"]
+        if cause["effect"] == "asymmetric_viscous_friction":
+            fv = extended_winch.viscous[np.asarray(p["cables"]) - 1]
+            assert p["ratio"] == pytest.approx(np.asarray(p["coefficient"]) / fv, rel=1e-9)
+        if cause["effect"] == "stribeck_friction":
+            fc = extended_winch.coulomb[np.asarray(p["cables"]) - 1]
+            for ratio, size, f in zip(p["static_ratio"], p["extra_static"], fc, strict=True):
+                assert ratio is None if abs(f) <= 0.01 * abs(size) else \
+                    ratio == pytest.approx(1 + size / f, rel=1e-9), cause["description"]
