@@ -413,11 +413,26 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
                                shapes=search.shapes)
         search.steps.append([rest])
         search._log([rest])
-        keep = []
-        for c in causes if rest.freeform.terms else []:
+        keep, replacement = [], rest
+        for c in causes:
             others = [o for o in causes if o is not c]
-            without = search.refit(rest, _effects(others), n_tests)
-            with_c = search.refit(rest, _effects(others + [c]), n_tests)
+            if rest.freeform.terms:
+                without = search.refit(rest, _effects(others), n_tests)
+            elif c.channel == "torque":
+                # nothing is left on top of the named causes, which may be because c
+                # absorbed what free-form terms would say better (a drag w|w| re-fitted
+                # as F_v and F_c): search what the others leave
+                ctx_o, judge_o = search.context(_effects(others))
+                without = _judge_freeform(freeform, ctx_o, judge_o, search.scale, kind,
+                                          n_tests, shapes=search.shapes)
+                if not without.freeform.terms:
+                    keep.append(c)
+                    continue
+            else:
+                keep.append(c)
+                continue
+            with_c = search.refit(rest if rest.freeform.terms else without,
+                                  _effects(others + [c]), n_tests)
             bic_with = search.bic(_effects(others + [c]) + list(with_c.effects),
                                   c.n_params + with_c.n_params)
             bic_without = search.bic(_effects(others) + list(without.effects),
@@ -431,12 +446,41 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
                              "with %d parameters for its %d): %s", c.label,
                              bic_without - bic_with, replacing, c.n_params,
                              without.freeform.describe())
+                if not rest.freeform.terms:
+                    replacement = without
             else:
                 keep.append(c)
-        if rest.freeform.terms:
-            final = rest if len(keep) == len(causes) else \
-                search.refit(rest, _effects(keep), n_tests)
+        # the free-form part on top of the named causes kept
+        final = rest
+        if replacement.freeform.terms and len(keep) != len(causes):
+            final = search.refit(replacement, _effects(keep), n_tests)
+        torque = [c for c in keep if c.channel == "torque"]
+        if torque:
+            # several named causes may together imitate one thing outside the
+            # vocabulary (a drag w|w| as re-fitted F_v and F_c plus a Stribeck bump),
+            # each fitted around the others so that none can go alone: what do free-form
+            # terms say in place of all of them, against the named causes with the
+            # free-form part that passes on top of them?
+            others = [c for c in keep if c.channel != "torque"]
+            ctx_o, judge_o = search.context(_effects(others))
+            alone = _judge_freeform(freeform, ctx_o, judge_o, search.scale, kind, n_tests,
+                                    shapes=search.shapes)
+            on_top = final.passed and bool(final.freeform.terms)
+            extra = list(final.effects[len(_effects(keep)):]) if on_top else []
+            named = sum(c.n_params for c in torque) + (final.n_params if on_top else 0)
+            if alone.passed and alone.n_params <= named and search.bic(
+                    _effects(others) + list(alone.effects), alone.n_params) \
+                    + search.log_n() < search.bic(_effects(keep) + extra, named):
+                if log:
+                    log.info("  %s dropped together: free-form terms explain them better "
+                             "with %d parameters for their %d: %s",
+                             ", ".join(c.label for c in torque), alone.n_params, named,
+                             alone.freeform.describe())
+                keep, final = others, alone
+        if final.freeform.terms:
             causes = keep + ([final] if final.passed else [])
+        else:
+            causes = keep
     causes = sorted(causes, key=lambda c: -c.bic_drop)
     return Selection(tuple(_merge(causes)), tuple(tuple(step) for step in search.steps),
                      tuple(_effects(causes)), seconds_candidates,
