@@ -646,7 +646,8 @@ class AnchorOffset(Effect):
 class DrumRadiusError(Effect):
     """The length per motor turn differs from the nominal R: ``R_true = R (1 + relative)``.
     The encoder still converts angle with the nominal R, so length residuals grow with the
-    reeled length."""
+    reeled length. ``relative`` is one value (every drum in ``cables``) or one per drum in
+    ``cables`` (see :func:`per_winch`): drums are wound, worn and measured one by one."""
 
     name: ClassVar[str] = "drum_radius_error"
     expression: ClassVar[str] = "l_enc = l_0 - R_nom theta, theta = (l_0 - l) / (R (1 + e))"
@@ -654,25 +655,39 @@ class DrumRadiusError(Effect):
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative": (0.01, 0.03)}
     signed: ClassVar[frozenset[str]] = frozenset({"relative"})
 
-    relative: float = 0.02
+    relative: float | list[float] = 0.02
     cables: list[int] | None = None
 
     def apply(self, plant):
-        mask = _cable_mask(self.cables, plant.n)
-        return plant.replace(drum_radius=np.where(mask, plant.drum_radius * (1 + self.relative),
-                                                  plant.drum_radius))
+        rel = per_winch(self.relative, self.cables, plant.n)
+        return plant.replace(drum_radius=plant.drum_radius * (1 + rel))
 
     def scaled(self, s):
-        return type(self)(s * self.relative, self.cables)
+        return type(self)(_map(self.relative, lambda v: s * v), self.cables)
 
     @classmethod
     def candidates(cls, rig, scale):
-        return [_candidate(cls.name, cls.name, lambda x: [cls(float(x[0]))],
-                           [_arr(0.0)], _arr(-0.5), _arr(0.5), _arr(0.01), names=["relative"])]
+        """One drum at a time (one parameter), and every drum with its own error (one
+        per drum): the data choose by BIC, as for the other per-winch effects."""
+        n = scale.n
+        one = [_candidate(cls.name, f"{cls.name}[drum {c}]",
+                          lambda x, c=c: [cls(float(x[0]), [c])],
+                          [_arr(0.0)], _arr(-0.5), _arr(0.5), _arr(0.01), names=["relative"])
+               for c in range(1, n + 1)]
+        every = _candidate(cls.name, f"{cls.name}[every drum]",
+                           lambda x: [cls([float(v) for v in x], list(range(1, n + 1)))],
+                           [np.zeros(n)], np.full(n, -0.5), np.full(n, 0.5), np.full(n, 0.01),
+                           names=[f"relative[drum {c}]" for c in range(1, n + 1)])
+        return [*one, every]
 
     def describe(self, plant=None):
-        where = "every drum" if self.cables is None else f"drum(s) {self.cables}"
-        return f"{where}: radius is {100 * self.relative:+.2f} % off the nominal R"
+        if np.ndim(self.relative) == 0:
+            where = "every drum" if self.cables is None else \
+                ", ".join(f"drum {c}" for c in self.cables)
+            return f"{where}: radius is {100 * self.relative:+.2f} % off the nominal R"
+        cables = self.cables or list(range(1, len(self.relative) + 1))
+        return "drum radii off the nominal R: " + ", ".join(
+            f"drum {c} {100 * v:+.2f} %" for c, v in zip(cables, self.relative, strict=True))
 
 
 @dataclass

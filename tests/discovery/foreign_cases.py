@@ -268,8 +268,8 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
     """Relative errors of the fitted magnitudes in ``cause`` (a ``diagnosis.json``
     cause record) against the simulated first effect, per channel, where the truth
     gives a number the cause's form can express: per-winch effects (``actuator_lag``
-    included) always; one magnitude for every channel (``drum_radius_error``,
-    ``cable_elasticity``) only when the effect hit every channel, and then against the
+    and ``drum_radius_error`` included) always; one magnitude for every channel
+    (``cable_elasticity``) only when the effect hit every channel, and then against the
     range of the channels' values (:func:`_outside`; a subset has no single value to
     compare with); ``anchor_offset``: the cable named must be one that moved, and its
     offset is compared when only one moved.
@@ -323,8 +323,15 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
     elif name == "payload_mass_error":
         errors["delta_mass_kg"] = _rel(p["relative"] * rig.mass,
                                        float(eff.params["delta_mass_kg"]))
-    elif name == "drum_radius_error" and every:
-        errors["relative"] = _outside(p["relative"], eff.params["delta_radius_m"] / rig.radius)
+    elif name == "drum_radius_error":
+        from cdpr_pipeline.sim.effects import per_winch
+        fitted = per_winch(p["relative"], p.get("cables"), rig.n)
+        true = eff.params["delta_radius_m"] / rig.radius
+        for c in chans:
+            if fitted[c - 1] == 0.0:
+                missing.append(f"drum {c}")
+                continue
+            errors[f"relative[{c}]"] = _rel(fitted[c - 1], true[c - 1])
     elif name == "cable_elasticity" and every:
         errors["ea_n"] = _outside(p["ea_n"], eff.params["ea_n"])
     elif name == "anchor_offset":
