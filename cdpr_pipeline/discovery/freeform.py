@@ -149,17 +149,60 @@ def term_columns(expressions: Sequence[str], signals: Sequence[RunSignals]) -> n
     return np.concatenate(out)
 
 
-def base_library(speed_rms: float, angles: bool, harmonics: int = 16) -> list[str]:
-    """The grammar enumerated at depth one: speed functions at a few scales, and angle
-    harmonics when the positions are angles (winches)."""
+@dataclass(frozen=True)
+class Periodicity:
+    """How position-periodic terms (``sin(k theta)``) are built from a run's positions.
+
+    Parameters
+    ----------
+    unit : float
+        The smallest wavenumber, per unit of position: 1 per radian for a winch (periods
+        per revolution), ``2 pi / stroke`` for a linear axis (periods per stroke).
+    integer : bool
+        Whether harmonics are whole multiples of ``unit``: a motor angle repeats every
+        revolution; a linear axis's period (a screw pitch, a magnet pitch) need not fit
+        its stroke a whole number of times.
+    """
+
+    unit: float = 1.0
+    integer: bool = True
+    #: the most periods of ``unit`` the search tries (24 per revolution, per stroke of
+    #: the shortest axis)
+    most: float = 24.0
+
+    def wavenumber(self, m: float) -> float:
+        return float(m) if self.integer and self.unit == 1.0 else round(m * self.unit, 6)
+
+    @classmethod
+    def of_axes(cls, positions: Sequence[np.ndarray]) -> Periodicity:
+        """Periods over the longest stroke of any axis in ``positions`` ((N, n) each), up
+        to 24 per stroke of the shortest."""
+        spans = np.max([np.ptp(np.asarray(q, float), axis=0) for q in positions], axis=0)
+        spans = spans[spans > 0]
+        if not spans.size:
+            return cls(1.0, integer=False)
+        return cls(2 * np.pi / spans.max(), integer=False,
+                   most=24.0 * float(spans.max() / spans.min()))
+
+
+#: a winch's motor angle: whole periods per revolution
+WINCH_ANGLE = Periodicity()
+
+
+def base_library(speed_rms: float, periodicity: Periodicity | None, harmonics: int = 16
+                 ) -> list[str]:
+    """The grammar enumerated at depth one: speed functions at a few scales, and
+    position harmonics (whole multiples of the periodicity's unit) when given."""
     w = "omega"
     lib = [w, "sign_(omega)", "one(omega)", f"mul({w}, abs_({w}))", f"mul({w}, square({w}))",
            f"abs_({w})", f"pos({w})", f"negpart({w})", f"square({w})"]
     for f in (0.05, 0.1, 0.2, 0.4, 0.8):
         s = round(f * speed_rms, 6)
         lib += [f"mul(gauss({w}, {s}), sign_({w}))", f"softsign({w}, {s})"]
-    if angles:
-        for k in range(1, harmonics + 1):
+    if periodicity is not None:
+        for m in range(1, harmonics + 1):
+            k = periodicity.wavenumber(m)
+            k = int(k) if float(k).is_integer() and periodicity.integer else k
             lib += [f"sin_k(theta, {k})", f"cos_k(theta, {k})"]
     return lib
 
@@ -270,8 +313,14 @@ class Term:
     """Grammar type: a candidate torque term."""
 
 
-class Harmonic(int):
-    """Grammar type: an angle harmonic (periods per revolution)."""
+class Harmonic(float):
+    """Grammar type: a position harmonic's wavenumber (:class:`Periodicity`), written
+    as a whole number where it is one (``sin_k(theta, 3)``)."""
+
+    def __repr__(self) -> str:
+        return f"{float(self):.6g}"
+
+    __str__ = __repr__
 
 
 class Scale(float):
@@ -283,8 +332,12 @@ def _draw_scale(speed_rms: float, rng: random.Random) -> Scale:
     return Scale(round(speed_rms * 10 ** rng.uniform(-1.5, 0.3), 6))
 
 
-def _draw_harmonic(rng: random.Random) -> Harmonic:
-    return Harmonic(rng.randint(1, 24))
+def _draw_harmonic(periodicity: Periodicity, rng: random.Random) -> Harmonic:
+    if periodicity.integer:
+        m = rng.randint(1, 24)
+        return Harmonic(int(m) if periodicity.unit == 1.0 else periodicity.wavenumber(m))
+    # a linear axis: any number of periods per stroke, log-uniform
+    return Harmonic(periodicity.wavenumber(round(periodicity.most ** rng.random(), 3)))
 
 
 @dataclass
@@ -315,7 +368,7 @@ class GrammarGP:
     patience: int = 25
     seed: int = 0
 
-    def _pset(self, speed_rms: float, angles: bool, rng: random.Random):
+    def _pset(self, speed_rms: float, periodicity: Periodicity | None, rng: random.Random):
         from deap import gp
 
         pset = gp.PrimitiveSetTyped("term", [Var, Angle], Term)
@@ -336,8 +389,10 @@ class GrammarGP:
         pset.addPrimitive(lambda s: s, [Scale], Scale, name="scale")
         pset.addPrimitive(lambda k: k, [Harmonic], Harmonic, name="harmonic")
         pset.addEphemeralConstant("speed_scale", partial(_draw_scale, speed_rms, rng), Scale)
-        pset.addEphemeralConstant("harmonic_k", partial(_draw_harmonic, rng), Harmonic)
-        if angles:
+        pset.addEphemeralConstant("harmonic_k",
+                                  partial(_draw_harmonic, periodicity or WINCH_ANGLE, rng),
+                                  Harmonic)
+        if periodicity is not None:
             pset.addPrimitive(FUNCTIONS["sin_k"].fn, [Angle, Harmonic], Term, name="sin_k")
             pset.addPrimitive(FUNCTIONS["cos_k"].fn, [Angle, Harmonic], Term, name="cos_k")
         pset.addPrimitive(lambda a: a, [Angle], Angle, name="angle")
@@ -350,21 +405,22 @@ class GrammarGP:
         return _tree_expression(tree)
 
     def search(self, signals: Sequence[RunSignals], residual: np.ndarray, speed_rms: float,
-               angles: bool, exclude: Sequence[str] = ()) -> list[tuple[str, float]]:
+               periodicity: Periodicity | None, exclude: Sequence[str] = ()
+               ) -> list[tuple[str, float]]:
         """Best distinct terms ``(expression, explained share)`` for the stacked torque
         residual (rows, n) of ``signals``; terms with a shape of ``exclude`` (see
         :class:`ShapeFilter`) score nothing. The same inputs and seed give the same terms
         on any machine (a private generator; budgets in generations and evaluations)."""
         rng = random.Random(self.seed)
         with deap_random(rng):
-            return self._search(signals, residual, speed_rms, angles, rng, exclude)
+            return self._search(signals, residual, speed_rms, periodicity, rng, exclude)
 
     def _search(self, signals: Sequence[RunSignals], residual: np.ndarray, speed_rms: float,
-                angles: bool, rng: random.Random, exclude: Sequence[str] = ()
-                ) -> list[tuple[str, float]]:
+                periodicity: Periodicity | None, rng: random.Random,
+                exclude: Sequence[str] = ()) -> list[tuple[str, float]]:
         from deap import base, gp, tools
 
-        pset = self._pset(speed_rms, angles, rng)
+        pset = self._pset(speed_rms, periodicity, rng)
         toolbox = base.Toolbox()
         toolbox.register("expr", gp.genHalfAndHalf, pset=pset, min_=1, max_=3)
         toolbox.register("individual", tools.initIterate, MaxTree, toolbox.expr)
@@ -569,21 +625,22 @@ class FreeFormSearch:
         return replace(self, extra_terms=list(dict.fromkeys(self.extra_terms + extra)))
 
     def fit(self, signals: Sequence[RunSignals], residual: np.ndarray, speed_rms: float,
-            angles: bool, use_gp: bool = True, exclude: Sequence[str] = ()
-            ) -> FreeFormResult:
+            periodicity: Periodicity | None, use_gp: bool = True,
+            exclude: Sequence[str] = ()) -> FreeFormResult:
         """Sparse torque terms explaining ``residual`` (stacked rows, n) of ``signals``,
         at most :data:`MAX_TERMS_PER_CHANNEL` per winch, none with a shape of
         ``exclude`` (the vocabulary's, see :class:`ShapeFilter`)."""
         with one_blas_thread():     # thousands of small products (see one_blas_thread)
-            return self._fit(signals, residual, speed_rms, angles, use_gp, exclude)
+            return self._fit(signals, residual, speed_rms, periodicity, use_gp, exclude)
 
     def _fit(self, signals: Sequence[RunSignals], residual: np.ndarray, speed_rms: float,
-             angles: bool, use_gp: bool, exclude: Sequence[str]) -> FreeFormResult:
-        library = base_library(speed_rms, angles, self.harmonics)
+             periodicity: Periodicity | None, use_gp: bool, exclude: Sequence[str]
+             ) -> FreeFormResult:
+        library = base_library(speed_rms, periodicity, self.harmonics)
         library += [e for e in self.extra_terms if e not in library]
         found: list[tuple[str, float]] = []
         if use_gp and self.gp is not None:
-            found = self.gp.search(signals, residual, speed_rms, angles, exclude)
+            found = self.gp.search(signals, residual, speed_rms, periodicity, exclude)
             # a term a person can read: bloated trees explain noise and nothing else
             found = [(e, v) for e, v in found if _nodes(e) <= self.max_nodes]
             library += [e for e, _ in found if e not in library]

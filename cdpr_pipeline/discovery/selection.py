@@ -51,7 +51,12 @@ from cdpr_pipeline.discovery.fitting import (
     fit_candidate,
     fit_winches,
 )
-from cdpr_pipeline.discovery.freeform import FreeFormResult, FreeFormSearch
+from cdpr_pipeline.discovery.freeform import (
+    WINCH_ANGLE,
+    FreeFormResult,
+    FreeFormSearch,
+    Periodicity,
+)
 from cdpr_pipeline.discovery.residuals import Model, Residuals, channel_names
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.discovery.validity import block_bootstrap, split_blocks
@@ -577,7 +582,9 @@ def _judge_freeform(search: FreeFormSearch, ctx: FitContext, judge: Judge, scale
                     kind: str, n_tests: int, gp: bool = True, shapes: Sequence[str] = ()
                     ) -> Judgement:
     torque = judge.base_train.stacked("torque")
-    result = search.fit(ctx.train, torque, scale.speed_rms, kind == "cdpr", use_gp=gp,
+    periodicity = WINCH_ANGLE if kind == "cdpr" else \
+        Periodicity.of_axes([s.theta for s in ctx.train])
+    result = search.fit(ctx.train, torque, scale.speed_rms, periodicity, use_gp=gp,
                         exclude=shapes)
     j = replace(judge("unnamed", "free-form",
                       judge.base_effects + ([result.effect] if result.terms else []),

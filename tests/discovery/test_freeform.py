@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from cdpr_pipeline.discovery.freeform import (
+    WINCH_ANGLE,
     FreeFormSearch,
     GrammarGP,
     L0Regression,
@@ -46,7 +47,7 @@ def test_search_recovers_a_position_periodic_torque():
     rng = np.random.default_rng(1)
     residual = sig.rows(0.1 * evaluate(truth, {"theta": sig.theta, "omega": sig.omega}))
     residual = residual + 0.005 * rng.normal(size=residual.shape)
-    res = FreeFormSearch(gp=None).fit([sig], residual, 1.0, angles=True)
+    res = FreeFormSearch(gp=None).fit([sig], residual, 1.0, WINCH_ANGLE)
     found = {(t["cable"], t["expression"]) for t in res.terms}
     assert {(c, truth) for c in (1, 2, 3)} <= found
     coef = [t["coefficient"] for t in res.terms if t["expression"] == truth]
@@ -57,9 +58,9 @@ def test_gp_composes_terms_the_library_lacks():
     """|w| sin(3 theta) is a product of two grammar branches: only the GP writes it."""
     sig = _signals(seed=2)
     truth = "mul(abs_(omega), sin_k(theta, 3))"
-    assert truth not in base_library(1.0, True)
+    assert truth not in base_library(1.0, WINCH_ANGLE)
     residual = sig.rows(0.2 * evaluate(truth, {"theta": sig.theta, "omega": sig.omega}))
-    ranked = GrammarGP(seed=0).search([sig], residual, 1.0, True)
+    ranked = GrammarGP(seed=0).search([sig], residual, 1.0, WINCH_ANGLE)
     best_expr, best_share = ranked[0]
     assert best_share > 0.99, ranked[:3]
     col = term_columns([best_expr], [sig])[..., 0]
@@ -79,11 +80,11 @@ def test_gp_is_reproducible_and_leaves_the_global_random_state_alone():
     gp = GrammarGP(seed=4, generations=8, max_evaluations=400)
     random.seed(1)
     state = random.getstate()
-    first = gp.search([sig], residual, 1.0, True)
+    first = gp.search([sig], residual, 1.0, WINCH_ANGLE)
     assert random.getstate() == state
     random.seed(99)
     random.random()
-    second = gp.search([sig], residual, 1.0, True)
+    second = gp.search([sig], residual, 1.0, WINCH_ANGLE)
     assert first == second
     assert GrammarGP(seed=5, generations=8, max_evaluations=400).search(
-        [sig], residual, 1.0, True) != first
+        [sig], residual, 1.0, WINCH_ANGLE) != first

@@ -22,7 +22,7 @@ import pytest
 from lab_cases import fast_settings, lab_dataset, rng_for
 
 from cdpr_pipeline.discovery.diagnosis import diagnose
-from cdpr_pipeline.discovery.freeform import GrammarGP, ShapeFilter, readable
+from cdpr_pipeline.discovery.freeform import WINCH_ANGLE, GrammarGP, ShapeFilter, readable
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.identification.regressors import RegressionSettings
 from cdpr_pipeline.sim.effects import (
@@ -174,7 +174,7 @@ def test_gp_leaves_vocabulary_shapes_to_the_named_candidates():
     residual = sig.rows(0.3 * evaluate(truth, {"omega": sig.omega, "theta": sig.theta}))
     shapes = StribeckFriction.shapes(1.0)
     found = GrammarGP(seed=1, generations=10, max_evaluations=600).search(
-        [sig], residual, 1.0, True, exclude=shapes)
+        [sig], residual, 1.0, WINCH_ANGLE, exclude=shapes)
     vocabulary = ShapeFilter(shapes, {"omega": sig.omega, "theta": sig.theta})
     assert found
     assert all(readable(e) and not vocabulary.matches(e) for e, _ in found), found
