@@ -36,7 +36,6 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.config import CONFIG_DIR, compose_config
-from cdpr_pipeline.models.datamodule import dataset_digest
 from cdpr_pipeline.models.physics import (
     EXTENDED,
     NOMINAL,
@@ -382,6 +381,10 @@ def _notes(sources: dict[str, str], columns: list[str], physics: list[PhysicsRow
 def compare(cfg: DictConfig) -> Comparison:
     """Build the tables from MLflow (fitting missing references, and saying so), add the
     physics rows on the same split, and write everything."""
+    # here, not at the top: the data module imports Lightning (3 s), which only the
+    # hybrid row and the references fitted here need
+    from cdpr_pipeline.models.datamodule import dataset_digest
+
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = Path(cfg.data.path)
