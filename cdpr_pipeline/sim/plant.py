@@ -39,6 +39,9 @@ if TYPE_CHECKING:  # pragma: no cover
 
 #: Default sharpness ``k`` of the smooth sign ``tanh(k x)`` (s/rad).
 SIGN_SHARPNESS = 20.0
+#: stiffness of a rigid cable among elastic ones in the elastic dynamics, as a multiple
+#: of the stiffest elastic cable (Plant.dynamic_stiffness)
+RIGID_AMONG_ELASTIC = 100.0
 
 
 def smooth_sign(x: np.ndarray, sharpness: float | None = SIGN_SHARPNESS) -> np.ndarray:
@@ -217,6 +220,19 @@ class Plant:
         return self.cable_stiffness is not None
 
     @property
+    def dynamic_stiffness(self) -> np.ndarray:
+        """The stiffness the elastic dynamics integrate: a cable stated rigid (infinite
+        ``EA``) among elastic ones becomes :data:`RIGID_AMONG_ELASTIC` times the stiffest
+        elastic cable (it then stretches at most 1 % as much), which the explicit
+        integrator can step; the quasi-static stretch (:meth:`reeled_length`) keeps it
+        rigid."""
+        k = self.cable_stiffness
+        finite = k[np.isfinite(k)]
+        if finite.size in (0, k.size):
+            return k
+        return np.where(np.isfinite(k), k, RIGID_AMONG_ELASTIC * finite.max())
+
+    @property
     def lagged(self) -> bool:
         """Whether any drive has a lag (the state then holds every drive's drum torque;
         a drive without one takes its command directly)."""
@@ -334,7 +350,7 @@ class Plant:
         strain = (g - reeled) / reeled
         strain_rate = (g_rate - reeled_rate) / reeled
         # cables only pull: a slack cable carries no tension
-        pull = self.cable_stiffness * (strain + self.cable_damping_time * strain_rate)
+        pull = self.dynamic_stiffness * (strain + self.cable_damping_time * strain_rate)
         return np.maximum(pull, 0.0)
 
     def derivative(self, state: np.ndarray, u_cmd: np.ndarray) -> np.ndarray:

@@ -124,7 +124,7 @@ def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5) -> int
     rates = [_coulomb_rate(plant, plant.sign_sharpness)]
     if plant.elastic:
         shortest = 0.5 * plant.home_lengths.min()
-        k = plant.cable_stiffness.max() / shortest
+        k = plant.dynamic_stiffness.max() / shortest
         rates.append(math.sqrt(plant.n * k / plant.mass))
         rates.append(plant.n * k * plant.cable_damping_time / plant.mass)
         # winch side of the cable spring

@@ -254,24 +254,11 @@ def _rel(found: float, true: float) -> float:
     return abs(found - true) / max(abs(true), 1e-300)
 
 
-def _outside(found: float, true: np.ndarray) -> float:
-    """How far one fitted value lies outside the range of per-channel true values,
-    relative to the nearest end (0 inside): a cause with one value for every channel
-    cannot come closer to different true values than their range."""
-    lo, hi = float(np.min(true)), float(np.max(true))
-    if lo <= found <= hi:
-        return 0.0
-    return _rel(found, lo if found < lo else hi)
-
-
 def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
     """Relative errors of the fitted magnitudes in ``cause`` (a ``diagnosis.json``
     cause record) against the simulated first effect, per channel, where the truth
-    gives a number the cause's form can express: per-winch effects (``actuator_lag``
-    and ``drum_radius_error`` included) always; one magnitude for every channel
-    (``cable_elasticity``) only when the effect hit every channel, and then against the
-    range of the channels' values (:func:`_outside`; a subset has no single value to
-    compare with); ``anchor_offset``: the cable named must be one that moved, and its
+    gives a number the cause's form can express: per-winch (per-cable) effects always;
+    ``anchor_offset``: the cable named must be one that moved, and its
     offset is compared when only one moved.
 
     Returns ``{"errors": {name: error}, "missing": [...], "checked": bool}``; ``missing``
@@ -281,7 +268,6 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
     chans = [c + 1 for c in eff.channels]
     errors: dict[str, float] = {}
     missing: list[str] = []
-    every = len(chans) == rig.n
     if name == "stribeck_friction":
         at = dict(zip(p.get("cables", []), zip(p.get("extra_static", []),
                                                p.get("stribeck_velocity", []), strict=True),
@@ -332,8 +318,14 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
                 missing.append(f"drum {c}")
                 continue
             errors[f"relative[{c}]"] = _rel(fitted[c - 1], true[c - 1])
-    elif name == "cable_elasticity" and every:
-        errors["ea_n"] = _outside(p["ea_n"], eff.params["ea_n"])
+    elif name == "cable_elasticity":
+        from cdpr_pipeline.sim.effects import per_winch
+        fitted = per_winch(p["ea_n"], p.get("cables"), rig.n, fill=np.inf)
+        for c in chans:
+            if not np.isfinite(fitted[c - 1]):
+                missing.append(f"cable {c}")
+                continue
+            errors[f"ea_n[{c}]"] = _rel(fitted[c - 1], float(eff.params["ea_n"][c - 1]))
     elif name == "anchor_offset":
         c = int(p["cable"])
         if c not in chans:

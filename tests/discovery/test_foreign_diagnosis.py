@@ -160,3 +160,15 @@ def test_a_position_periodic_force_on_a_linear_axis_gets_no_name(tmp_path, seed)
           if t["cable"] == axis + 1 and t["expression"].startswith(("sin_k", "cos_k"))]
     assert any(abs(k - true_k) <= 0.15 * true_k for k in ks), \
         f"axis {axis + 1}: wavenumbers {ks} against {true_k:.4g}: {case.describe()}"
+
+
+def test_cable_elasticity_is_named_with_each_cables_stiffness(tmp_path, seed):
+    """Cables drawn elastic one, some or all, each with its own EA (other cables rigid):
+    named ``cable_elasticity`` with every elastic cable's EA within the tolerance (one EA
+    for every cable was named in 1 of 3 draws of the fast experiment)."""
+    case = foreign_case(tmp_path, "cdpr", ["cable_elasticity"], seed, n_runs=4,
+                        duration_s=10.0)
+    record = case.diagnose()
+    assert record["verdict"] == "cable_elasticity", case.describe()
+    ok, why = parameters_ok(case, record["causes"][0])
+    assert ok, f"{why}: {case.describe()}"
