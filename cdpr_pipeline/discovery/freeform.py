@@ -171,7 +171,9 @@ class Periodicity:
     most: float = 24.0
 
     def wavenumber(self, m: float) -> float:
-        return float(m) if self.integer and self.unit == 1.0 else round(m * self.unit, 6)
+        """``m`` periods of :attr:`unit`, to the six significant digits an expression
+        writes (so a term evaluates the same before and after it is written)."""
+        return float(f"{m * self.unit:.6g}")
 
     @classmethod
     def of_axes(cls, positions: Sequence[np.ndarray]) -> Periodicity:
@@ -201,8 +203,7 @@ def base_library(speed_rms: float, periodicity: Periodicity | None, harmonics: i
         lib += [f"mul(gauss({w}, {s}), sign_({w}))", f"softsign({w}, {s})"]
     if periodicity is not None:
         for m in range(1, harmonics + 1):
-            k = periodicity.wavenumber(m)
-            k = int(k) if float(k).is_integer() and periodicity.integer else k
+            k = Harmonic(periodicity.wavenumber(m))
             lib += [f"sin_k(theta, {k})", f"cos_k(theta, {k})"]
     return lib
 
@@ -334,10 +335,9 @@ def _draw_scale(speed_rms: float, rng: random.Random) -> Scale:
 
 def _draw_harmonic(periodicity: Periodicity, rng: random.Random) -> Harmonic:
     if periodicity.integer:
-        m = rng.randint(1, 24)
-        return Harmonic(int(m) if periodicity.unit == 1.0 else periodicity.wavenumber(m))
+        return Harmonic(periodicity.wavenumber(rng.randint(1, int(periodicity.most))))
     # a linear axis: any number of periods per stroke, log-uniform
-    return Harmonic(periodicity.wavenumber(round(periodicity.most ** rng.random(), 3)))
+    return Harmonic(periodicity.wavenumber(periodicity.most ** rng.random()))
 
 
 @dataclass
