@@ -397,7 +397,11 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
        terms that merely imitates its shape while adding nothing significant beyond
        it; a candidate that merely mimics an effect outside the vocabulary costs
        parameters and never gets to name it. Free-form terms pay for the constants the
-       search chose for them (a width, a harmonic).
+       search chose for them (a width, a harmonic). The torque-side named causes are
+       also asked together: free-form terms searched in place of all of them replace
+       them if they pass, need no more parameters and have a BIC better by one
+       parameter's worth (named causes that imitate one thing outside the vocabulary
+       only together, each fitted around the others).
     4. The free-form terms, re-selected on top of the named causes kept, are the
        ``unnamed`` cause if they pass the tests every candidate passes (they add
        significantly, and on held-out runs, beyond the named causes).
@@ -418,26 +422,11 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
                                shapes=search.shapes)
         search.steps.append([rest])
         search._log([rest])
-        keep, replacement = [], rest
-        for c in causes:
+        keep = [] if rest.freeform.terms else list(causes)
+        for c in causes if rest.freeform.terms else []:
             others = [o for o in causes if o is not c]
-            if rest.freeform.terms:
-                without = search.refit(rest, _effects(others), n_tests)
-            elif c.channel == "torque":
-                # nothing is left on top of the named causes, which may be because c
-                # absorbed what free-form terms would say better (a drag w|w| re-fitted
-                # as F_v and F_c): search what the others leave
-                ctx_o, judge_o = search.context(_effects(others))
-                without = _judge_freeform(freeform, ctx_o, judge_o, search.scale, kind,
-                                          n_tests, shapes=search.shapes)
-                if not without.freeform.terms:
-                    keep.append(c)
-                    continue
-            else:
-                keep.append(c)
-                continue
-            with_c = search.refit(rest if rest.freeform.terms else without,
-                                  _effects(others + [c]), n_tests)
+            without = search.refit(rest, _effects(others), n_tests)
+            with_c = search.refit(rest, _effects(others + [c]), n_tests)
             bic_with = search.bic(_effects(others + [c]) + list(with_c.effects),
                                   c.n_params + with_c.n_params)
             bic_without = search.bic(_effects(others) + list(without.effects),
@@ -451,14 +440,12 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
                              "with %d parameters for its %d): %s", c.label,
                              bic_without - bic_with, replacing, c.n_params,
                              without.freeform.describe())
-                if not rest.freeform.terms:
-                    replacement = without
             else:
                 keep.append(c)
         # the free-form part on top of the named causes kept
         final = rest
-        if replacement.freeform.terms and len(keep) != len(causes):
-            final = search.refit(replacement, _effects(keep), n_tests)
+        if rest.freeform.terms and len(keep) != len(causes):
+            final = search.refit(rest, _effects(keep), n_tests)
         torque = [c for c in keep if c.channel == "torque"]
         if torque:
             # several named causes may together imitate one thing outside the
