@@ -42,3 +42,23 @@ def fast_settings(**changes):
 
 def rng_for(seed: int) -> np.random.Generator:
     return np.random.default_rng([seed, 2718])
+
+
+def candidate_effects(rig, signals, seed: int) -> list[list[Effect]]:
+    """One set of effects per candidate of ``rig`` (every variant, the winch re-fits
+    too), each at its start moved by two of its scales at random, then every other set
+    together: models of every structure the fast residual path must match the direct
+    one on."""
+    from cdpr_pipeline.discovery.candidates import DataScale, candidates_for, nominal_winch
+
+    omega = np.concatenate([s.omega for s in signals])
+    scale = DataScale(float(np.sqrt(np.mean(omega ** 2))), omega.shape[1], "cdpr",
+                      nominal_winch(rig))
+    rng = np.random.default_rng(seed)
+    sets = []
+    for cand in candidates_for(rig, scale, None, True):
+        lo = np.where(np.isfinite(cand.lower), cand.lower, -1e9)
+        hi = np.where(np.isfinite(cand.upper), cand.upper, 1e9)
+        x = np.clip(cand.starts[0] + 2 * cand.x_scale * rng.normal(size=cand.n_params), lo, hi)
+        sets.append(list(cand.build(x)))
+    return sets + [[e for s in sets[::2] for e in s]]

@@ -10,10 +10,10 @@ import dataclasses
 
 import numpy as np
 import pytest
+from lab_cases import candidate_effects
 from scipy.optimize import least_squares
 
 from cdpr_pipeline.discovery import residuals as R
-from cdpr_pipeline.discovery.candidates import DataScale, candidates_for, nominal_winch
 from cdpr_pipeline.discovery.fitting import GroupedJacobian
 from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.identification.regressors import RegressionSettings, resolve_settings
@@ -57,17 +57,7 @@ def test_rows_by_linearity_match_the_direct_rows(lab, sharpness):
     regression = dataclasses.replace(sigs[0].settings, sign_sharpness=sharpness)
     sigs = dataset_signals(data.trajectories[:2], data.rig, regression)
     nominal = R.nominal_model(data.rig, sharpness)
-    omega = np.concatenate([s.omega for s in sigs])
-    scale = DataScale(float(np.sqrt(np.mean(omega ** 2))), omega.shape[1], "cdpr",
-                      nominal_winch(data.rig))
-    rng = np.random.default_rng(1)
-    sets = []
-    for cand in candidates_for(data.rig, scale, None, True):
-        lo = np.where(np.isfinite(cand.lower), cand.lower, -1e9)
-        hi = np.where(np.isfinite(cand.upper), cand.upper, 1e9)
-        x = np.clip(cand.starts[0] + 2 * cand.x_scale * rng.normal(size=cand.n_params), lo, hi)
-        sets.append(list(cand.build(x)))
-    sets.append([e for s in sets[::2] for e in s])
+    sets = candidate_effects(data.rig, sigs, 1)
     sets.append([SymbolicWinchTorque([{"cable": 1, "expression": "sin_k(theta, 3)",
                                        "coefficient": 0.2}])] + sets[-1])
     for effects in sets:

@@ -101,24 +101,47 @@ def test_an_effect_outside_the_vocabulary_gets_no_name(tmp_path, seed, kind):
         assert record["gain"]["ci95"][0] > 0, case.describe()
 
 
+def _upper_half(name: str, key: str, base):
+    """``name`` drawn by the generator (channels, phases, wavenumbers), its magnitude
+    ``key`` redrawn on the affected channels in the upper half of the generator's
+    documented range, 0.55-0.8 of ``base(rig)``: these tests are about the name and the
+    size found, the detection limit is ``benchmarks/bench_detection.py``'s."""
+    from tests.independent_sim import draw_effect
+
+    def draw(rig, rng):
+        eff = draw_effect(name, rig, rng)
+        idx = list(eff.channels)
+        values = np.array(eff.params[key], float)
+        values[idx] = rng.uniform(0.55, 0.8, len(idx)) * base(rig)[idx]
+        return type(eff)(name, eff.channels, {**eff.params, key: values})
+
+    return draw
+
+
+def _unnamed_terms(case) -> list[dict]:
+    """The free-form terms of a diagnosis that must name nothing from the vocabulary
+    (empty when the verdict is ``none``: on a rig whose viscous or Coulomb share of the
+    force is small, even the upper half of the range does not show on the held-out run,
+    which is no wrong name; measured: 2 of 10 drag draws, 0 of 10 periodic)."""
+    record = case.diagnose()
+    found = {c["effect"] for c in record["causes"]}
+    assert found <= {"unnamed"}, case.describe()
+    return record["causes"][0]["params"]["terms"] if found else []
+
+
 def test_a_drag_outside_the_vocabulary_is_not_named_after_what_imitates_it(tmp_path, seed):
     """A quadratic drag ``c w |w|`` on drive axes: re-fitted viscous and Coulomb
     friction plus a Stribeck bump imitate it so well together that neither can go alone
     (each was fitted around the other), so the selection also asks what free-form terms
-    say in place of all of them: never a vocabulary name, and when found (a drag too
-    small to show on the held-out run gives ``none``, as in
-    :func:`test_an_effect_outside_the_vocabulary_gets_no_name`) ``unnamed`` with the
-    drag's own term and size on every axis it acts on. Before this step, 5 of 6 draws
-    were named ``winch_parameter_error`` + ``stribeck_friction``."""
-    case = foreign_case(tmp_path, "axes", ["quadratic_drag"], seed, n_runs=3, duration_s=10.0)
-    record = case.diagnose()
-    found = {c["effect"] for c in record["causes"]}
-    assert found <= {"unnamed"}, case.describe()
-    if not found:
-        return
-    terms = record["causes"][0]["params"]["terms"]
+    say in place of all of them: never a vocabulary name, and when found ``unnamed``
+    with the drag's own term and size on every axis it acts on. Before this step, 5 of 6
+    draws were named ``winch_parameter_error`` + ``stribeck_friction``."""
+    draw = _upper_half("quadratic_drag", "coefficient",
+                       lambda rig: rig.viscous / rig.typical_speed)
+    case = foreign_case(tmp_path, "axes", [draw], seed, n_runs=3, duration_s=10.0)
+    terms = _unnamed_terms(case)
     eff = case.truth.effects[0]
-    for axis in eff.channels:
+    for axis in eff.channels if terms else []:
         drag = [t["coefficient"] for t in terms if t["cable"] == axis + 1
                 and t["expression"] == "mul(omega, abs_(omega))"]
         true = float(eff.params["coefficient"][axis])
@@ -145,21 +168,18 @@ def test_a_position_periodic_force_on_a_linear_axis_gets_no_name(tmp_path, seed)
     that need not fit the stroke a whole number of times) was named ``actuator_lag`` in
     3 of 3 draws of the detection benchmark: the free-form grammar had position
     harmonics only for winch angles. Axes now get wavenumbers in periods per stroke
-    (``freeform.Periodicity.of_axes``, any number from 1 to 24): never a vocabulary name,
-    and when found, on the axis where it is largest, a harmonic within 15 % of its
-    wavenumber."""
-    case = foreign_case(tmp_path, "axes", ["periodic_torque"], seed, n_runs=3, duration_s=10.0)
-    record = case.diagnose()
-    found = {c["effect"] for c in record["causes"]}
-    assert found <= {"unnamed"}, case.describe()
-    if not found:
+    (``freeform.Periodicity.of_axes``): never a vocabulary name, and when found, on the
+    axis where it is largest, a harmonic within 15 % of its wavenumber."""
+    draw = _upper_half("periodic_torque", "amplitude", lambda rig: rig.coulomb)
+    case = foreign_case(tmp_path, "axes", [draw], seed, n_runs=3, duration_s=10.0)
+    terms = _unnamed_terms(case)
+    if not terms:
         return
     eff = case.truth.effects[0]
     nominal = np.abs(np.asarray(case.dataset.rig.nominal.coulomb, float)) + 1e-12
     axis = max(eff.channels, key=lambda c: eff.params["amplitude"][c] / nominal[c])
     true_k = float(eff.params["wavenumber"][axis])
-    ks = [float(t["expression"].split(",")[1].rstrip(")")) for t in
-          record["causes"][0]["params"]["terms"]
+    ks = [float(t["expression"].split(",")[1].rstrip(")")) for t in terms
           if t["cable"] == axis + 1 and t["expression"].startswith(("sin_k", "cos_k"))]
     assert any(abs(k - true_k) <= 0.15 * true_k for k in ks), \
         f"axis {axis + 1}: wavenumbers {ks} against {true_k:.4g}: {case.describe()}"

@@ -16,9 +16,9 @@ import dataclasses
 import numpy as np
 import pytest
 from foreign_cases import foreign_case, foreign_settings, parameters_ok
+from lab_cases import candidate_effects
 
 from cdpr_pipeline.discovery import residuals as R
-from cdpr_pipeline.discovery.candidates import DataScale, candidates_for, nominal_winch
 from cdpr_pipeline.discovery.signals import dataset_signals, internal_force_projection
 from cdpr_pipeline.identification.regressors import resolve_settings
 from cdpr_pipeline.sim.effects import ActuatorLag, StribeckFriction, SymbolicWinchTorque
@@ -89,16 +89,7 @@ def test_rows_by_linearity_match_the_direct_rows_where_winches_mix(redundant):
     data, sigs = redundant
     assert all(s.mixes for s in sigs)
     nominal = R.nominal_model(data.rig, sigs[0].settings.sign_sharpness)
-    omega = np.concatenate([s.omega for s in sigs])
-    scale = DataScale(float(np.sqrt(np.mean(omega ** 2))), omega.shape[1], "cdpr",
-                      nominal_winch(data.rig))
-    rng = np.random.default_rng(2)
-    sets = []
-    for cand in candidates_for(data.rig, scale, None, True):
-        lo = np.where(np.isfinite(cand.lower), cand.lower, -1e9)
-        hi = np.where(np.isfinite(cand.upper), cand.upper, 1e9)
-        x = np.clip(cand.starts[0] + 2 * cand.x_scale * rng.normal(size=cand.n_params), lo, hi)
-        sets.append(list(cand.build(x)))
+    sets = candidate_effects(data.rig, sigs, 2)
     sets.append([StribeckFriction(static_ratio=None, stribeck_velocity=[0.5, 1.0], cables=[1, 3],
                                   extra_static=[0.1, 0.2]),
                  ActuatorLag(time_constant_s=[0.004, 0.007], cables=[2, 4]),
