@@ -16,7 +16,7 @@ With the hard sign (set-valued Coulomb friction, the spec's default law) the fri
 stopping, starting or reversing, the friction is whatever balances the rest, which no
 model of the form ``F_c sign(w)`` predicts: :attr:`RunSignals.friction_known` marks those
 samples (weight 0) so that the torque residual leaves them out *before* the parallel
-filter (:meth:`RunSignals.torque_rows`), as the identification's regression does. Left
+filter (:meth:`RunSignals.torque_weighted`), as the identification's regression does. Left
 in, their residual (holding torque minus ``+-F_c``, a pulse at every reversal placed by
 the stick) is fitted by any candidate with a pulse there: an ``actuator_lag`` of a few ms
 (whose ``tau du/dt`` has one at every sign switch), or a free-form low-speed term, on
@@ -199,14 +199,6 @@ class RunSignals:
             # the protocol's own anti-alias filter and decimation, after trimming
             return zero_phase_decimate(x[trim:len(x) - trim], int(self.settings.decimate))
         return zero_phase_lowpass(x, filt, self.fs)[trim:len(x) - trim:self.thin]
-
-    def torque_rows(self, x: np.ndarray) -> np.ndarray:
-        """:meth:`rows` of a per-winch torque quantity ``x`` (N, n, ...): a torque
-        residual, or a column a torque residual is regressed on. Samples whose friction
-        the law does not give (:attr:`friction_known` 0) are taken out before the
-        filter, so every model is compared, and every column fitted, on the same
-        samples."""
-        return self.rows(self.torque_weighted(x))
 
     @property
     def mixes(self) -> bool:
