@@ -58,7 +58,6 @@ from cdpr_pipeline.identification.regressors import (
     DerivativeFilter,
     RegressionSettings,
     _held_torque,
-    _shows_standstill,
     _sliding,
 )
 from cdpr_pipeline.sim.plant import Plant, cable_geometry
@@ -284,14 +283,16 @@ def friction_known(position: np.ndarray, speed: np.ndarray, settings: Regression
 
     The rule is the identification's
     (:func:`~cdpr_pipeline.identification.regressors._sliding`), applied only to
-    channels whose recorded position shows standstill (an encoder resolving rest);
+    channels whose sensor resolves rest (an encoder;
+    :attr:`~cdpr_pipeline.identification.regressors.RegressionSettings.encoder_rest`,
+    decided once for the dataset);
     ``speed`` is the filtered speed. Every dropped sample also drops its neighbours
     within :func:`filter_reach` of the derivative filter (see the module docstring)."""
     if settings.sign_sharpness is not None:
         return None
     position = np.asarray(position, float)
     keep = _sliding(position, speed)
-    keep[:, ~_shows_standstill(position)] = True
+    keep[:, ~settings.rest_channels(position)] = True
     if keep.all():
         return None
     filt = settings.filter

@@ -118,19 +118,47 @@ class RegressionSettings:
         Treat each recorded torque as held until the next sample (see
         :func:`winch_regression`); ``"auto"``: when rig.yaml states a digital controller
         (``controller.rate_hz``), whose commands are held over its period.
+    encoder_rest : bool, sequence of bool or "auto"
+        Per channel, whether its recorded position resolves standstill (an encoder whose
+        count stays unchanged at rest), so that a hard-sign Coulomb law can tell stops
+        and reversals sample by sample (:func:`_sliding`); one bool for every channel.
+        ``"auto"``: a channel whose position stays unchanged for
+        :data:`STANDSTILL_SAMPLES` samples somewhere in *any* run. A property of the
+        sensor, so decided once for the dataset: a time block cut from a run that never
+        stops in it still has its encoder.
     """
 
     filter: DerivativeFilter = DerivativeFilter()
     decimate: int | str = 1
     sign_sharpness: float | str | None = RIG
     zero_order_hold: bool | str = True
+    encoder_rest: bool | tuple[bool, ...] | str = AUTO
+
+    def __post_init__(self) -> None:
+        # a list from a yaml file becomes a tuple (the settings stay hashable)
+        if not isinstance(self.encoder_rest, (bool, str)):
+            object.__setattr__(self, "encoder_rest",
+                               tuple(bool(v) for v in self.encoder_rest))
 
     @property
     def resolved(self) -> bool:
         """Whether nothing is left to choose from the data."""
         return not any(isinstance(v, str) for v in (
             self.filter.cutoff_hz, self.filter.trim_s, self.decimate, self.sign_sharpness,
-            self.zero_order_hold))
+            self.zero_order_hold, self.encoder_rest))
+
+    def rest_channels(self, position: np.ndarray) -> np.ndarray:
+        """``(n,)``: which channels of a run with ``position`` (N, n) resolve standstill
+        (:attr:`encoder_rest`; still ``"auto"``: decided from this run alone)."""
+        n = np.shape(position)[1]
+        rest = self.encoder_rest
+        if isinstance(rest, str):
+            return _shows_standstill(np.asarray(position, float))
+        out = np.broadcast_to(np.asarray(rest, bool), (n,)) if np.ndim(rest) == 0 or \
+            len(rest) == n else None
+        if out is None:
+            raise ValueError(f"regression.encoder_rest: {len(rest)} entries for {n} channels")
+        return np.array(out)
 
 
 @dataclass
@@ -191,8 +219,7 @@ def motion_bandwidth_hz(trajectories: Sequence[Trajectory]) -> float:
     """
     found = []
     for tr in trajectories:
-        q = tr.lengths if tr.lengths is not None else tr.position
-        q = np.asarray(q, float).reshape(len(tr.t), -1)
+        q = _recorded_position(tr)
         fs = 1.0 / float(np.median(np.diff(tr.t)))
         f, p = periodogram(q, fs=fs, window="hann", detrend="linear", axis=0)
         p = p.sum(axis=1)
@@ -223,7 +250,9 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
     - edge trim: :data:`TRIM_PERIODS` periods of the cut-off;
     - Coulomb law: rig.yaml's ``coulomb_law`` (hard ``sign`` when absent, the spec);
     - zero-order hold of the recorded torques when rig.yaml states a digital controller
-      rate (the command is held over a control period).
+      rate (the command is held over a control period);
+    - encoder rest: a channel whose recorded position stands still somewhere in any run
+      (:attr:`RegressionSettings.encoder_rest`).
 
     On the EMPS benchmark (1 kHz, 3.7 Hz motion bandwidth) these give the published
     protocol (Butterworth about 100 Hz, decimation by 10).
@@ -262,14 +291,28 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
         hold = rate is not None
         log.info("recorded torques %s", f"held over the controller period ({rate:g} Hz)"
                  if hold else "taken as sampled (rig.yaml states no controller rate)")
+    rest = settings.encoder_rest
+    if rest == AUTO:
+        seen = [_shows_standstill(np.asarray(_recorded_position(tr), float))
+                for tr in trajectories]
+        rest = tuple(bool(v) for v in np.any(seen, axis=0)) if seen else True
+        log.info("position sensors resolving standstill (encoders): %s", ", ".join(
+            f"{i + 1}: {'yes' if r else 'no'}" for i, r in enumerate(np.atleast_1d(rest))))
     for name, value in (("filter.cutoff_hz", cutoff), ("filter.trim_s", trim),
                         ("decimate", q), ("sign_sharpness", law),
-                        ("zero_order_hold", hold)):
+                        ("zero_order_hold", hold), ("encoder_rest", rest)):
         if isinstance(value, str):
             raise ValueError(f"regression.{name}: unknown setting {value!r} "
                              f"(a value, or {AUTO!r}/{RIG!r} where documented)")
     return RegressionSettings(replace(filt, cutoff_hz=float(cutoff), trim_s=float(trim)),
-                              int(q), None if law is None else float(law), bool(hold))
+                              int(q), None if law is None else float(law), bool(hold), rest)
+
+
+def _recorded_position(traj: Trajectory) -> np.ndarray:
+    """What a run's position sensors recorded per channel: the encoder lengths of a
+    cable robot, the axis positions of drive axes."""
+    q = traj.lengths if traj.lengths is not None else traj.position
+    return np.asarray(q, float).reshape(len(traj.t), -1)
 
 
 def _held_torque(torques: np.ndarray, zero_order_hold: bool) -> np.ndarray:
@@ -359,7 +402,7 @@ def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
         target, c = filt.smooth(torque, fs) - smooth_load, filt.smooth(c, fs)
     else:
         keep = _sliding(position, b)
-        keep[:, ~_shows_standstill(position)] = True
+        keep[:, ~settings.rest_channels(position)] = True
         drop = (~keep).astype(float)
         c = filt.smooth(keep * np.sign(b), fs)
         one = filt.smooth(keep.astype(float), fs)
