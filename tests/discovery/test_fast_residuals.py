@@ -26,9 +26,11 @@ def lab(quiet_lab):
     return quiet_lab, dataset_signals(quiet_lab.trajectories[:2], quiet_lab.rig, regression)
 
 
-def test_rows_are_scipys_decimation(tmp_path):
-    """EMPS with default settings decimates by 10 (the published protocol)."""
-    from scipy.signal import decimate
+def test_rows_are_scipys_decimation_with_an_even_extension(tmp_path):
+    """EMPS with default settings decimates by 10 (the published protocol); the rows are
+    SciPy's zero-phase decimation with the mirror extension at the ends
+    (:func:`~cdpr_pipeline.discovery.signals.zero_phase_decimate`)."""
+    from scipy.signal import cheby1, sosfiltfilt
 
     from cdpr_pipeline.data import load_dataset
     from cdpr_pipeline.data.convert import convert_emps
@@ -44,11 +46,29 @@ def test_rows_are_scipys_decimation(tmp_path):
     for sig in dataset_signals(data.trajectories, data.rig, regression):
         trim = int(round(sig.settings.filter.trim_s * sig.fs))
         for x in (sig.torque, sig.theta, rng.normal(size=(len(sig.t), 3, 4))):
-            expected = decimate(x[trim:len(x) - trim], regression.decimate, axis=0,
-                                zero_phase=True)
+            q = regression.decimate
+            sos = cheby1(8, 0.05, 0.8 / q, output="sos")
+            # SciPy's own pad length, at least two decimation periods
+            pad = max(2 * q, 3 * (2 * len(sos) + 1))
+            expected = sosfiltfilt(sos, x[trim:len(x) - trim], axis=0, padtype="even",
+                                   padlen=pad)[::q]
             np.testing.assert_allclose(sig.rows(x), expected, rtol=0,
                                        atol=1e-12 * np.abs(x).max())
             assert len(sig.rows(x)) == len(sig.row_index())
+
+
+@pytest.mark.parametrize("q", [10, 81])
+def test_edge_rows_of_white_noise_are_not_one_sample(q):
+    """SciPy's odd extension pivots on the edge sample: the first row of white noise has
+    about ``q`` times the others' variance (101x at q = 81), and a one-run held-out block
+    is scored by it. The mirror leaves it about twice."""
+    from cdpr_pipeline.discovery.signals import zero_phase_decimate
+
+    x = np.random.default_rng(q).normal(size=(40 * q, 4000))
+    rows = zero_phase_decimate(x, q)
+    middle = rows[5:-5].var()
+    assert rows[0].var() < 3.0 * middle and rows[-1].var() < 3.0 * middle
+    assert 0.7 * middle < rows[1].var() < 1.3 * middle
 
 
 @pytest.mark.parametrize("sharpness", [None, 30.0])
