@@ -32,8 +32,10 @@ and after the parallel filter it is a systematic residual that free-form angle
 harmonics fit and a held-out block of the same motion confirms (measured on effect-free
 one-run recordings of the independent simulator: 5 of 6 false alarms, 20-50 % held-out
 "gain"). :func:`friction_known` therefore also leaves out every sample within the
-reach of the derivative filter (:func:`filter_reach`: the half-width holding 95 % of its
-impulse response, about one cut-off period) of a sample whose friction is unknown.
+reach of the derivative filter (the half-width holding 95 % of its impulse response,
+about one cut-off period: :func:`~cdpr_pipeline.identification.regressors.filter_reach`)
+of a sample whose friction is unknown. The identification's regression of a cable robot
+does the same, for the same reason (its tensions come from the filtered motion).
 """
 
 from __future__ import annotations
@@ -44,8 +46,7 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 from scipy.fft import next_fast_len
-from scipy.ndimage import minimum_filter1d
-from scipy.signal import butter, cheby1, sosfilt, sosfilt_zi, sosfiltfilt, sosfreqz
+from scipy.signal import butter, cheby1, sosfilt, sosfilt_zi, sosfreqz
 
 try:  # the compiled kernel of scipy.signal.sosfilt
     from scipy.signal._sosfilt import _sosfilt
@@ -59,6 +60,7 @@ from cdpr_pipeline.identification.regressors import (
     RegressionSettings,
     _held_torque,
     _sliding,
+    clear_of_reach,
 )
 from cdpr_pipeline.sim.plant import Plant, cable_geometry
 
@@ -266,25 +268,6 @@ class RunSignals:
         return self.t[self.row_index()]
 
 
-#: share of the derivative filter's impulse response (absolute area) whose half-width is
-#: its reach (:func:`filter_reach`)
-REACH_SHARE = 0.95
-
-
-@lru_cache(maxsize=64)
-def filter_reach(order: int, cutoff_hz: float, fs: float) -> int:
-    """Half-width in samples of the zero-phase Butterworth (``order``, forward and
-    backward) that holds :data:`REACH_SHARE` of its impulse response's absolute area:
-    how far a non-smooth instant of the motion spreads into the filtered derivatives
-    (about ``1 / cutoff_hz`` for order 4)."""
-    half = int(np.ceil(20 * fs / cutoff_hz))
-    pulse = np.zeros(2 * half + 1)
-    pulse[half] = 1.0
-    mass = np.abs(sosfiltfilt(butter(order, cutoff_hz, fs=fs, output="sos"), pulse))
-    inside = np.cumsum(mass[half:] + mass[half::-1]) - mass[half]
-    return int(np.searchsorted(inside, REACH_SHARE * mass.sum()))
-
-
 def friction_known(position: np.ndarray, speed: np.ndarray, settings: RegressionSettings,
                    fs: float) -> np.ndarray | None:
     """(N, n) weights, 1 where a hard-sign Coulomb law gives the friction (the winch or
@@ -298,7 +281,8 @@ def friction_known(position: np.ndarray, speed: np.ndarray, settings: Regression
     :attr:`~cdpr_pipeline.identification.regressors.RegressionSettings.encoder_rest`,
     decided once for the dataset);
     ``speed`` is the filtered speed. Every dropped sample also drops its neighbours
-    within :func:`filter_reach` of the derivative filter (see the module docstring)."""
+    within the derivative filter's reach
+    (:func:`~cdpr_pipeline.identification.regressors.clear_of_reach`; module docstring)."""
     if settings.sign_sharpness is not None:
         return None
     position = np.asarray(position, float)
@@ -306,12 +290,7 @@ def friction_known(position: np.ndarray, speed: np.ndarray, settings: Regression
     keep[:, ~settings.rest_channels(position)] = True
     if keep.all():
         return None
-    filt = settings.filter
-    reach = filter_reach(int(filt.order), float(filt.cutoff_hz), float(fs))
-    if reach > 0:
-        keep = minimum_filter1d(keep.astype(np.uint8), size=2 * reach + 1, axis=0,
-                                mode="nearest").astype(bool)
-    return keep.astype(float)
+    return clear_of_reach(keep, settings.filter, fs).astype(float)
 
 
 def internal_force_projection(units: np.ndarray, radius: np.ndarray,

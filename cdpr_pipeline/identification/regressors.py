@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
+from scipy.ndimage import minimum_filter1d
 from scipy.signal import butter, decimate, periodogram, sosfiltfilt
 
 from cdpr_pipeline.data.rig import AxesRig, CdprRig, Rig
@@ -335,6 +336,37 @@ def _second_difference(x: np.ndarray, step: float) -> np.ndarray:
     return a
 
 
+#: share of the derivative filter's impulse response (absolute area) whose half-width is
+#: its reach (:func:`filter_reach`)
+REACH_SHARE = 0.95
+
+
+@lru_cache(maxsize=64)
+def filter_reach(order: int, cutoff_hz: float, fs: float) -> int:
+    """Half-width in samples of the zero-phase Butterworth (``order``, forward and
+    backward) that holds :data:`REACH_SHARE` of its impulse response's absolute area:
+    how far a non-smooth instant of the motion spreads into the filtered derivatives
+    (about ``1 / cutoff_hz`` for order 4)."""
+    half = int(np.ceil(20 * fs / cutoff_hz))
+    pulse = np.zeros(2 * half + 1)
+    pulse[half] = 1.0
+    mass = np.abs(sosfiltfilt(butter(order, cutoff_hz, fs=fs, output="sos"), pulse))
+    inside = np.cumsum(mass[half:] + mass[half::-1]) - mass[half]
+    return int(np.searchsorted(inside, REACH_SHARE * mass.sum()))
+
+
+def clear_of_reach(keep: np.ndarray, filt: DerivativeFilter, fs: float) -> np.ndarray:
+    """``keep`` (N, n) with every sample within :func:`filter_reach` of a dropped one
+    dropped too: where a column is computed from *filtered* motion (a cable robot's
+    tensions from the filtered platform acceleration), a stick or reversal's jump is
+    spread over that reach and the column there disagrees with the raw torque."""
+    reach = filter_reach(int(filt.order), float(filt.cutoff_hz), float(fs))
+    if reach <= 0 or keep.all():
+        return keep
+    return minimum_filter1d(keep.astype(np.uint8), size=2 * reach + 1, axis=0,
+                            mode="nearest").astype(bool)
+
+
 def _sliding(position: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``(N, n)``: samples whose triangle ``[t_k-1, t_k+1]`` the axis slides through in one
     direction, so that its friction is ``F_c sign(v)`` throughout.
@@ -403,6 +435,11 @@ def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
     else:
         keep = _sliding(position, b)
         keep[:, ~settings.rest_channels(position)] = True
+        if np.any(smooth_load):
+            # the load comes from filtered motion: it spreads each stop's and reversal's
+            # jump over the filter's reach, where the raw torque has none (measured on
+            # independent-simulator cable robots: inertia up to 20 % off without this)
+            keep = clear_of_reach(keep, filt, fs)
         drop = (~keep).astype(float)
         c = filt.smooth(keep * np.sign(b), fs)
         one = filt.smooth(keep.astype(float), fs)

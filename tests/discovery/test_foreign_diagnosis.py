@@ -48,7 +48,7 @@ def test_one_long_run_without_effect_gives_none(tmp_path, seed, kind):
     periodic motion later, which confirms any motion-locked artefact a model fits. Two
     such artefacts made this a false alarm in most cable-robot draws (found in review):
     the derivative filter spreading each reversal's friction jump (now left out with
-    the reversal, ``signals.filter_reach``) and a redundant rig's internal force (now
+    the reversal, ``regressors.filter_reach``) and a redundant rig's internal force (now
     projected out, ``signals.internal_force_projection``)."""
     case = foreign_case(tmp_path, kind, [], seed, n_runs=1, duration_s=40.0)
     case.diagnose()
