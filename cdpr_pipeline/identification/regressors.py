@@ -118,7 +118,8 @@ class RegressionSettings:
     zero_order_hold : bool or "auto"
         Treat each recorded torque as held until the next sample (see
         :func:`winch_regression`); ``"auto"``: when rig.yaml states a digital controller
-        (``controller.rate_hz``), whose commands are held over its period.
+        (``controller.rate_hz``), whose commands are held over its period, and for a
+        cable robot (the spec's ``u`` is the commanded torque).
     encoder_rest : bool, sequence of bool or "auto"
         Per channel, whether its recorded position resolves standstill (an encoder whose
         count stays unchanged at rest), so that a hard-sign Coulomb law can tell stops
@@ -251,7 +252,8 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
     - edge trim: :data:`TRIM_PERIODS` periods of the cut-off;
     - Coulomb law: rig.yaml's ``coulomb_law`` (hard ``sign`` when absent, the spec);
     - zero-order hold of the recorded torques when rig.yaml states a digital controller
-      rate (the command is held over a control period);
+      rate (the command is held over a control period), and always for a cable robot,
+      whose ``u`` the spec defines as the commanded torque;
     - encoder rest: a channel whose recorded position stands still somewhere in any run
       (:attr:`RegressionSettings.encoder_rest`).
 
@@ -289,9 +291,14 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
         rate = (rig.controller.rate_hz if isinstance(rig, CdprRig) and rig.controller
                 else (rig.controller or {}).get("rate_hz") if isinstance(rig, AxesRig)
                 else None)
-        hold = rate is not None
+        # the spec defines a cable robot's u as the commanded torque, which a digital
+        # drive holds until the next command; an axis's u is the force applied
+        commanded = isinstance(rig, CdprRig)
+        hold = rate is not None or commanded
         log.info("recorded torques %s", f"held over the controller period ({rate:g} Hz)"
-                 if hold else "taken as sampled (rig.yaml states no controller rate)")
+                 if rate is not None else "held over the sample (a cable robot's u is the "
+                 "commanded torque)" if commanded
+                 else "taken as sampled (rig.yaml states no controller rate)")
     rest = settings.encoder_rest
     if rest == AUTO:
         seen = [_shows_standstill(np.asarray(_recorded_position(tr), float))
