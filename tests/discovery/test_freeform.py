@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from cdpr_pipeline.discovery.freeform import (
     WINCH_ANGLE,
     FreeFormSearch,
     GrammarGP,
     L0Regression,
+    Periodicity,
     base_library,
+    periodic_peaks,
+    row_state,
     term_columns,
 )
 from cdpr_pipeline.discovery.signals import RunSignals
@@ -52,6 +56,50 @@ def test_search_recovers_a_position_periodic_torque():
     assert {(c, truth) for c in (1, 2, 3)} <= found
     coef = [t["coefficient"] for t in res.terms if t["expression"] == truth]
     assert np.allclose(coef, 0.1, rtol=0.05)
+
+
+def _axes_signals(seed: int, spans: np.ndarray, seconds=20.0, fs=500.0):
+    """Linear axes swinging over ``spans`` (m), each at its own pace."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, seconds, 1 / fs)
+    rate = rng.uniform(0.3, 0.8, len(spans))
+    theta = 0.5 * spans * np.sin(2 * np.pi * rate * t[:, None] + rng.uniform(0, 6, len(spans)))
+    omega = np.gradient(theta, t, axis=0)
+    return RunSignals("000_run", "run", t, theta, omega, np.gradient(omega, t, axis=0),
+                      np.zeros_like(theta), RegressionSettings())
+
+
+def test_periodic_peaks_find_a_light_axis_wavenumber_the_base_harmonics_miss():
+    """A force periodic in position on one light axis beside heavy ones (residuals 1000x
+    apart), at a wavenumber that is no whole number of units: the scan names it within
+    0.5 % (a harmonic over ``m`` periods of a stroke fits only within ``1 / (4 m)``),
+    and the search then selects it on that axis with its amplitude."""
+    rng = np.random.default_rng(5)
+    for trial in range(5):
+        spans = rng.uniform(0.05, 0.3, 4)
+        sig = _axes_signals(trial, spans)
+        periodicity = Periodicity.of_axes([sig.theta])
+        light = int(rng.integers(4))
+        periods = rng.uniform(4.0, 10.0)                   # over the light axis's span
+        k = 2 * np.pi * periods / np.ptp(sig.theta[:, light])
+        amp = rng.uniform(0.5, 1.0)
+        force = np.zeros_like(sig.theta)
+        force[:, light] = amp * np.sin(k * sig.theta[:, light] + rng.uniform(0, 6))
+        # the heavy axes carry a large residual of another shape
+        heavy = np.arange(4) != light
+        force[:, heavy] = 1000.0 * np.tanh(sig.omega[:, heavy])
+        residual = sig.rows(force) + 0.01 * rng.normal(size=(len(sig.rows(force)), 4))
+        peaks = periodic_peaks(row_state([sig]), residual, periodicity)
+        found = [float(e.split(",")[1].rstrip(")")) for e in peaks]
+        assert any(abs(f / k - 1) < 0.005 for f in found), (trial, k, found)
+        res = FreeFormSearch(gp=None).fit([sig], residual, 1.0, periodicity)
+        mine = {t["expression"]: t["coefficient"] for t in res.terms
+                if t["cable"] == light + 1}
+        at_k = [c for e, c in mine.items() if e.startswith(("sin_k", "cos_k"))
+                and abs(float(e.split(",")[1].rstrip(")")) / k - 1) < 0.005]
+        # the peak's sine and cosine carry the force (a neighbour may add a trim)
+        assert np.hypot(*(at_k + [0.0])[:2]) == pytest.approx(amp, rel=0.05), \
+            (trial, k, mine)
 
 
 def test_gp_composes_terms_the_library_lacks():
