@@ -142,11 +142,13 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
     parts = [fit_reg] + [dataset_regression(d, d.rig, settings) for d in extra]
     if extra:
         fit_reg = WinchRegression.concatenate(parts)
+    # a redundant cable robot's internal forces: fitted per row and taken out first
+    fit_reg = fit_reg.without_internal_forces()
     est = identifier.fit(lowpass_regression(fit_reg, split))
     metrics: dict[str, Any] = dict(fit_metrics(fit_reg, est.theta))
     if held_names:
         held_reg = dataset_regression(data_split.trajectories("heldout", dataset),
-                                      dataset.rig, settings)
+                                      dataset.rig, settings).without_internal_forces(est.theta)
         metrics |= {f"heldout_{k}": v for k, v in fit_metrics(held_reg, est.theta).items()
                     if k != "condition_number"}
     if truth is not None:

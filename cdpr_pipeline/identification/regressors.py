@@ -169,12 +169,17 @@ class WinchRegression:
 
     ``phi`` is ``(N, n, 4)`` (columns ``a, b, c, 1`` per winch), ``target`` ``(N, n)``;
     ``run`` ``(N,)`` says which run each row came from (for held-out splits and block
-    bootstraps).
+    bootstraps). ``internal`` ``(N, n, n - 3)``, on a cable robot with more than three
+    cables: the winch-torque directions ``R N`` of internal cable forces at each row
+    (``N`` the null space of ``K^T``), which the motion cannot tell: the target holds
+    ``U* + R N lambda`` with ``lambda`` unknown per row
+    (:meth:`without_internal_forces`).
     """
 
     phi: np.ndarray
     target: np.ndarray
     run: np.ndarray | None = None
+    internal: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -195,7 +200,41 @@ class WinchRegression:
 
     def rows(self, mask: np.ndarray) -> WinchRegression:
         return WinchRegression(self.phi[mask], self.target[mask],
-                               None if self.run is None else self.run[mask])
+                               None if self.run is None else self.run[mask],
+                               None if self.internal is None else self.internal[mask])
+
+    def without_internal_forces(self, params: np.ndarray | None = None) -> WinchRegression:
+        """The regression with the internal cable forces taken out of the target.
+
+        How much internal force a redundant rig holds is its controller's choice (a
+        pretension, a lower tension bound), which rig.yaml does not state, so the
+        least-norm tensions leave ``R N lambda`` in every winch's target: a smooth,
+        motion-locked torque no winch parameter causes, which biased the per-winch fits
+        (independent-simulator 4-cable rigs: inertia up to 22 % off). Like the diagnosis
+        (:func:`~cdpr_pipeline.discovery.signals.internal_force_projection`), ``lambda``
+        is a nuisance fitted per row: the winch parameters of every winch jointly by
+        least squares on the projected equations ``P (U* - Phi theta) = 0``, ``P`` the
+        projector off ``R N``; then ``lambda`` from their residual, and the target
+        without ``R N lambda``. Every winch's own least squares on that target gives
+        the joint solution back (its normal equations are the joint ones), so any
+        identifier fits it per winch. ``params`` (n, 4): take ``lambda`` given these
+        (held-out rows) instead of fitting them. Without :attr:`internal`: unchanged.
+        """
+        if self.internal is None:
+            return self
+        b, phi, y = self.internal, self.phi, self.target
+        n = self.n
+        proj = np.eye(n) - np.einsum("kia,kab,kjb->kij", b,
+                                     np.linalg.pinv(np.einsum("kia,kib->kab", b, b)), b)
+        if params is None:
+            design = np.einsum("kij,kjc->kijc", proj, phi).reshape(len(y) * n, n * 4)
+            scale = np.linalg.norm(design, axis=0)
+            scale = np.where(scale > 0, scale, 1.0)
+            params = (np.linalg.lstsq(design / scale, np.einsum("kij,kj->ki", proj, y)
+                                      .ravel(), rcond=None)[0] / scale).reshape(n, 4)
+        resid = y - self.predict(params)
+        cleaned = y - (resid - np.einsum("kij,kj->ki", proj, resid))
+        return WinchRegression(phi, cleaned, self.run)
 
     @staticmethod
     def concatenate(parts: Iterable[WinchRegression]) -> WinchRegression:
@@ -205,8 +244,17 @@ class WinchRegression:
             r = np.zeros(len(p), int) if p.run is None else np.asarray(p.run, int)
             runs.append(r + offset)
             offset += int(r.max()) + 1 if len(r) else 0
+        internal = [p.internal for p in parts]
+        if any(i is None for i in internal):
+            if any(i is not None for i in internal):
+                raise ValueError("regressions with and without internal-force directions "
+                                 "cannot be stacked (take them out of each first)")
+            internal = None
+        else:
+            internal = np.concatenate(internal)
         return WinchRegression(np.concatenate([p.phi for p in parts]),
-                               np.concatenate([p.target for p in parts]), np.concatenate(runs))
+                               np.concatenate([p.target for p in parts]), np.concatenate(runs),
+                               internal)
 
 
 def motion_bandwidth_hz(trajectories: Sequence[Trajectory]) -> float:
@@ -409,7 +457,8 @@ def _shows_standstill(position: np.ndarray) -> np.ndarray:
 
 
 def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
-              t: np.ndarray, settings: RegressionSettings) -> WinchRegression:
+              t: np.ndarray, settings: RegressionSettings,
+              internal: np.ndarray | None = None) -> WinchRegression:
     """Rows ``[a, b, c, 1] -> u - smooth_load`` with parallel filtering (the offset column
     is the filtered share of rows kept, 1 away from dropped samples).
 
@@ -462,7 +511,11 @@ def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
         q = int(settings.decimate)
         phi = decimate(phi, q, axis=0, zero_phase=True)
         target = decimate(target, q, axis=0, zero_phase=True)
-    return WinchRegression(phi, target)
+    if internal is not None:
+        # directions at the rows' own samples (the zero-phase decimation keeps every
+        # q-th sample of the trimmed signal in place)
+        internal = internal[trim:len(t) - trim][::max(1, int(settings.decimate))]
+    return WinchRegression(phi, target, None, internal)
 
 
 def winch_regression(traj: Trajectory, rig: CdprRig, home_lengths: np.ndarray | None = None,
@@ -480,7 +533,12 @@ def winch_regression(traj: Trajectory, rig: CdprRig, home_lengths: np.ndarray | 
     _, units = cable_geometry(rig.anchors_m, pos)
     gravity = np.array([0.0, 0.0, -rig.gravity])
     tension = tensions_for_force(units, rig.platform_mass_kg * (acc - gravity))
-    return _assemble(theta, np.asarray(traj.torques, float), R * tension, traj.t, settings)
+    internal = None
+    if len(R) > 3:
+        # left singular vectors of K (n x 3) beyond its rank span the null space of K^T
+        internal = np.asarray(R, float)[None, :, None] * np.linalg.svd(units)[0][:, :, 3:]
+    return _assemble(theta, np.asarray(traj.torques, float), R * tension, traj.t, settings,
+                     internal)
 
 
 def axis_regression(traj: Trajectory, rig: AxesRig,

@@ -80,8 +80,9 @@ def reconstruct(cfg: DictConfig) -> dict:
     split = Split.from_dict(ident.get("split") or {"train": ident["fit_runs"],
                                                    "heldout": ident["heldout_runs"]})
     fit_runs, held_runs = split.trajectories("train", data), split.trajectories("heldout", data)
-    fit_reg = dataset_regression(fit_runs, data.rig, settings)
-    held_reg = dataset_regression(held_runs, data.rig, settings)
+    # a redundant rig's internal forces out first, as identify_dataset does
+    fit_reg = dataset_regression(fit_runs, data.rig, settings).without_internal_forces()
+    held_reg = dataset_regression(held_runs, data.rig, settings).without_internal_forces(theta)
     lsm = LeastSquares().fit(fit_reg).theta
     rate = float(data.rig.sample_rate_hz) / max(1, int(settings.decimate))
     hf = HighFrequencyModel(instantiate(cfg.residual_model.net), sample_rate_hz=rate,
@@ -95,7 +96,7 @@ def reconstruct(cfg: DictConfig) -> dict:
                         strict=True))
 
     table4 = reconstruction_scores(held_reg.target, predictions(held_reg))
-    one = dataset_regression(held_runs[:1], data.rig, settings)
+    one = dataset_regression(held_runs[:1], data.rig, settings).without_internal_forces(theta)
     preds_one = predictions(one)
     table5 = reconstruction_scores(one.target, preds_one)
 

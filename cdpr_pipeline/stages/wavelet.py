@@ -31,7 +31,8 @@ def decompose(cfg: DictConfig) -> dict:
     data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
                         min_samples=cfg.data.min_samples)
     split: WaveletSplit = instantiate(cfg.wavelet) if cfg.get("wavelet") else WaveletSplit()
-    reg = dataset_regression(data, data.rig, instantiate(cfg.regression))
+    reg = dataset_regression(data, data.rig, instantiate(cfg.regression)
+                             ).without_internal_forces()
     low, high = split_regression(reg, split)
     high_phi, high_target = high.phi, high.target
     n = reg.n

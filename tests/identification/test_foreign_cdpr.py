@@ -10,9 +10,17 @@ none; those samples are left out (``regressors.clear_of_reach``). Without that, 
 was 5-16 % off on 3-cable rigs (its torque is a few % of a winch's torque), beyond ten
 reported standard deviations.
 
+With four cables the controller also holds internal cable forces, which least-norm
+tensions leave in every winch's target (inertia up to 22 % off); they are fitted per
+row and taken out (``WinchRegression.without_internal_forces``). What remains is not
+all noise yet: over 20 rigs errors reached 4.3 % (an inertia at 118 Hz, a Coulomb level
+at 318 Hz), beyond the reported spread (the 118 Hz one noise-free too); not yet understood (listed
+in the README). 4-cable rigs are held to :data:`FLOOR` ``[4]``, which catches the
+internal forces left in and no more.
+
 What is left is noise, read from the reported standard deviation times
-:data:`STD_UNDERSTATEMENT` (the LSM's assumes white rows); every parameter is held to 2 %
-or four such spreads, whichever is larger.
+:data:`STD_UNDERSTATEMENT` (the LSM's assumes white rows); every parameter is held to
+:data:`FLOOR` or four such spreads, whichever is larger.
 """
 
 from __future__ import annotations
@@ -31,6 +39,8 @@ from tests.independent_sim import SlackCableError, random_rig, simulate_dataset
 #: assumed ratio of the true spread to the LSM standard deviation (as for axes)
 STD_UNDERSTATEMENT = 2.5
 SLACK_RETRIES = 5
+#: smallest tolerance per number of cables (see the module docstring)
+FLOOR = {3: 0.02, 4: 0.10}
 
 
 def _simulate(path, n_cables: int, seed: int):
@@ -45,7 +55,7 @@ def _simulate(path, n_cables: int, seed: int):
     raise RuntimeError(f"seeds {seed}.. all slacken a cable")
 
 
-@pytest.mark.parametrize("n_cables", [3])
+@pytest.mark.parametrize("n_cables", [3, 4])
 def test_default_identification_of_foreign_cable_robots(tmp_path, n_cables, new_mlflow_store):
     seed = int(os.environ.get("CDPR_TEST_SEED", secrets.randbelow(2 ** 31)))
     data = tmp_path / "cdpr"
@@ -59,8 +69,9 @@ def test_default_identification_of_foreign_cable_robots(tmp_path, n_cables, new_
         true = np.asarray(getattr(model, key), float)
         spread = STD_UNDERSTATEMENT * np.asarray(out["std"][key]) / true
         err = np.asarray(out["params"][key]) / true - 1
-        tol = np.maximum(0.02, 4 * spread)
+        tol = np.maximum(FLOOR[n_cables], 4 * spread)
         assert np.all(np.abs(err) <= tol), \
             f"{key}: {case}: errors {np.round(100 * err, 2)} %, allowed {np.round(100 * tol, 2)} %"
-    assert np.all(np.abs(np.asarray(out["params"]["offset"]) - model.offset)
-                  <= 0.02 * np.asarray(model.coulomb)), case
+    offset_err = np.abs(np.asarray(out["params"]["offset"]) - model.offset)
+    assert np.all(offset_err <= FLOOR[n_cables] * np.asarray(model.coulomb)), \
+        f"offset: {case}: errors {np.round(offset_err / np.asarray(model.coulomb), 3)} F_c"

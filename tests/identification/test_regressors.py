@@ -16,6 +16,7 @@ from cdpr_pipeline.identification.identifiers import LeastSquares
 from cdpr_pipeline.identification.regressors import (
     DerivativeFilter,
     RegressionSettings,
+    WinchRegression,
     axis_regression,
     build_regression,
 )
@@ -85,3 +86,33 @@ def test_convert_names_a_file_that_is_not_emps(tmp_path):
         convert_emps(bad, tmp_path / "out")
     with pytest.raises(FileNotFoundError, match="none of"):
         convert_emps(tmp_path, tmp_path / "out2")
+
+
+@pytest.mark.parametrize("n", [4, 6])
+def test_internal_forces_are_fitted_per_row_and_taken_out(n):
+    """A redundant rig's target holds ``R N lambda`` the motion cannot tell (internal
+    cable forces, chosen by its controller): the joint fit on the projected equations
+    finds every winch's parameters exactly, and each winch's own least squares on the
+    cleaned target gives them back (its normal equations are the joint ones)."""
+    rng = np.random.default_rng(n)
+    rows = 600
+    phi = rng.normal(size=(rows, n, 4))
+    phi[..., 3] = 1.0
+    theta = rng.uniform(0.5, 2.0, (n, 4))
+    basis = np.linalg.qr(rng.normal(size=(rows, n, n - 3)))[0]
+    smooth = np.cumsum(rng.normal(size=(rows, n - 3)), axis=0)      # a drifting pretension
+    target = np.einsum("tnk,nk->tn", phi, theta) + np.einsum("kia,ka->ki", basis, smooth)
+    reg = WinchRegression(phi, target, None, basis)
+    # least squares per winch on the raw target is biased by the internal force
+    assert not np.allclose(reg.least_squares(), theta, rtol=0.05)
+    clean = reg.without_internal_forces()
+    assert clean.internal is None
+    np.testing.assert_allclose(clean.least_squares(), theta, rtol=1e-8, atol=1e-10)
+    # held-out rows: lambda fitted given the parameters leaves no residual
+    held = reg.rows(np.arange(rows) < 100).without_internal_forces(theta)
+    np.testing.assert_allclose(held.target, held.predict(theta), atol=1e-9)
+    stacked = WinchRegression.concatenate([reg.rows(np.arange(rows) < 300),
+                                           reg.rows(np.arange(rows) >= 300)])
+    assert stacked.internal.shape == basis.shape
+    with pytest.raises(ValueError, match="internal"):
+        WinchRegression.concatenate([reg, WinchRegression(phi, target)])
