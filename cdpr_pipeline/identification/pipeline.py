@@ -5,7 +5,7 @@ runs and on held-out runs."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -145,6 +145,11 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
     # a redundant cable robot's internal forces: fitted per row and taken out first
     fit_reg = fit_reg.without_internal_forces()
     est = identifier.fit(lowpass_regression(fit_reg, split))
+    if fit_reg.std_scale is not None:
+        # the per-row internal force costs information each winch's own formula misses
+        est = replace(est, theta_std=est.theta_std * fit_reg.std_scale,
+                      notes={**est.notes, "std_scaled_for_internal_forces":
+                             fit_reg.std_scale.tolist()})
     metrics: dict[str, Any] = dict(fit_metrics(fit_reg, est.theta))
     if held_names:
         held_reg = dataset_regression(data_split.trajectories("heldout", dataset),

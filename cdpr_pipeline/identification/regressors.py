@@ -180,6 +180,10 @@ class WinchRegression:
     target: np.ndarray
     run: np.ndarray | None = None
     internal: np.ndarray | None = None
+    #: (n, 4), after :meth:`without_internal_forces`: the joint fit's standard deviations
+    #: over what each winch's own least squares on the cleaned target reports (which
+    #: does not count the internal force fitted per row; 1.1-3x on 4-cable rigs)
+    std_scale: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -226,15 +230,37 @@ class WinchRegression:
         n = self.n
         proj = np.eye(n) - np.einsum("kia,kab,kjb->kij", b,
                                      np.linalg.pinv(np.einsum("kia,kib->kab", b, b)), b)
+        std_scale = None
         if params is None:
             design = np.einsum("kij,kjc->kijc", proj, phi).reshape(len(y) * n, n * 4)
             scale = np.linalg.norm(design, axis=0)
             scale = np.where(scale > 0, scale, 1.0)
-            params = (np.linalg.lstsq(design / scale, np.einsum("kij,kj->ki", proj, y)
-                                      .ravel(), rcond=None)[0] / scale).reshape(n, 4)
+            design = design / scale
+            params = (np.linalg.lstsq(design, np.einsum("kij,kj->ki", proj, y).ravel(),
+                                      rcond=None)[0] / scale).reshape(n, 4)
+            std_scale = self._joint_std_scale(design, scale, proj, params)
         resid = y - self.predict(params)
         cleaned = y - (resid - np.einsum("kij,kj->ki", proj, resid))
-        return WinchRegression(phi, cleaned, self.run)
+        return WinchRegression(phi, cleaned, self.run, None, std_scale)
+
+    def _joint_std_scale(self, design: np.ndarray, scale: np.ndarray, proj: np.ndarray,
+                         params: np.ndarray) -> np.ndarray:
+        """:attr:`std_scale`: the joint least squares' white-residual standard deviations
+        (each row keeps ``n - r`` equations) over each winch's own on the cleaned
+        target."""
+        n, rows = self.n, len(self)
+        resid = self.target - self.predict(params)
+        projected = np.einsum("kij,kj->ki", proj, resid)
+        dof = max(rows * (n - self.internal.shape[2]) - 4 * n, 1)
+        s2 = float(np.sum(projected ** 2)) / dof
+        joint = np.sqrt(np.clip(np.diag(np.linalg.pinv(design.T @ design)), 0, None)
+                        * s2).reshape(n, 4) / scale.reshape(n, 4)
+        own = np.empty((n, 4))
+        for i in range(n):
+            x = self.phi[:, i]
+            s2_i = float(projected[:, i] @ projected[:, i]) / max(rows - 4, 1)
+            own[i] = np.sqrt(np.clip(np.diag(np.linalg.pinv(x.T @ x)), 0, None) * s2_i)
+        return np.where(own > 0, joint / np.where(own > 0, own, 1.0), 1.0)
 
     @staticmethod
     def concatenate(parts: Iterable[WinchRegression]) -> WinchRegression:

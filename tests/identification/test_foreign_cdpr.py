@@ -12,11 +12,10 @@ reported standard deviations.
 
 With four cables the controller also holds internal cable forces, which least-norm
 tensions leave in every winch's target (inertia up to 22 % off); they are fitted per
-row and taken out (``WinchRegression.without_internal_forces``). What remains is not
-all noise yet: over 20 rigs errors reached 4.3 % (an inertia at 118 Hz, a Coulomb level
-at 318 Hz), beyond the reported spread (the 118 Hz one noise-free too); not yet understood (listed
-in the README). 4-cable rigs are held to :data:`FLOOR` ``[4]``, which catches the
-internal forces left in and no more.
+row and taken out (``WinchRegression.without_internal_forces``). That costs information
+each winch's own standard deviation does not count (errors reached 7.6 of those), so
+the reported one is scaled by the joint fit's (``std_scale``, 1.1-3x; then within 3.1
+over the rigs checked).
 
 What is left is noise, read from the reported standard deviation times
 :data:`STD_UNDERSTATEMENT` (the LSM's assumes white rows); every parameter is held to
@@ -39,8 +38,8 @@ from tests.independent_sim import SlackCableError, random_rig, simulate_dataset
 #: assumed ratio of the true spread to the LSM standard deviation (as for axes)
 STD_UNDERSTATEMENT = 2.5
 SLACK_RETRIES = 5
-#: smallest tolerance per number of cables (see the module docstring)
-FLOOR = {3: 0.02, 4: 0.10}
+#: smallest tolerance
+FLOOR = 0.02
 
 
 def _simulate(path, n_cables: int, seed: int):
@@ -69,9 +68,9 @@ def test_default_identification_of_foreign_cable_robots(tmp_path, n_cables, new_
         true = np.asarray(getattr(model, key), float)
         spread = STD_UNDERSTATEMENT * np.asarray(out["std"][key]) / true
         err = np.asarray(out["params"][key]) / true - 1
-        tol = np.maximum(FLOOR[n_cables], 4 * spread)
+        tol = np.maximum(FLOOR, 4 * spread)
         assert np.all(np.abs(err) <= tol), \
             f"{key}: {case}: errors {np.round(100 * err, 2)} %, allowed {np.round(100 * tol, 2)} %"
     offset_err = np.abs(np.asarray(out["params"]["offset"]) - model.offset)
-    assert np.all(offset_err <= FLOOR[n_cables] * np.asarray(model.coulomb)), \
+    assert np.all(offset_err <= FLOOR * np.asarray(model.coulomb)), \
         f"offset: {case}: errors {np.round(offset_err / np.asarray(model.coulomb), 3)} F_c"

@@ -116,3 +116,29 @@ def test_internal_forces_are_fitted_per_row_and_taken_out(n):
     assert stacked.internal.shape == basis.shape
     with pytest.raises(ValueError, match="internal"):
         WinchRegression.concatenate([reg, WinchRegression(phi, target)])
+
+
+def test_internal_force_std_scale_matches_the_spread_over_noise_draws():
+    """Each winch's own least squares on the cleaned target reports too small a standard
+    deviation (the internal force fitted per row costs information); times
+    ``std_scale`` it matches the spread of the estimates over noise draws."""
+    rng = np.random.default_rng(0)
+    rows, n = 400, 4
+    phi = rng.normal(size=(rows, n, 4))
+    phi[..., 3] = 1.0
+    theta = rng.uniform(0.5, 2.0, (n, 4))
+    basis = np.linalg.qr(rng.normal(size=(rows, n, 1)))[0]
+    clean_target = np.einsum("tnk,nk->tn", phi, theta)
+    draws, reported = [], []
+    for _ in range(200):
+        noisy = clean_target + 0.1 * rng.normal(size=(rows, n)) \
+            + basis[..., 0] * rng.normal(size=(rows, 1))
+        reg = WinchRegression(phi, noisy, None, basis).without_internal_forces()
+        est = LeastSquares().fit(reg)
+        draws.append(est.theta)
+        reported.append(est.theta_std * reg.std_scale)
+        assert np.all(reg.std_scale >= 0.99)
+    spread = np.std(draws, axis=0, ddof=1)
+    np.testing.assert_allclose(np.mean(reported, axis=0), spread, rtol=0.2)
+    # the unscaled figure understates it
+    assert np.mean(spread / (np.mean(reported, axis=0) / reg.std_scale)) > 1.05
