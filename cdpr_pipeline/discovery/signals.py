@@ -62,7 +62,7 @@ from cdpr_pipeline.identification.regressors import (
     _sliding,
     clear_of_reach,
 )
-from cdpr_pipeline.sim.plant import Plant, cable_geometry
+from cdpr_pipeline.sim.plant import Plant, cable_geometry, internal_force_directions
 
 #: statistics rows per cut-off period: rows are thinned to ``2 * cutoff_hz`` (the
 #: low-pass band sampled at its Nyquist rate: band-limited white noise stays white)
@@ -319,11 +319,9 @@ def internal_force_projection(units: np.ndarray, radius: np.ndarray,
         Friction-known weights (None: all 1).
     """
     size, n = units.shape[:2]
-    if n <= 3:
+    b = internal_force_directions(units, radius)
+    if b is None:
         return None
-    # left singular vectors of K (n x 3) beyond its rank span the null space of K^T
-    basis = np.linalg.svd(units, full_matrices=True)[0][:, :, 3:]
-    b = np.asarray(radius, float)[None, :, None] * basis
     w = np.ones((size, n)) if known is None else np.asarray(known, float)
     wb = w[:, :, None] * b
     gram = np.einsum("kia,kib->kab", wb, b)

@@ -28,7 +28,12 @@ from scipy.signal import butter, decimate, periodogram, sosfiltfilt
 
 from cdpr_pipeline.data.rig import AxesRig, CdprRig, Rig
 from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.sim.plant import cable_geometry, smooth_sign, tensions_for_force
+from cdpr_pipeline.sim.plant import (
+    cable_geometry,
+    internal_force_directions,
+    smooth_sign,
+    tensions_for_force,
+)
 
 log = logging.getLogger(__name__)
 
@@ -156,11 +161,11 @@ class RegressionSettings:
         rest = self.encoder_rest
         if isinstance(rest, str):
             return _shows_standstill(np.asarray(position, float))
-        out = np.broadcast_to(np.asarray(rest, bool), (n,)) if np.ndim(rest) == 0 or \
-            len(rest) == n else None
-        if out is None:
+        if isinstance(rest, bool):
+            return np.full(n, rest)
+        if len(rest) != n:
             raise ValueError(f"regression.encoder_rest: {len(rest)} entries for {n} channels")
-        return np.array(out)
+        return np.array(rest, bool)
 
 
 @dataclass
@@ -559,12 +564,8 @@ def winch_regression(traj: Trajectory, rig: CdprRig, home_lengths: np.ndarray | 
     _, units = cable_geometry(rig.anchors_m, pos)
     gravity = np.array([0.0, 0.0, -rig.gravity])
     tension = tensions_for_force(units, rig.platform_mass_kg * (acc - gravity))
-    internal = None
-    if len(R) > 3:
-        # left singular vectors of K (n x 3) beyond its rank span the null space of K^T
-        internal = np.asarray(R, float)[None, :, None] * np.linalg.svd(units)[0][:, :, 3:]
     return _assemble(theta, np.asarray(traj.torques, float), R * tension, traj.t, settings,
-                     internal)
+                     internal_force_directions(units, R))
 
 
 def axis_regression(traj: Trajectory, rig: AxesRig,

@@ -548,6 +548,18 @@ def tensions_for_force(units: np.ndarray, force: np.ndarray) -> np.ndarray:
     return np.einsum("...ni,...i->...n", units, np.linalg.solve(gram, force[..., None])[..., 0])
 
 
+def internal_force_directions(units: np.ndarray, radius: np.ndarray) -> np.ndarray | None:
+    """``(..., n, n - 3)`` winch-torque directions ``R N`` of internal cable forces (``N``
+    the null space of ``K^T``: tensions that move no platform), or None with three
+    cables or fewer. What :func:`tensions_for_force`'s least-norm answer cannot tell: a
+    rig's controller may hold any such force (a pretension, a lower tension bound)."""
+    if units.shape[-2] <= 3:
+        return None
+    # left singular vectors of K (n x 3) beyond its rank span the null space of K^T
+    basis = np.linalg.svd(units, full_matrices=True)[0][..., 3:]
+    return np.asarray(radius, float)[..., :, None] * basis
+
+
 def static_tensions(units: np.ndarray, mass: float, gravity_vector: np.ndarray) -> np.ndarray:
     """Tensions holding the platform at rest, ``K^T t = -m g``."""
     return tensions_for_force(units, -mass * np.asarray(gravity_vector))
