@@ -235,7 +235,7 @@ class WinchRegression:
         n = self.n
         proj = np.eye(n) - np.einsum("kia,kab,kjb->kij", b,
                                      np.linalg.pinv(np.einsum("kia,kib->kab", b, b)), b)
-        std_scale = None
+        std_scale = design = scale = None
         if params is None:
             design = np.einsum("kij,kjc->kijc", proj, phi).reshape(len(y) * n, n * 4)
             scale = np.linalg.norm(design, axis=0)
@@ -243,19 +243,19 @@ class WinchRegression:
             design = design / scale
             params = (np.linalg.lstsq(design, np.einsum("kij,kj->ki", proj, y).ravel(),
                                       rcond=None)[0] / scale).reshape(n, 4)
-            std_scale = self._joint_std_scale(design, scale, proj, params)
         resid = y - self.predict(params)
-        cleaned = y - (resid - np.einsum("kij,kj->ki", proj, resid))
-        return WinchRegression(phi, cleaned, self.run, None, std_scale)
+        projected = np.einsum("kij,kj->ki", proj, resid)
+        if design is not None:
+            std_scale = self._joint_std_scale(design, scale, projected)
+        # the target less R N lambda: what each winch's own fit then leaves is `projected`
+        return WinchRegression(phi, y - (resid - projected), self.run, None, std_scale)
 
-    def _joint_std_scale(self, design: np.ndarray, scale: np.ndarray, proj: np.ndarray,
-                         params: np.ndarray) -> np.ndarray:
+    def _joint_std_scale(self, design: np.ndarray, scale: np.ndarray,
+                         projected: np.ndarray) -> np.ndarray:
         """:attr:`std_scale`: the joint least squares' white-residual standard deviations
         (each row keeps ``n - r`` equations) over each winch's own on the cleaned
-        target."""
+        target (whose residual is ``projected``)."""
         n, rows = self.n, len(self)
-        resid = self.target - self.predict(params)
-        projected = np.einsum("kij,kj->ki", proj, resid)
         dof = max(rows * (n - self.internal.shape[2]) - 4 * n, 1)
         s2 = float(np.sum(projected ** 2)) / dof
         joint = np.sqrt(np.clip(np.diag(np.linalg.pinv(design.T @ design)), 0, None)
