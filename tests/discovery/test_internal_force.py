@@ -134,7 +134,8 @@ def test_a_stribeck_effect_on_one_winch_of_a_redundant_rig(tmp_path, seed):
     named there carries at most half its size (what is left of the projected share).
 
     The size is drawn from the upper half of the generator's documented range
-    (``F_s - F_c`` 0.4-0.6 F_c, Stribeck velocity 0.15-0.3 of the winch's typical speed):
+    (``F_s - F_c`` 0.4-0.6 F_c of 0.2-0.6; Stribeck velocity 0.15-0.3 of the winch's
+    typical speed, the upper three quarters of 0.1-0.3):
     this test is about naming on a redundant rig, the detection limit is
     ``benchmarks/bench_detection.py``'s."""
     from tests.independent_sim import Effect
