@@ -458,7 +458,9 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
             alone = _judge_freeform(freeform, ctx_o, judge_o, search.scale, kind, n_tests,
                                     shapes=search.shapes)
             on_top = final.passed and bool(final.freeform.terms)
-            extra = list(final.effects[len(_effects(keep)):]) if on_top else []
+            # the free-form judgement's effects are its own part only (its judge's
+            # base is the kept causes, passed to the fit, not among its effects)
+            extra = list(final.effects) if on_top else []
             named = sum(c.n_params for c in torque) + (final.n_params if on_top else 0)
             if alone.passed and alone.n_params <= named and search.bic(
                     _effects(others) + list(alone.effects), alone.n_params) \

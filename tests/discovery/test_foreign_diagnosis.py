@@ -58,12 +58,13 @@ def test_one_long_run_without_effect_gives_none(tmp_path, seed, kind):
 
 
 #: Known gaps on the independent simulator (measured with ``benchmarks/bench_detection.py
-#: --simulator both --seeds 3``: 98 % detection over its effects, against 100 % on the
+#: --simulator both --seeds 3``: 96 % detection over its effects, against 100 % on the
 #: lab; was 71 % before the internal-force projection, the filter-reach rule, per-drum
 #: and per-cable candidates, axis harmonics, the naming's group step and the wavenumber
 #: scan): an actuator lag of a few ms on one winch of some cable robots (named
 #: winch_parameter_error, or none when its held-out interval reaches zero; 3 of 3 found
-#: in the last run), a winch parameter error on one of several axes found as an unnamed
+#: in the last run), a quadratic drag on a cable robot named winch_parameter_error in one
+#: draw of three, a winch parameter error on one of several axes found as an unnamed
 #: term in one draw of three, per-winch lags on 4-cable rigs and rigs below 150 Hz
 #: 30-120 % off on some winch. These two tests draw any effect and
 #: report a miss as XFAIL with the case printed instead of failing CI (a crash still
