@@ -540,6 +540,8 @@ def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
     phi, target = phi[trim:len(t) - trim], target[trim:len(t) - trim]
     if settings.decimate > 1:
         q = int(settings.decimate)
+        # SciPy's decimate as the published protocol has it (odd extension at the ends;
+        # the diagnosis's rows mirror them instead: discovery.signals.zero_phase_decimate)
         phi = decimate(phi, q, axis=0, zero_phase=True)
         target = decimate(target, q, axis=0, zero_phase=True)
     if internal is not None:
