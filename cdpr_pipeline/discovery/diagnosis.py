@@ -30,6 +30,7 @@ from cdpr_pipeline.discovery.residuals import (
     channel_names,
     measured_rows,
     nominal_model,
+    relative_sse,
     residuals,
 )
 from cdpr_pipeline.discovery.results import (
@@ -50,6 +51,7 @@ from cdpr_pipeline.discovery.selection import (
     Judge,
     Judgement,
     SelectionSettings,
+    judged_columns,
     select_causes,
 )
 from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
@@ -383,21 +385,30 @@ def _full_rate_residual(model: Model, sig: RunSignals, channel: str) -> np.ndarr
 
 # ---------------------------------------------------------------------- gain
 def heldout_gain(before: Residuals, after: Residuals, held: list[RunSignals], channel: str,
-                 block_s: float, n_boot: int, seed: int) -> HeldoutGain:
+                 block_s: float, n_boot: int, seed: int,
+                 scales: dict[str, np.ndarray] | None = None,
+                 columns: Sequence[int] | None = None) -> HeldoutGain:
     """Held-out RMSE of ``channel`` before and after, relative drop and its 95 % block
-    bootstrap interval; per channel column too."""
+    bootstrap interval; per channel column too.
+
+    The relative drop is over ``columns`` (all when None), each column's squared error
+    weighted by ``scales`` (:meth:`Residuals.column_scales`; equal weights when None), as
+    the selection judged it; ``before`` and ``after`` are the plain RMSE over the same
+    columns."""
     def stat(b, a):
         return 1 - np.sqrt(a.sum() / max(b.sum(), 1e-300))
 
+    b, a = before.stacked(channel), after.stacked(channel)
+    cols = list(range(b.shape[1])) if columns is None else list(columns)
+    w2 = np.ones(len(cols)) if scales is None else scales[channel][cols] ** 2
     blocks, per_col = [], {}
     for sig, rb, ra in zip(held, before.by_run, after.by_run, strict=True):
         rate = len(rb[channel]) / max(sig.t[-1] - sig.t[0], 1e-9)
         length = max(2, int(round(block_s * rate)))
         blocks += split_blocks((rb[channel] ** 2, ra[channel] ** 2), length)
-    b, a = before.stacked(channel), after.stacked(channel)
-    est, lo, hi = (block_bootstrap(lambda x, y: stat(x.sum(1), y.sum(1)), blocks, n_boot,
-                                   0.95, seed) if len(blocks) > 1
-                   else (stat(b ** 2, a ** 2), -np.inf, np.inf))
+    est, lo, hi = (block_bootstrap(lambda x, y: stat(x[:, cols] @ w2, y[:, cols] @ w2),
+                                   blocks, n_boot, 0.95, seed) if len(blocks) > 1
+                   else (stat(b[:, cols] ** 2 @ w2, a[:, cols] ** 2 @ w2), -np.inf, np.inf))
     for i, name in enumerate(channel_names(channel, b.shape[1])):
         _, clo, chi = (block_bootstrap(lambda x, y, i=i: stat(x[:, i], y[:, i]), blocks, n_boot,
                                        0.95, seed) if len(blocks) > 1 else (0, -np.inf, np.inf))
@@ -405,9 +416,10 @@ def heldout_gain(before: Residuals, after: Residuals, held: list[RunSignals], ch
                                     float(np.sqrt(np.mean(a[:, i] ** 2))),
                                     float(stat(b[:, i] ** 2, a[:, i] ** 2)),
                                     (float(clo), float(chi)))
-    return HeldoutGain(channel, float(np.sqrt(np.mean(b ** 2))),
-                       float(np.sqrt(np.mean(a ** 2))), float(est), (float(lo), float(hi)),
-                       per_col)
+    return HeldoutGain(channel, float(np.sqrt(np.mean(b[:, cols] ** 2))),
+                       float(np.sqrt(np.mean(a[:, cols] ** 2))), float(est),
+                       (float(lo), float(hi)), per_col,
+                       columns=tuple(channel_names(channel, b.shape[1])[i] for i in cols))
 
 
 def _validity(res: Residuals, held: list[RunSignals], channel: str, max_lag: int,
@@ -496,6 +508,8 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     # never worse: the causes are kept only while the extended model's held-out gain has
     # a 95 % interval above zero; the weakest cause goes first until it has
     before_held = residuals(nominal, nominal, held)
+    # each column's error relative to the model the selection extended, as it judged
+    scales = selection.scales or residuals(base, nominal, train).column_scales()
     withdrawn: list[str] = []
     # and every cause must still add to the others: causes were fitted jointly as they
     # were added, so one found early can end with nothing left to explain
@@ -504,10 +518,11 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
             break
         others = [o for o in causes if o is not c]
         ch = c.channel
-        without = residuals(nominal.with_effects([e for o in others for e in o.effects]),
-                            nominal, held).sse(ch)
-        with_c = residuals(nominal.with_effects([e for o in causes for e in o.effects]),
-                           nominal, held).sse(ch)
+        cols = judged_columns(ch, before_held.stacked(ch).shape[1], c.channels)
+        without = relative_sse(residuals(nominal.with_effects(
+            [e for o in others for e in o.effects]), nominal, held), ch, scales, cols)
+        with_c = relative_sse(residuals(nominal.with_effects(
+            [e for o in causes for e in o.effects]), nominal, held), ch, scales, cols)
         if with_c > (1 - settings.selection.min_gain) * without:
             causes.remove(c)
             withdrawn.append(c.label)
@@ -518,9 +533,11 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         extended = nominal.with_effects(extension)
         channel = causes[0].channel if causes else "torque"
         after_held = residuals(extended, nominal, held)
+        explained = [name for c in causes if c.channel == channel for name in c.channels]
         gain = heldout_gain(before_held, after_held, held, channel,
                             settings.selection.block_s, settings.selection.n_boot,
-                            settings.selection.seed)
+                            settings.selection.seed, scales, judged_columns(
+                                channel, before_held.stacked(channel).shape[1], explained))
         if not causes or gain.ci95[0] > 0:
             break
         dropped = causes.pop()

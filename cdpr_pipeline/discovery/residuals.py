@@ -331,6 +331,34 @@ class Residuals:
     def rms(self, channel: str) -> float:
         return float(np.sqrt(self.sse(channel) / max(self.count(channel), 1)))
 
+    def column_sse(self, channel: str) -> np.ndarray:
+        """Sum of squares of each column (n,)."""
+        r = self.stacked(channel)
+        return np.einsum("ij,ij->j", r, r)
+
+    def column_scales(self) -> dict[str, np.ndarray]:
+        """Per channel, ``1 / RMS`` of each column (0 where a column has no residual):
+        the weights that make each column's error relative to this model's."""
+        out = {}
+        for c in self.channels:
+            rms = np.sqrt(self.column_sse(c) / max(len(self.stacked(c)), 1))
+            out[c] = np.where(rms > 0, 1.0 / np.where(rms > 0, rms, 1.0), 0.0)
+        return out
+
+
+def relative_sse(res: Residuals, channel: str, scales: dict[str, np.ndarray],
+                 columns: Sequence[int] | None = None) -> float:
+    """Sum of squares of ``channel`` with each column weighted by ``scales`` (see
+    :meth:`Residuals.column_scales`), over ``columns`` (all when None).
+
+    Axes of one robot differ in torque by orders of magnitude (a base axis beside a
+    wrist): summed raw, the heaviest decides every test and an effect on a light axis is
+    invisible (found: a periodic force explaining half a wrist axis's residual scored a
+    likelihood ratio of 1.6). Relative to one reference model's error, each column
+    counts by how much of *its* error a model explains."""
+    w2 = scales[channel] ** 2 * res.column_sse(channel)
+    return float(np.sum(w2 if columns is None else w2[list(columns)]))
+
 
 def residuals(model: Model, nominal: Model, signals: Sequence[RunSignals]) -> Residuals:
     return Residuals([s.name for s in signals], runs_rows(model, nominal, signals))

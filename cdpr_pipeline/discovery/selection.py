@@ -57,7 +57,7 @@ from cdpr_pipeline.discovery.freeform import (
     FreeFormSearch,
     Periodicity,
 )
-from cdpr_pipeline.discovery.residuals import Model, Residuals, channel_names
+from cdpr_pipeline.discovery.residuals import Model, Residuals, channel_names, relative_sse
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.discovery.validity import block_bootstrap, split_blocks
 from cdpr_pipeline.sim.effects import Effect, SymbolicWinchTorque
@@ -149,59 +149,96 @@ class Judgement:
                 "signal": self.channel, "variant": self.label}
 
 
-def _row_sq(res: Residuals, channel: str) -> list[np.ndarray]:
-    return [r[channel] ** 2 for r in res.by_run]
+def judged_columns(channel: str, n: int, explained: Sequence[str]) -> list[int]:
+    """Indices of ``channel``'s columns among ``explained`` (``u2``, ``l1``); all ``n``
+    when none is: the columns whose held-out gain judges an extension."""
+    cols = [i for i, name in enumerate(channel_names(channel, n)) if name in explained]
+    return cols or list(range(n))
+
+
+def _columns_label(channel: str, cols: list[int], n: int) -> str:
+    names = channel_names(channel, n)
+    return ", ".join(names[i] for i in cols) if len(cols) < n else channel
 
 
 @dataclass
 class Judge:
-    """Tests fitted extensions against the model they extend."""
+    """Tests fitted extensions against the model they extend.
+
+    Every sum of squares is relative per column (:func:`~cdpr_pipeline.discovery.
+    residuals.relative_sse`, scales from one reference model for a whole selection): the
+    likelihood ratio is the sum of each column's own, and the held-out gain is judged on
+    the columns the extension explains on the training runs (all columns when it
+    explains none), so an effect on a light axis beside heavy ones counts as much as one
+    on a heavy axis."""
 
     ctx: FitContext
     heldout: list[RunSignals]
     settings: SelectionSettings
-    nominal_held: dict[str, float] | None = None
+    #: per channel, each column's held-out sum of squares under the nominal model
+    nominal_held: dict[str, np.ndarray] | None = None
     base_effects: list[Effect] = field(default_factory=list)
+    #: per channel, each column's weight (:meth:`Residuals.column_scales` of the
+    #: reference model; of the model extended when None)
+    scales: dict[str, np.ndarray] | None = None
     base_train: Residuals = field(init=False)
     base_held: Residuals = field(init=False)
 
     def __post_init__(self) -> None:
         self.base_train = self.ctx.residuals(self.base_effects)
         self.base_held = self.ctx.residuals(self.base_effects, self.heldout)
+        if self.scales is None:
+            self.scales = self.base_train.column_scales()
 
     def __call__(self, effect: str, label: str, effects: list[Effect], n_params: int,
                  n_tests: int) -> Judgement:
         train = self.ctx.residuals(effects)
         held = self.ctx.residuals(effects, self.heldout)
         chans = self.base_train.channels
-        tr = {c: (self.base_train.sse(c), train.sse(c)) for c in chans}
-        ho = {c: (self.base_held.sse(c), held.sse(c)) for c in chans}
-        per = {c: self.base_train.count(c) * np.log(tr[c][0] / max(tr[c][1], 1e-300))
-               for c in chans}
+        sc = self.scales
+        tr = {c: (relative_sse(self.base_train, c, sc), relative_sse(train, c, sc))
+              for c in chans}
+        ho = {c: (relative_sse(self.base_held, c, sc), relative_sse(held, c, sc))
+              for c in chans}
+        # each column with its own noise variance: the likelihood ratio is the sum of
+        # the columns' own (a pooled one is the heaviest column's)
+        per = {}
+        for c in chans:
+            s0, s1 = self.base_train.column_sse(c), train.column_sse(c)
+            ok = s0 > 0
+            per[c] = float(len(self.base_train.stacked(c))
+                           * np.sum(np.log(s0[ok] / np.maximum(s1[ok], 1e-300))))
         lr = float(sum(per.values()))
         n_total = sum(self.base_train.count(c) for c in chans)
         pvalue = float(chi2.sf(max(lr, 0.0), max(n_params, 1)))
         bic = lr - n_params * np.log(n_total)
         channel = max(per, key=per.get)
-        gain = 1 - ho[channel][1] / ho[channel][0]
+        names = self._channels_explained(train, chans, n_tests)
+        n_cols = self.base_train.stacked(channel).shape[1]
+        cols = judged_columns(channel, n_cols, names)
+        before = relative_sse(self.base_held, channel, sc, cols)
+        after = relative_sse(held, channel, sc, cols)
+        gain = 1 - after / max(before, 1e-300)
         # practical significance against the *nominal* discrepancy: a later cause must
         # explain a real share of what the user's model got wrong, not mop up a remainder
-        reference = (self.nominal_held or {}).get(channel, ho[channel][0])
-        explained = (ho[channel][0] - ho[channel][1]) / max(reference, 1e-300)
+        reference = before
+        if self.nominal_held is not None and channel in self.nominal_held:
+            reference = float(np.sum((sc[channel] ** 2 * self.nominal_held[channel])[cols]))
+        explained = (before - after) / max(reference, 1e-300)
         level = 1 - 2 * self.settings.alpha / max(n_tests, 1)
-        ci = self._interval(held, channel, level)
-        names = self._channels_explained(train, chans, n_tests)
-        total_before = sum(ho[c][0] * self.ctx.weights[c] ** 2 for c in chans)
-        total_after = sum(ho[c][1] * self.ctx.weights[c] ** 2 for c in chans)
+        ci = self._interval(held, channel, cols, level)
+        total_before = sum(ho[c][0] for c in chans)
+        total_after = sum(ho[c][1] for c in chans)
         reason = ""
         if pvalue >= self.settings.alpha / max(n_tests, 1):
             reason = f"not significant on training runs (p = {pvalue:.2g})"
         elif gain < self.settings.min_gain:
-            reason = (f"held-out {channel} gain {100 * gain:.1f} % below "
-                      f"{100 * self.settings.min_gain:.0f} %")
+            reason = (f"held-out {_columns_label(channel, cols, n_cols)} gain {100 * gain:.1f} % "
+                      f"below {100 * self.settings.min_gain:.0f} %")
         elif explained < self.settings.min_share:
-            reason = (f"explains {100 * explained:.1f} % of the nominal held-out {channel} "
-                      f"error, below {100 * self.settings.min_share:.0f} %")
+            reason = (f"explains {100 * explained:.1f} % of the nominal held-out "
+                      f"{_columns_label(channel, cols, n_cols)} error, below "
+                      f"{100 * self.settings.min_share:.0f} %")
         elif ci[0] <= 0:
             reason = f"held-out gain interval includes zero ({100 * ci[0]:.1f} %)"
         elif total_after >= total_before:
@@ -210,13 +247,15 @@ class Judge:
                          float(bic), channel, float(gain), ci, tuple(names),
                          passed=not reason, reason=reason)
 
-    def _interval(self, held: Residuals, channel: str, level: float) -> tuple[float, float]:
-        before, after = _row_sq(self.base_held, channel), _row_sq(held, channel)
+    def _interval(self, held: Residuals, channel: str, cols: list[int], level: float
+                  ) -> tuple[float, float]:
+        w2 = self.scales[channel][cols] ** 2
         blocks = []
-        for sig, b, a in zip(self.heldout, before, after, strict=True):
+        for sig, b, a in zip(self.heldout, self.base_held.by_run, held.by_run, strict=True):
+            b, a = b[channel][:, cols], a[channel][:, cols]
             rate = len(b) / max(sig.t[-1] - sig.t[0], 1e-9)
             length = max(2, int(round(self.settings.block_s * rate)))
-            blocks += split_blocks((b.sum(axis=1), a.sum(axis=1)), length)
+            blocks += split_blocks(((b ** 2) @ w2, (a ** 2) @ w2), length)
         if len(blocks) < 2:
             return (-np.inf, np.inf)
         _, lo, hi = block_bootstrap(lambda b, a: 1 - a.sum() / max(b.sum(), 1e-300), blocks,
@@ -250,6 +289,9 @@ class Selection:
     effects: tuple[Effect, ...]
     seconds_candidates: float = 0.0
     seconds_freeform: float = 0.0
+    #: the column weights every judgement used (:meth:`Residuals.column_scales` of the
+    #: model the selection extends, on the training runs)
+    scales: dict[str, np.ndarray] | None = None
 
 
 def _data_scale(signals: Sequence[RunSignals], kind: str, nominal: Model) -> DataScale:
@@ -278,7 +320,8 @@ class _Search:
     log: Any = None
     columns: np.ndarray | None = None
     steps: list[list[Judgement]] = field(default_factory=list)
-    nominal_held: dict[str, float] | None = None
+    nominal_held: dict[str, np.ndarray] | None = None
+    scales: dict[str, np.ndarray] | None = None
     shapes: list[str] = field(default_factory=list)
     _log_n: float | None = None
 
@@ -289,10 +332,12 @@ class _Search:
         weights = {c: 1.0 / max(base_res.rms(c), 1e-300) for c in base_res.channels}
         ctx = FitContext(self.nominal, self.train, kept, weights, self.columns)
         if self.nominal_held is None:
-            held = FitContext(self.nominal, self.train, [], {}, self.columns).residuals(
-                [], self.heldout)
-            self.nominal_held = {c: held.sse(c) for c in held.channels}
-        return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held)
+            reference = FitContext(self.nominal, self.train, [], {}, self.columns)
+            held = reference.residuals([], self.heldout)
+            self.nominal_held = {c: held.column_sse(c) for c in held.channels}
+            self.scales = reference.residuals([]).column_scales()
+        return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held,
+                          scales=self.scales)
 
     def joint_context(self, fixed: list[Effect], parts: list[tuple[Candidate, np.ndarray]]
                       ) -> tuple[FitContext, Judge]:
@@ -306,7 +351,7 @@ class _Search:
         self.context([])        # the nominal held-out reference
         ctx = FitContext(self.nominal, self.train, fixed, weights, self.columns)
         return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held,
-                          base_effects=_build(parts))
+                          base_effects=_build(parts), scales=self.scales)
 
     def forward(self, fixed: list[Effect], candidates: list[Candidate], freeform: bool,
                 max_steps: int) -> list[Judgement]:
@@ -478,7 +523,7 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
     causes = sorted(causes, key=lambda c: -c.bic_drop)
     return Selection(tuple(_merge(causes)), tuple(tuple(step) for step in search.steps),
                      tuple(_effects(causes)), seconds_candidates,
-                     time.perf_counter() - start - seconds_candidates)
+                     time.perf_counter() - start - seconds_candidates, search.scales)
 
 
 def _build(parts: Sequence[tuple[Candidate, np.ndarray]]) -> list[Effect]:
