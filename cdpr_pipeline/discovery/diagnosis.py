@@ -602,7 +602,7 @@ def _reidentify_if_unusable(nominal: Model, train: list[RunSignals], held: list[
     ctx = FitContext(nominal, train, [], {})
     base = ctx.residuals([])
     effects = refit_effects(ctx.winch_refit(base.stacked("torque")))
-    weights = {c: 1.0 / max(base.rms(c), 1e-300) for c in base.channels}
+    weights = base.column_scales()
     judge = Judge(FitContext(nominal, train, [], weights, ctx.columns), held,
                   settings.selection)
     first = judge("winch_parameter_error", "winch_parameter_error[every winch re-identified]",

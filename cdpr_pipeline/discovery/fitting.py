@@ -53,7 +53,9 @@ class FitContext:
     nominal: Model
     train: list[RunSignals]
     base: list[Effect]
-    weights: dict[str, float]
+    #: per channel, a weight per column (:meth:`Residuals.column_scales`): each column's
+    #: error counts relative to the base model's, as the judge counts it
+    weights: dict[str, np.ndarray]
     columns: np.ndarray | None = None      # stacked winch_columns of the training runs
     max_nfev: int = 60
 
@@ -107,7 +109,7 @@ class FitContext:
             r = res.stacked(ch)
             if ch == "torque" and refit:
                 r = r - self.winch_explained(self.winch_refit(r))
-            parts.append(self.weights[ch] * r.ravel())
+            parts.append((self.weights[ch] * r).ravel())   # a weight per column
         return np.concatenate(parts)
 
     @staticmethod

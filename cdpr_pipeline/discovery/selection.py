@@ -329,7 +329,7 @@ class _Search:
         base = FitContext(self.nominal, self.train, kept, {}, self.columns)
         self.columns = base.columns
         base_res = base.residuals([])
-        weights = {c: 1.0 / max(base_res.rms(c), 1e-300) for c in base_res.channels}
+        weights = base_res.column_scales()
         ctx = FitContext(self.nominal, self.train, kept, weights, self.columns)
         if self.nominal_held is None:
             reference = FitContext(self.nominal, self.train, [], {}, self.columns)
@@ -347,7 +347,7 @@ class _Search:
         base = FitContext(self.nominal, self.train, current, {}, self.columns)
         self.columns = base.columns
         base_res = base.residuals([])
-        weights = {c: 1.0 / max(base_res.rms(c), 1e-300) for c in base_res.channels}
+        weights = base_res.column_scales()
         self.context([])        # the nominal held-out reference
         ctx = FitContext(self.nominal, self.train, fixed, weights, self.columns)
         return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held,
@@ -398,12 +398,17 @@ class _Search:
         return _judge_candidate(judgement.candidate, ctx, judge, n_tests)
 
     def bic(self, effects: list[Effect], n_params: int) -> float:
-        """BIC of the nominal model extended by ``effects`` on the training runs (per
-        channel Gaussian likelihood; constant terms dropped)."""
+        """BIC of the nominal model extended by ``effects`` on the training runs (a
+        Gaussian likelihood per column, each with its own variance, as the judge's
+        likelihood ratio; constant terms dropped)."""
         ctx = FitContext(self.nominal, self.train, [], {}, self.columns)
         res = ctx.residuals(effects)
-        return float(sum(res.count(c) * np.log(res.sse(c) / res.count(c))
-                         for c in res.channels) + n_params * self.log_n())
+        total = 0.0
+        for c in res.channels:
+            rows = len(res.stacked(c))
+            sse = res.column_sse(c)
+            total += rows * float(np.sum(np.log(np.maximum(sse[sse > 0], 1e-300) / rows)))
+        return total + n_params * self.log_n()
 
     def log_n(self) -> float:
         """log of the number of training residual values (rows x columns x channels)."""

@@ -139,7 +139,8 @@ class ForeignCase:
 def foreign_case(out_dir: str | Path, kind: str, effects: list[str], seed: int,
                  n_runs: int | None = None, duration_s: float | None = None,
                  n: int | None = None, rate_hz: float | None = None,
-                 channels: list[int] | None = None) -> ForeignCase:
+                 channels: list[int] | None = None,
+                 rig_options: dict[str, Any] | None = None) -> ForeignCase:
     """Simulate, write and load one independent-simulator dataset.
 
     Parameters
@@ -158,6 +159,9 @@ def foreign_case(out_dir: str | Path, kind: str, effects: list[str], seed: int,
         Number of cables / axes and sample rate; drawn with the rig when omitted.
     channels : list of int, optional
         0-based channels the effect acts on (drawn: one, some or all, when omitted).
+    rig_options : dict, optional
+        Further nominal values for the rig's drawer (``inertia=[...]`` of
+        ``random_axes_rig``); drawn when omitted.
     """
     runs, duration = FULL[kind]
     n_runs, duration_s = n_runs or runs, duration_s or duration
@@ -168,12 +172,12 @@ def foreign_case(out_dir: str | Path, kind: str, effects: list[str], seed: int,
         path = root / f"{kind}_{s}"
         try:
             if kind == "cdpr":
-                rig = random_rig(s, n_cables=n, rate_hz=rate_hz)
+                rig = random_rig(s, n_cables=n, rate_hz=rate_hz, **(rig_options or {}))
                 hidden = _effects(rig, effects, s, channels)
                 truth = simulate_dataset(path, rig, hidden, n_runs=n_runs,
                                          duration_s=duration_s, seed=s, overwrite=True)
             elif kind == "axes":
-                rig = random_axes_rig(s, n_axes=n, rate_hz=rate_hz)
+                rig = random_axes_rig(s, n_axes=n, rate_hz=rate_hz, **(rig_options or {}))
                 hidden = _effects(rig, effects, s, channels)
                 truth = simulate_axes_dataset(path, rig, hidden, n_runs=n_runs,
                                               duration_s=duration_s, seed=s, overwrite=True)

@@ -188,6 +188,29 @@ def test_a_position_periodic_force_on_a_linear_axis_gets_no_name(tmp_path, seed)
         f"axis {axis + 1}: wavenumbers {ks} against {true_k:.4g}: {case.describe()}"
 
 
+def test_an_effect_on_a_light_axis_beside_heavy_ones_is_named(tmp_path, seed):
+    """A wrist axis beside base axes: inertias 1e-3..1e-2 against 10..100 (torques
+    1e3-1e5 times apart), a Stribeck or asymmetric viscous friction on the light axis
+    only. Summed raw over the axes, every sum of squares was the heavy axes' and such an
+    effect could not show (a periodic force explaining half a light axis's residual
+    scored a likelihood ratio of 1.6); each column now counts relative to its own error
+    (``residuals.relative_sse``) and with its own likelihood."""
+    rng = rng_for(seed)
+    n = int(rng.integers(2, 5))
+    light = int(rng.integers(n))
+    inertia = np.exp(rng.uniform(np.log(10.0), np.log(100.0), n))
+    inertia[light] = np.exp(rng.uniform(np.log(1e-3), np.log(1e-2)))
+    name = ["stribeck_friction", "asymmetric_viscous_friction"][int(rng.integers(2))]
+    case = foreign_case(tmp_path, "axes", [name], seed, n_runs=3, duration_s=10.0, n=n,
+                        channels=[light], rig_options={"inertia": inertia})
+    record = case.diagnose()
+    assert record["verdict"] == name, case.describe()
+    assert record["causes"][0]["channels"] == [f"u{light + 1}"], case.describe()
+    ok, why = parameters_ok(case, record["causes"][0])
+    assert ok, f"{why}: {case.describe()}"
+    assert record["gain"]["ci95"][0] > 0, case.describe()
+
+
 def test_cable_elasticity_is_named_with_each_cables_stiffness(tmp_path, seed):
     """Cables drawn elastic one, some or all, each with its own EA (other cables rigid):
     named ``cable_elasticity`` with every elastic cable's EA within the tolerance (one EA
