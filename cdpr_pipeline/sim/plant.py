@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -219,7 +220,7 @@ class Plant:
     def elastic(self) -> bool:
         return self.cable_stiffness is not None
 
-    @property
+    @cached_property    # read on every derivative call (frozen: computed once)
     def dynamic_stiffness(self) -> np.ndarray:
         """The stiffness the elastic dynamics integrate: a cable stated rigid (infinite
         ``EA``) among elastic ones becomes :data:`RIGID_AMONG_ELASTIC` times the stiffest
@@ -238,7 +239,7 @@ class Plant:
         a drive without one takes its command directly)."""
         return bool(np.any(self.lags > 0.0))
 
-    @property
+    @cached_property    # read on every derivative call (frozen: computed once)
     def lags(self) -> np.ndarray:
         """The actuator lag of every drive (n,), 0 where a drive has none."""
         return actuator_lags(self.actuator_time_constant, self.n)
@@ -458,7 +459,7 @@ class Drives:
     def n(self) -> int:
         return self.winch.n
 
-    @property
+    @cached_property    # read on every derivative call (frozen: computed once)
     def lags(self) -> np.ndarray:
         """The actuator lag of every axis (n,), 0 where an axis has none."""
         return actuator_lags(self.actuator_time_constant, self.n)
