@@ -32,6 +32,7 @@ from cdpr_pipeline.discovery.residuals import (
     nominal_model,
     relative_sse,
     residuals,
+    signal_scales,
 )
 from cdpr_pipeline.discovery.results import (
     Band,
@@ -51,7 +52,7 @@ from cdpr_pipeline.discovery.selection import (
     Judge,
     Judgement,
     SelectionSettings,
-    judged_columns,
+    fit_weights,
     select_causes,
 )
 from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
@@ -386,29 +387,26 @@ def _full_rate_residual(model: Model, sig: RunSignals, channel: str) -> np.ndarr
 # ---------------------------------------------------------------------- gain
 def heldout_gain(before: Residuals, after: Residuals, held: list[RunSignals], channel: str,
                  block_s: float, n_boot: int, seed: int,
-                 scales: dict[str, np.ndarray] | None = None,
-                 columns: Sequence[int] | None = None) -> HeldoutGain:
+                 scales: dict[str, np.ndarray] | None = None) -> HeldoutGain:
     """Held-out RMSE of ``channel`` before and after, relative drop and its 95 % block
     bootstrap interval; per channel column too.
 
-    The relative drop is over ``columns`` (all when None), each column's squared error
-    weighted by ``scales`` (:meth:`Residuals.column_scales`; equal weights when None), as
-    the selection judged it; ``before`` and ``after`` are the plain RMSE over the same
-    columns."""
+    The relative drop weights each column's squared error by ``scales``
+    (:func:`~cdpr_pipeline.discovery.residuals.signal_scales`; equal weights when None),
+    as the selection judged it; ``before`` and ``after`` are the plain RMSE."""
     def stat(b, a):
         return 1 - np.sqrt(a.sum() / max(b.sum(), 1e-300))
 
     b, a = before.stacked(channel), after.stacked(channel)
-    cols = list(range(b.shape[1])) if columns is None else list(columns)
-    w2 = np.ones(len(cols)) if scales is None else scales[channel][cols] ** 2
+    w2 = np.ones(b.shape[1]) if scales is None else scales[channel] ** 2
     blocks, per_col = [], {}
     for sig, rb, ra in zip(held, before.by_run, after.by_run, strict=True):
         rate = len(rb[channel]) / max(sig.t[-1] - sig.t[0], 1e-9)
         length = max(2, int(round(block_s * rate)))
         blocks += split_blocks((rb[channel] ** 2, ra[channel] ** 2), length)
-    est, lo, hi = (block_bootstrap(lambda x, y: stat(x[:, cols] @ w2, y[:, cols] @ w2),
-                                   blocks, n_boot, 0.95, seed) if len(blocks) > 1
-                   else (stat(b[:, cols] ** 2 @ w2, a[:, cols] ** 2 @ w2), -np.inf, np.inf))
+    est, lo, hi = (block_bootstrap(lambda x, y: stat(x @ w2, y @ w2), blocks, n_boot, 0.95,
+                                   seed) if len(blocks) > 1
+                   else (stat(b ** 2 @ w2, a ** 2 @ w2), -np.inf, np.inf))
     for i, name in enumerate(channel_names(channel, b.shape[1])):
         _, clo, chi = (block_bootstrap(lambda x, y, i=i: stat(x[:, i], y[:, i]), blocks, n_boot,
                                        0.95, seed) if len(blocks) > 1 else (0, -np.inf, np.inf))
@@ -416,10 +414,10 @@ def heldout_gain(before: Residuals, after: Residuals, held: list[RunSignals], ch
                                     float(np.sqrt(np.mean(a[:, i] ** 2))),
                                     float(stat(b[:, i] ** 2, a[:, i] ** 2)),
                                     (float(clo), float(chi)))
-    return HeldoutGain(channel, float(np.sqrt(np.mean(b[:, cols] ** 2))),
-                       float(np.sqrt(np.mean(a[:, cols] ** 2))), float(est),
-                       (float(lo), float(hi)), per_col,
-                       columns=tuple(channel_names(channel, b.shape[1])[i] for i in cols))
+    return HeldoutGain(channel, float(np.sqrt(np.mean(b ** 2))),
+                       float(np.sqrt(np.mean(a ** 2))), float(est), (float(lo), float(hi)),
+                       per_col, relative_to="each column's measured signal (RMS)"
+                       if scales is not None else "")
 
 
 def _validity(res: Residuals, held: list[RunSignals], channel: str, max_lag: int,
@@ -509,7 +507,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     # a 95 % interval above zero; the weakest cause goes first until it has
     before_held = residuals(nominal, nominal, held)
     # each column's error relative to the model the selection extended, as it judged
-    scales = selection.scales or residuals(base, nominal, train).column_scales()
+    scales = selection.scales or signal_scales(train, before_held.channels)
     withdrawn: list[str] = []
     # and every cause must still add to the others: causes were fitted jointly as they
     # were added, so one found early can end with nothing left to explain
@@ -518,11 +516,10 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
             break
         others = [o for o in causes if o is not c]
         ch = c.channel
-        cols = judged_columns(ch, before_held.stacked(ch).shape[1], c.channels)
         without = relative_sse(residuals(nominal.with_effects(
-            [e for o in others for e in o.effects]), nominal, held), ch, scales, cols)
+            [e for o in others for e in o.effects]), nominal, held), ch, scales)
         with_c = relative_sse(residuals(nominal.with_effects(
-            [e for o in causes for e in o.effects]), nominal, held), ch, scales, cols)
+            [e for o in causes for e in o.effects]), nominal, held), ch, scales)
         if with_c > (1 - settings.selection.min_gain) * without:
             causes.remove(c)
             withdrawn.append(c.label)
@@ -533,11 +530,9 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         extended = nominal.with_effects(extension)
         channel = causes[0].channel if causes else "torque"
         after_held = residuals(extended, nominal, held)
-        explained = [name for c in causes if c.channel == channel for name in c.channels]
         gain = heldout_gain(before_held, after_held, held, channel,
                             settings.selection.block_s, settings.selection.n_boot,
-                            settings.selection.seed, scales, judged_columns(
-                                channel, before_held.stacked(channel).shape[1], explained))
+                            settings.selection.seed, scales)
         if not causes or gain.ci95[0] > 0:
             break
         dropped = causes.pop()
@@ -602,7 +597,7 @@ def _reidentify_if_unusable(nominal: Model, train: list[RunSignals], held: list[
     ctx = FitContext(nominal, train, [], {})
     base = ctx.residuals([])
     effects = refit_effects(ctx.winch_refit(base.stacked("torque")))
-    weights = base.column_scales()
+    weights = fit_weights(base, signal_scales(train, base.channels))
     judge = Judge(FitContext(nominal, train, [], weights, ctx.columns), held,
                   settings.selection)
     first = judge("winch_parameter_error", "winch_parameter_error[every winch re-identified]",

@@ -53,8 +53,8 @@ class FitContext:
     nominal: Model
     train: list[RunSignals]
     base: list[Effect]
-    #: per channel, a weight per column (:meth:`Residuals.column_scales`): each column's
-    #: error counts relative to the base model's, as the judge counts it
+    #: per channel, a weight per column (:func:`~cdpr_pipeline.discovery.selection.
+    #: fit_weights`): each column's error counts relative to its signal, as judged
     weights: dict[str, np.ndarray]
     columns: np.ndarray | None = None      # stacked winch_columns of the training runs
     max_nfev: int = 60

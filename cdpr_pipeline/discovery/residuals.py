@@ -336,28 +336,29 @@ class Residuals:
         r = self.stacked(channel)
         return np.einsum("ij,ij->j", r, r)
 
-    def column_scales(self) -> dict[str, np.ndarray]:
-        """Per channel, ``1 / RMS`` of each column (0 where a column has no residual):
-        the weights that make each column's error relative to this model's."""
-        out = {}
-        for c in self.channels:
-            rms = np.sqrt(self.column_sse(c) / max(len(self.stacked(c)), 1))
-            out[c] = np.where(rms > 0, 1.0 / np.where(rms > 0, rms, 1.0), 0.0)
-        return out
 
-
-def relative_sse(res: Residuals, channel: str, scales: dict[str, np.ndarray],
-                 columns: Sequence[int] | None = None) -> float:
+def relative_sse(res: Residuals, channel: str, scales: dict[str, np.ndarray]) -> float:
     """Sum of squares of ``channel`` with each column weighted by ``scales`` (see
-    :meth:`Residuals.column_scales`), over ``columns`` (all when None).
+    :func:`signal_scales`): the error of each column relative to its own signal.
 
     Axes of one robot differ in torque by orders of magnitude (a base axis beside a
     wrist): summed raw, the heaviest decides every test and an effect on a light axis is
     invisible (found: a periodic force explaining half a wrist axis's residual scored a
-    likelihood ratio of 1.6). Relative to one reference model's error, each column
-    counts by how much of *its* error a model explains."""
-    w2 = scales[channel] ** 2 * res.column_sse(channel)
-    return float(np.sum(w2 if columns is None else w2[list(columns)]))
+    likelihood ratio of 1.6). Relative to each column's signal, as a sensor's noise
+    scales with its range, each axis counts by its relative error; winches of one cable
+    robot, of similar size, count about as they did summed raw."""
+    return float(np.sum(scales[channel] ** 2 * res.column_sse(channel)))
+
+
+def signal_scales(signals: Sequence[RunSignals], channels: Sequence[str]
+                  ) -> dict[str, np.ndarray]:
+    """Per channel, ``1 / RMS`` of each measured column on the statistics rows (a length
+    about its run's mean); 0 for a column that never moves."""
+    out = {}
+    for c in channels:
+        rms = np.sqrt(np.mean(measured_rows(signals, c) ** 2, axis=0))
+        out[c] = np.where(rms > 0, 1.0 / np.where(rms > 0, rms, 1.0), 0.0)
+    return out
 
 
 def residuals(model: Model, nominal: Model, signals: Sequence[RunSignals]) -> Residuals:

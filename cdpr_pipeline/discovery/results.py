@@ -78,9 +78,8 @@ class HeldoutGain:
     by_channel: Mapping[str, ChannelGain]
     withdrawn: tuple[str, ...] = ()
     metric: str = "heldout_rmse"
-    #: the columns judged (those the causes explain; every column when they name none),
-    #: each relative to the reference model's error
-    columns: tuple[str, ...] = ()
+    #: what ``relative`` weights each column's squared error by (empty: equal weights)
+    relative_to: str = ""
 
     def best_column(self) -> str:
         """The column whose RMSE dropped most."""
@@ -90,8 +89,8 @@ class HeldoutGain:
         out = {"metric": self.metric, "signal": self.signal, "before": self.before,
                "after": self.after, "relative": self.relative, "ci95": _pair(self.ci95),
                "by_channel": {k: v.as_dict() for k, v in self.by_channel.items()}}
-        if self.columns:
-            out["columns"] = list(self.columns)
+        if self.relative_to:
+            out["relative_to"] = self.relative_to
         if self.withdrawn:
             out["withdrawn"] = list(self.withdrawn)
         return out

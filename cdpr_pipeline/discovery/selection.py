@@ -57,7 +57,13 @@ from cdpr_pipeline.discovery.freeform import (
     FreeFormSearch,
     Periodicity,
 )
-from cdpr_pipeline.discovery.residuals import Model, Residuals, channel_names, relative_sse
+from cdpr_pipeline.discovery.residuals import (
+    Model,
+    Residuals,
+    channel_names,
+    relative_sse,
+    signal_scales,
+)
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.discovery.validity import block_bootstrap, split_blocks
 from cdpr_pipeline.sim.effects import Effect, SymbolicWinchTorque
@@ -149,28 +155,24 @@ class Judgement:
                 "signal": self.channel, "variant": self.label}
 
 
-def judged_columns(channel: str, n: int, explained: Sequence[str]) -> list[int]:
-    """Indices of ``channel``'s columns among ``explained`` (``u2``, ``l1``); all ``n``
-    when none is: the columns whose held-out gain judges an extension."""
-    cols = [i for i, name in enumerate(channel_names(channel, n)) if name in explained]
-    return cols or list(range(n))
-
-
-def _columns_label(channel: str, cols: list[int], n: int) -> str:
-    names = channel_names(channel, n)
-    return ", ".join(names[i] for i in cols) if len(cols) < n else channel
+def fit_weights(base: Residuals, scales: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per channel, the weight of each column in a fit: its signal scale, times one
+    factor per channel that gives the base model's weighted residual unit RMS (maximum
+    likelihood for Gaussian channels)."""
+    out = {}
+    for c in base.channels:
+        rms = np.sqrt(relative_sse(base, c, scales) / max(base.count(c), 1))
+        out[c] = scales[c] / max(rms, 1e-300)
+    return out
 
 
 @dataclass
 class Judge:
     """Tests fitted extensions against the model they extend.
 
-    Every sum of squares is relative per column (:func:`~cdpr_pipeline.discovery.
-    residuals.relative_sse`, scales from one reference model for a whole selection): the
-    likelihood ratio is the sum of each column's own, and the held-out gain is judged on
-    the columns the extension explains on the training runs (all columns when it
-    explains none), so an effect on a light axis beside heavy ones counts as much as one
-    on a heavy axis."""
+    Every sum of squares weights each column by its own signal's scale
+    (:func:`~cdpr_pipeline.discovery.residuals.relative_sse`), so an effect on a light
+    axis beside heavy ones counts by its relative size, not by its newtons."""
 
     ctx: FitContext
     heldout: list[RunSignals]
@@ -178,8 +180,8 @@ class Judge:
     #: per channel, each column's held-out sum of squares under the nominal model
     nominal_held: dict[str, np.ndarray] | None = None
     base_effects: list[Effect] = field(default_factory=list)
-    #: per channel, each column's weight (:meth:`Residuals.column_scales` of the
-    #: reference model; of the model extended when None)
+    #: per channel, each column's weight (:func:`~cdpr_pipeline.discovery.residuals.
+    #: signal_scales` of the training runs when None)
     scales: dict[str, np.ndarray] | None = None
     base_train: Residuals = field(init=False)
     base_held: Residuals = field(init=False)
@@ -188,7 +190,7 @@ class Judge:
         self.base_train = self.ctx.residuals(self.base_effects)
         self.base_held = self.ctx.residuals(self.base_effects, self.heldout)
         if self.scales is None:
-            self.scales = self.base_train.column_scales()
+            self.scales = signal_scales(self.ctx.train, self.base_train.channels)
 
     def __call__(self, effect: str, label: str, effects: list[Effect], n_params: int,
                  n_tests: int) -> Judgement:
@@ -200,45 +202,35 @@ class Judge:
               for c in chans}
         ho = {c: (relative_sse(self.base_held, c, sc), relative_sse(held, c, sc))
               for c in chans}
-        # each column with its own noise variance: the likelihood ratio is the sum of
-        # the columns' own (a pooled one is the heaviest column's)
-        per = {}
-        for c in chans:
-            s0, s1 = self.base_train.column_sse(c), train.column_sse(c)
-            ok = s0 > 0
-            per[c] = float(len(self.base_train.stacked(c))
-                           * np.sum(np.log(s0[ok] / np.maximum(s1[ok], 1e-300))))
+        per = {c: self.base_train.count(c) * np.log(tr[c][0] / max(tr[c][1], 1e-300))
+               for c in chans}
         lr = float(sum(per.values()))
         n_total = sum(self.base_train.count(c) for c in chans)
         pvalue = float(chi2.sf(max(lr, 0.0), max(n_params, 1)))
         bic = lr - n_params * np.log(n_total)
         channel = max(per, key=per.get)
         names = self._channels_explained(train, chans, n_tests)
-        n_cols = self.base_train.stacked(channel).shape[1]
-        cols = judged_columns(channel, n_cols, names)
-        before = relative_sse(self.base_held, channel, sc, cols)
-        after = relative_sse(held, channel, sc, cols)
+        before, after = ho[channel]
         gain = 1 - after / max(before, 1e-300)
         # practical significance against the *nominal* discrepancy: a later cause must
         # explain a real share of what the user's model got wrong, not mop up a remainder
         reference = before
         if self.nominal_held is not None and channel in self.nominal_held:
-            reference = float(np.sum((sc[channel] ** 2 * self.nominal_held[channel])[cols]))
+            reference = float(np.sum(sc[channel] ** 2 * self.nominal_held[channel]))
         explained = (before - after) / max(reference, 1e-300)
         level = 1 - 2 * self.settings.alpha / max(n_tests, 1)
-        ci = self._interval(held, channel, cols, level)
+        ci = self._interval(held, channel, level)
         total_before = sum(ho[c][0] for c in chans)
         total_after = sum(ho[c][1] for c in chans)
         reason = ""
         if pvalue >= self.settings.alpha / max(n_tests, 1):
             reason = f"not significant on training runs (p = {pvalue:.2g})"
         elif gain < self.settings.min_gain:
-            reason = (f"held-out {_columns_label(channel, cols, n_cols)} gain {100 * gain:.1f} % "
-                      f"below {100 * self.settings.min_gain:.0f} %")
+            reason = (f"held-out {channel} gain {100 * gain:.1f} % below "
+                      f"{100 * self.settings.min_gain:.0f} %")
         elif explained < self.settings.min_share:
-            reason = (f"explains {100 * explained:.1f} % of the nominal held-out "
-                      f"{_columns_label(channel, cols, n_cols)} error, below "
-                      f"{100 * self.settings.min_share:.0f} %")
+            reason = (f"explains {100 * explained:.1f} % of the nominal held-out {channel} "
+                      f"error, below {100 * self.settings.min_share:.0f} %")
         elif ci[0] <= 0:
             reason = f"held-out gain interval includes zero ({100 * ci[0]:.1f} %)"
         elif total_after >= total_before:
@@ -247,12 +239,11 @@ class Judge:
                          float(bic), channel, float(gain), ci, tuple(names),
                          passed=not reason, reason=reason)
 
-    def _interval(self, held: Residuals, channel: str, cols: list[int], level: float
-                  ) -> tuple[float, float]:
-        w2 = self.scales[channel][cols] ** 2
+    def _interval(self, held: Residuals, channel: str, level: float) -> tuple[float, float]:
+        w2 = self.scales[channel] ** 2
         blocks = []
         for sig, b, a in zip(self.heldout, self.base_held.by_run, held.by_run, strict=True):
-            b, a = b[channel][:, cols], a[channel][:, cols]
+            b, a = b[channel], a[channel]
             rate = len(b) / max(sig.t[-1] - sig.t[0], 1e-9)
             length = max(2, int(round(self.settings.block_s * rate)))
             blocks += split_blocks(((b ** 2) @ w2, (a ** 2) @ w2), length)
@@ -289,8 +280,8 @@ class Selection:
     effects: tuple[Effect, ...]
     seconds_candidates: float = 0.0
     seconds_freeform: float = 0.0
-    #: the column weights every judgement used (:meth:`Residuals.column_scales` of the
-    #: model the selection extends, on the training runs)
+    #: the column weights every judgement used (:func:`~cdpr_pipeline.discovery.
+    #: residuals.signal_scales` of the training runs)
     scales: dict[str, np.ndarray] | None = None
 
 
@@ -329,13 +320,14 @@ class _Search:
         base = FitContext(self.nominal, self.train, kept, {}, self.columns)
         self.columns = base.columns
         base_res = base.residuals([])
-        weights = base_res.column_scales()
+        if self.scales is None:
+            self.scales = signal_scales(self.train, base_res.channels)
+        weights = fit_weights(base_res, self.scales)
         ctx = FitContext(self.nominal, self.train, kept, weights, self.columns)
         if self.nominal_held is None:
-            reference = FitContext(self.nominal, self.train, [], {}, self.columns)
-            held = reference.residuals([], self.heldout)
+            held = FitContext(self.nominal, self.train, [], {}, self.columns).residuals(
+                [], self.heldout)
             self.nominal_held = {c: held.column_sse(c) for c in held.channels}
-            self.scales = reference.residuals([]).column_scales()
         return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held,
                           scales=self.scales)
 
@@ -347,8 +339,8 @@ class _Search:
         base = FitContext(self.nominal, self.train, current, {}, self.columns)
         self.columns = base.columns
         base_res = base.residuals([])
-        weights = base_res.column_scales()
-        self.context([])        # the nominal held-out reference
+        self.context([])        # the nominal held-out reference and the scales
+        weights = fit_weights(base_res, self.scales)
         ctx = FitContext(self.nominal, self.train, fixed, weights, self.columns)
         return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held,
                           base_effects=_build(parts), scales=self.scales)
@@ -398,17 +390,16 @@ class _Search:
         return _judge_candidate(judgement.candidate, ctx, judge, n_tests)
 
     def bic(self, effects: list[Effect], n_params: int) -> float:
-        """BIC of the nominal model extended by ``effects`` on the training runs (a
-        Gaussian likelihood per column, each with its own variance, as the judge's
-        likelihood ratio; constant terms dropped)."""
+        """BIC of the nominal model extended by ``effects`` on the training runs (per
+        channel Gaussian likelihood of the columns relative to their signals, as the
+        judge's; constant terms dropped)."""
         ctx = FitContext(self.nominal, self.train, [], {}, self.columns)
         res = ctx.residuals(effects)
-        total = 0.0
-        for c in res.channels:
-            rows = len(res.stacked(c))
-            sse = res.column_sse(c)
-            total += rows * float(np.sum(np.log(np.maximum(sse[sse > 0], 1e-300) / rows)))
-        return total + n_params * self.log_n()
+        if self.scales is None:
+            self.scales = signal_scales(self.train, res.channels)
+        return float(sum(res.count(c) * np.log(relative_sse(res, c, self.scales)
+                                               / res.count(c)) for c in res.channels)
+                     + n_params * self.log_n())
 
     def log_n(self) -> float:
         """log of the number of training residual values (rows x columns x channels)."""

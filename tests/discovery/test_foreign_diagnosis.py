@@ -193,8 +193,8 @@ def test_an_effect_on_a_light_axis_beside_heavy_ones_is_named(tmp_path, seed):
     1e3-1e5 times apart), a Stribeck or asymmetric viscous friction on the light axis
     only. Summed raw over the axes, every sum of squares was the heavy axes' and such an
     effect could not show (a periodic force explaining half a light axis's residual
-    scored a likelihood ratio of 1.6); each column now counts relative to its own error
-    (``residuals.relative_sse``) and with its own likelihood."""
+    scored a likelihood ratio of 1.6); each column now counts relative to its own
+    signal (``residuals.relative_sse``)."""
     rng = rng_for(seed)
     n = int(rng.integers(2, 5))
     light = int(rng.integers(n))
