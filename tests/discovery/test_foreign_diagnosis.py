@@ -155,9 +155,11 @@ def test_a_drum_radius_error_is_named_on_its_drum(tmp_path, seed):
     rig is named on that drum with its size (per drum, as the spec's per-winch
     magnitudes; a single error shared by every drum was named winch_parameter_error or
     anchor_offset in 3 of 3 draws of the detection benchmark)."""
-    drum = int(rng_for(seed).integers(3))
+    rng = rng_for(seed)
+    n = int(rng.integers(3, 5))
+    drum = int(rng.integers(n))
     case = foreign_case(tmp_path, "cdpr", ["drum_radius_error"], seed, n_runs=4,
-                        duration_s=10.0, channels=[drum])
+                        duration_s=10.0, n=n, channels=[drum])
     record = case.diagnose()
     assert record["verdict"] == "drum_radius_error", case.describe()
     ok, why = parameters_ok(case, record["causes"][0])
