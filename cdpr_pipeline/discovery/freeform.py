@@ -670,12 +670,20 @@ class FreeFormSearch:
         Angle harmonics in the fixed library.
     max_nodes : int
         Largest GP term (functions, variables and constants) admitted to the library.
+    min_channel_gain : float
+        Smallest share of a channel's residual sum of squares its terms must explain on
+        the training runs to be kept (the practical threshold of the selection's
+        ``min_gain``, per channel): with tens of thousands of rows, BIC takes noise-level
+        terms for the small systematic mismatch every model leaves on every axis, and
+        those made a drag's free-form description (one term on its axis) cost more
+        parameters than the named causes imitating it.
     """
 
     gp: GrammarGP | None = field(default_factory=GrammarGP)
     regression: L0Regression = field(default_factory=L0Regression)
     harmonics: int = 16
     max_nodes: int = 8
+    min_channel_gain: float = 0.10
     extra_terms: list[str] = field(default_factory=list)
 
     def with_terms(self, result: FreeFormResult) -> FreeFormSearch:
@@ -715,7 +723,11 @@ class FreeFormSearch:
         for i in range(residual.shape[1]):
             reg = L0Regression(max_terms, self.regression.penalty,
                                self.regression.max_overlap)
-            reg.fit(X[:, i, :], residual[:, i], cost)
+            y = residual[:, i]
+            reg.fit(X[:, i, :], y, cost)
+            left = y - reg.predict(X[:, i, :])
+            if float(left @ left) > (1 - self.min_channel_gain) * float(y @ y):
+                continue
             for j in reg.support_:
                 # a residual r = u - u_model is explained by extra resisting torque +c f
                 terms.append({"cable": i + 1, "expression": library[j],
