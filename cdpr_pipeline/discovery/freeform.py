@@ -149,6 +149,94 @@ def term_columns(expressions: Sequence[str], signals: Sequence[RunSignals]) -> n
     return np.concatenate(out)
 
 
+def term_spread_columns(expressions: Sequence[str], signals: Sequence[RunSignals]
+                        ) -> np.ndarray:
+    """Each expression on each winch, as every winch's residual sees it on a rig whose
+    torque projection mixes winches: (rows, n, n, terms), entry ``[k, i, j, t]`` what
+    term ``t`` on winch ``j`` adds to winch ``i``'s residual
+    (:meth:`RunSignals.torque_spread`)."""
+    out = []
+    for sig in signals:
+        known = sig.cache.setdefault("term_spread", {})
+        missing = [e for e in dict.fromkeys(expressions) if e not in known]
+        if missing:
+            cols = np.stack([evaluate(e, {"omega": sig.omega, "theta": sig.theta})
+                             for e in missing], axis=-1)
+            rows = sig.rows(sig.torque_spread(cols))
+            for e, col in zip(missing, np.moveaxis(rows, -1, 0), strict=True):
+                known[e] = col
+        out.append(np.stack([known[e] for e in expressions], axis=-1))
+    return np.concatenate(out)
+
+
+def select_joint(X: np.ndarray, y: np.ndarray, cost: np.ndarray, groups: np.ndarray,
+                 max_per_group: int, max_overlap: float = 0.95,
+                 penalty: float | None = None) -> tuple[list[int], np.ndarray]:
+    """Sparse least squares over all columns of ``X`` (N, m) at once, at most
+    ``max_per_group`` columns of each group: forward selection by BIC with the
+    orthogonalised gain of every column in one product per step, then backward
+    elimination. Returns the support and the coefficients (m,).
+
+    The winch terms of a redundant cable robot: a term on one winch reaches every
+    winch's projected residual, so selecting each winch's terms on its own residual
+    takes the spread of one winch's term for terms of the others."""
+    N, m = X.shape
+    pen = np.log(N) if penalty is None else penalty
+    norms2 = np.einsum("ij,ij->j", X, X)
+    unit = X / np.sqrt(np.where(norms2 > 0, norms2, 1.0))
+
+    def criterion(support: list[int]) -> float:
+        if not support:
+            rss = float(y @ y)
+        else:
+            coef = np.linalg.lstsq(X[:, support], y, rcond=None)[0]
+            rss = float(np.sum((y - X[:, support] @ coef) ** 2))
+        return N * np.log(max(rss, 1e-300) / N) + pen * float(np.sum(cost[support]))
+
+    support: list[int] = []
+    best = criterion(support)
+    while True:
+        # orthonormal basis of the support, the residual orthogonal to it
+        if support:
+            Q, _ = np.linalg.qr(X[:, support])
+            r = y - Q @ (Q.T @ y)
+            P = Q.T @ X
+            perp2 = norms2 - np.einsum("ij,ij->j", P, P)
+        else:
+            r, perp2 = y, norms2.copy()
+        rss = float(r @ r)
+        ok = perp2 > 1e-10 * np.maximum(norms2, 1e-300)
+        ok[support] = False
+        for g in set(groups[support].tolist()):
+            if np.sum(groups[support] == g) >= max_per_group:
+                ok &= groups != g
+        if support:
+            ok &= np.max(np.abs(unit[:, support].T @ unit), axis=0) <= max_overlap
+        if not ok.any():
+            break
+        gain = np.where(ok, (X.T @ r) ** 2 / np.where(ok, perp2, 1.0), -np.inf)
+        spent = float(np.sum(cost[support]))
+        crit = N * np.log(np.maximum(rss - gain, 1e-300) / N) + pen * (spent + cost)
+        crit = np.where(ok, crit, np.inf)
+        j = int(np.argmin(crit))
+        if crit[j] >= best:
+            break
+        support, best = support + [j], criterion(support + [j])
+        improved = True
+        while improved and len(support) > 1:
+            improved = False
+            for k in list(support):
+                rest = [i for i in support if i != k]
+                value = criterion(rest)
+                if value < best:
+                    support, best, improved = rest, value, True
+                    break
+    coef = np.zeros(m)
+    if support:
+        coef[support] = np.linalg.lstsq(X[:, support], y, rcond=None)[0]
+    return sorted(support), coef
+
+
 @dataclass(frozen=True)
 class Periodicity:
     """How position-periodic terms (``sin(k theta)``) are built from a run's positions.
@@ -716,10 +804,13 @@ class FreeFormSearch:
             library += [e for e, _ in found if e not in library]
         vocabulary = ShapeFilter(exclude, row_state(signals))
         library = [e for e in library if readable(e) and not vocabulary.matches(e)]
-        X = term_columns(library, signals)
         cost = np.array([term_cost(e) for e in library], float)
-        terms = []
         max_terms = min(self.regression.max_terms, MAX_TERMS_PER_CHANNEL)
+        if any(s.mixes for s in signals):
+            return FreeFormResult(*self._joint(library, cost, signals, residual, max_terms),
+                                  found)
+        X = term_columns(library, signals)
+        terms = []
         for i in range(residual.shape[1]):
             reg = L0Regression(max_terms, self.regression.penalty,
                                self.regression.max_overlap)
@@ -733,3 +824,39 @@ class FreeFormSearch:
                 terms.append({"cable": i + 1, "expression": library[j],
                               "coefficient": float(reg.coef_[j])})
         return FreeFormResult(terms, SymbolicWinchTorque(terms), found)
+
+    def _joint(self, library: list[str], cost: np.ndarray, signals: Sequence[RunSignals],
+               residual: np.ndarray, max_terms: int
+               ) -> tuple[list[dict], SymbolicWinchTorque]:
+        """Terms of every winch selected together on the stacked residual of a rig whose
+        projection mixes winches (:func:`select_joint`); a winch's terms stay only if
+        they explain :attr:`min_channel_gain` of its own residual's sum of squares."""
+        spread = term_spread_columns(library, signals)          # (rows, n, n, L)
+        rows, n, _, L = spread.shape
+        X = spread.reshape(rows * n, n * L)       # column j * L + l: term l on winch j
+        y = residual.ravel()
+        groups = np.repeat(np.arange(n), L)
+        pair_cost = np.tile(cost, n)
+        support, coef = select_joint(X, y, pair_cost, groups, max_terms,
+                                     self.regression.max_overlap, self.regression.penalty)
+        own = np.einsum("ij,ij->j", residual, residual)
+        while support:
+            fitted = y - X[:, support] @ coef[support]
+            rss = float(fitted @ fitted)
+            weakest, worst = None, np.inf
+            for g in sorted(set(groups[support].tolist())):
+                rest = [k for k in support if groups[k] != g]
+                left = y - (X[:, rest] @ np.linalg.lstsq(X[:, rest], y, rcond=None)[0]
+                            if rest else 0.0)
+                added = (float(left @ left) - rss) / max(float(own[g]), 1e-300)
+                if added < worst:
+                    weakest, worst = g, added
+            if worst >= self.min_channel_gain:
+                break
+            support = [k for k in support if groups[k] != weakest]
+            coef = np.zeros_like(coef)
+            if support:
+                coef[support] = np.linalg.lstsq(X[:, support], y, rcond=None)[0]
+        terms = [{"cable": int(k // L) + 1, "expression": library[k % L],
+                  "coefficient": float(coef[k])} for k in support]
+        return terms, SymbolicWinchTorque(terms)
