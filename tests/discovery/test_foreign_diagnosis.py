@@ -57,49 +57,63 @@ def test_one_long_run_without_effect_gives_none(tmp_path, seed, kind):
     assert record["verdict"] == "none", f"false alarm: {case.describe()}"
 
 
-#: Known gaps on the independent simulator (measured with ``benchmarks/bench_detection.py
-#: --simulator both --seeds 3``: 96 % detection over its effects, against 100 % on the
-#: lab; was 71 % before the internal-force projection, the filter-reach rule, per-drum
-#: and per-cable candidates, axis harmonics, the naming's group step and the wavenumber
-#: scan): an actuator lag of a few ms on one winch of some cable robots (named
-#: winch_parameter_error, or none when its held-out interval reaches zero; 3 of 3 found
-#: in the last run), a quadratic drag on a cable robot named winch_parameter_error in one
-#: draw of three, a winch parameter error on one of several axes found as an unnamed
-#: term in one draw of three, per-winch lags on 4-cable rigs and rigs below 150 Hz
-#: 30-120 % off on some winch. These two tests draw any effect and
-#: report a miss as XFAIL with the case printed instead of failing CI (a crash still
-#: fails); the null tests and the dedicated tests (drum radius, elasticity, drag,
-#: position-periodic force, internal force) gate.
-KNOWN_GAPS = pytest.mark.xfail(strict=False, raises=AssertionError,
-                               reason="known detection gaps on the independent simulator "
-                               "(see KNOWN_GAPS); the rates are in the README")
+#: Known gaps on the independent simulator, by rig kind and hidden effect (measured with
+#: ``benchmarks/bench_detection.py --simulator both --seeds 3`` and these two tests over
+#: 90 random seeds, README *Discovery on data it did not write*): an actuator lag of a
+#: few ms on some winches of a cable robot (named winch_parameter_error, or none when its
+#: held-out interval reaches zero; per-winch sizes 30-120 % off on some winch of 4-cable
+#: and sub-150 Hz rigs), a quadratic drag on a 4-cable robot with an extra
+#: winch_parameter_error or Stribeck name, a winch parameter error on some of several
+#: axes found as an unnamed term, an axis lag with an extra winch_parameter_error. A miss
+#: of one of these is reported as XFAIL with the case printed; every other miss of the
+#: two tests below fails, as do the null tests and the dedicated tests (drum radius,
+#: elasticity, drag, position-periodic force, light axis, internal force).
+KNOWN_GAPS = {("cdpr", "actuator_lag"), ("cdpr", "quadratic_drag"),
+              ("axes", "winch_parameter_error"), ("axes", "actuator_lag")}
 
 
-@KNOWN_GAPS
+def _unless_known_gap(kind: str, name: str, check) -> None:
+    """Run ``check``; a failed assertion on a :data:`KNOWN_GAPS` pair is an XFAIL."""
+    try:
+        check()
+    except AssertionError as err:
+        if (kind, name) in KNOWN_GAPS:
+            pytest.xfail(f"known gap ({kind}, {name}): {err}")
+        raise
+
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_a_hidden_vocabulary_effect_is_named(tmp_path, seed, kind):
     name, case = _one_hidden(tmp_path, kind, VOCABULARY[kind], seed)
     record = case.record
-    assert record["verdict"] == name, case.describe()
-    gain = record["gain"]
-    assert gain["relative"] > 0 and gain["ci95"][0] > 0, f"gain {gain}: {case.describe()}"
-    ok, why = parameters_ok(case, record["causes"][0])
-    assert ok, f"{why}: {case.describe()}"
+
+    def check():
+        assert record["verdict"] == name, case.describe()
+        gain = record["gain"]
+        assert gain["relative"] > 0 and gain["ci95"][0] > 0, \
+            f"gain {gain}: {case.describe()}"
+        ok, why = parameters_ok(case, record["causes"][0])
+        assert ok, f"{why}: {case.describe()}"
+
+    _unless_known_gap(kind, name, check)
 
 
-@KNOWN_GAPS
 @pytest.mark.parametrize("kind", KINDS)
 def test_an_effect_outside_the_vocabulary_gets_no_name(tmp_path, seed, kind):
-    _, case = _one_hidden(tmp_path, kind, OUTSIDE[kind], seed)
+    name, case = _one_hidden(tmp_path, kind, OUTSIDE[kind], seed)
     record = case.record
     found = {c["effect"] for c in record["causes"]}
-    # never a vocabulary name, not even as a second cause; `none` (too small to show on
-    # held-out data) is not a wrong name
-    assert found <= {"unnamed"}, f"named {sorted(found)}: {case.describe()}"
-    assert record["verdict"] in ("unnamed", "none"), case.describe()
-    if record["verdict"] == "unnamed":
-        assert record["causes"][0]["expression"], case.describe()
-        assert record["gain"]["ci95"][0] > 0, case.describe()
+
+    def check():
+        # never a vocabulary name, not even as a second cause; `none` (too small to show
+        # on held-out data) is not a wrong name
+        assert found <= {"unnamed"}, f"named {sorted(found)}: {case.describe()}"
+        assert record["verdict"] in ("unnamed", "none"), case.describe()
+        if record["verdict"] == "unnamed":
+            assert record["causes"][0]["expression"], case.describe()
+            assert record["gain"]["ci95"][0] > 0, case.describe()
+
+    _unless_known_gap(kind, name, check)
 
 
 def _upper_half(name: str, key: str, base):
