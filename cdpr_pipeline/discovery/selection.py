@@ -87,7 +87,10 @@ class SelectionSettings:
         significance: with tens of thousands of rows, micro-metre artefacts of any model
         are "significant"; a rig engineer does not care about them).
     max_causes : int
-        Forward-selection steps.
+        Most distinct effects the forward selection names. A winch parameter error is
+        named one winch per step and counts once however many winches it re-identifies
+        (at most one extra step per winch): with three steps in all, an error on four
+        of six axes left one to free-form terms and the verdict was ``unnamed``.
     block_s : float
         Bootstrap block length (residuals are correlated within a block).
     n_boot : int
@@ -350,10 +353,13 @@ class _Search:
         """Add the best passing candidate (by BIC) until none passes. Every candidate is
         fitted jointly with the causes already kept (their parameters start where they
         are and may move), so an earlier cause does not keep what a later one explains
-        better (a winch offset absorbing a payload error)."""
+        better (a winch offset absorbing a payload error). ``max_steps`` counts
+        distinct effects (see :attr:`SelectionSettings.max_causes`)."""
         causes: list[Judgement] = []
         parts: list[tuple[Candidate, np.ndarray]] = []
-        for _ in range(max_steps):
+        for _ in range(max_steps + self.scale.n):
+            if len({c.effect for c in causes}) >= max_steps:
+                break
             ctx, judge = self.joint_context(fixed, parts)
             n_tests = len(candidates) + bool(freeform and self.freeform)
             step = [_judge_joint(parts, c, ctx, judge, n_tests) for c in candidates]
