@@ -506,7 +506,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     # never worse: the causes are kept only while the extended model's held-out gain has
     # a 95 % interval above zero; the weakest cause goes first until it has
     before_held = residuals(nominal, nominal, held)
-    # each column's error relative to the model the selection extended, as it judged
+    # each column's error relative to its measured signal, as the selection judged it
     scales = selection.scales or signal_scales(train, before_held.channels)
     withdrawn: list[str] = []
     # and every cause must still add to the others: causes were fitted jointly as they

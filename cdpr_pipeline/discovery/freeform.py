@@ -31,7 +31,7 @@ from __future__ import annotations
 import ast
 import operator
 import random
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import lru_cache, partial
 
@@ -128,45 +128,38 @@ class ShapeFilter:
         return bool(norm > 0 and np.max(np.abs(self._basis @ col)) >= SHAPE_MATCH * norm)
 
 
-def term_columns(expressions: Sequence[str], signals: Sequence[RunSignals]) -> np.ndarray:
-    """Each expression evaluated per winch on the winch state, parallel-filtered onto
-    the statistics rows: (rows, n, terms). Columns are kept with the run (the library is
-    re-selected many times on the same runs while the residual changes)."""
+def _term_rows(expressions: Sequence[str], signals: Sequence[RunSignals],
+               view: Callable[[RunSignals, np.ndarray], np.ndarray]) -> np.ndarray:
+    """Each expression evaluated per winch on the winch state, passed through ``view``
+    (a :class:`RunSignals` torque view) and parallel-filtered onto the statistics
+    rows, stacked over runs with the terms last. Kept with the run per view (the library
+    is re-selected many times on the same runs while the residual changes)."""
     out = []
     for sig in signals:
-        known = sig.cache.setdefault("term_columns", {})
+        known = sig.cache.setdefault(f"term_{view.__name__}", {})
         missing = [e for e in dict.fromkeys(expressions) if e not in known]
         if missing:
             cols = np.stack([evaluate(e, {"omega": sig.omega, "theta": sig.theta})
                              for e in missing], axis=-1)
-            # weighted like the torque residual the terms are fitted to, each winch's
-            # on its own residual (RunSignals.torque_own)
-            rows = sig.rows(sig.torque_own(cols))
-            for e, col in zip(missing, np.moveaxis(rows, -1, 0),
-                              strict=True):
-                known[e] = col
-        out.append(np.stack([known[e] for e in expressions], axis=-1))
-    return np.concatenate(out)
-
-
-def term_spread_columns(expressions: Sequence[str], signals: Sequence[RunSignals]
-                        ) -> np.ndarray:
-    """Each expression on each winch, as every winch's residual sees it on a rig whose
-    torque projection mixes winches: (rows, n, n, terms), entry ``[k, i, j, t]`` what
-    term ``t`` on winch ``j`` adds to winch ``i``'s residual
-    (:meth:`RunSignals.torque_spread`)."""
-    out = []
-    for sig in signals:
-        known = sig.cache.setdefault("term_spread", {})
-        missing = [e for e in dict.fromkeys(expressions) if e not in known]
-        if missing:
-            cols = np.stack([evaluate(e, {"omega": sig.omega, "theta": sig.theta})
-                             for e in missing], axis=-1)
-            rows = sig.rows(sig.torque_spread(cols))
+            rows = sig.rows(view(sig, cols))
             for e, col in zip(missing, np.moveaxis(rows, -1, 0), strict=True):
                 known[e] = col
         out.append(np.stack([known[e] for e in expressions], axis=-1))
     return np.concatenate(out)
+
+
+def term_columns(expressions: Sequence[str], signals: Sequence[RunSignals]) -> np.ndarray:
+    """(rows, n, terms): each winch's term as its own residual sees it
+    (:meth:`RunSignals.torque_own`), the column a per-winch fit regresses on."""
+    return _term_rows(expressions, signals, RunSignals.torque_own)
+
+
+def term_spread_columns(expressions: Sequence[str], signals: Sequence[RunSignals]
+                        ) -> np.ndarray:
+    """(rows, n, n, terms) on a rig whose torque projection mixes winches: entry
+    ``[k, i, j, t]`` is what term ``t`` on winch ``j`` adds to winch ``i``'s residual
+    (:meth:`RunSignals.torque_spread`)."""
+    return _term_rows(expressions, signals, RunSignals.torque_spread)
 
 
 def select_joint(X: np.ndarray, y: np.ndarray, cost: np.ndarray, groups: np.ndarray,

@@ -319,18 +319,22 @@ class _Search:
     shapes: list[str] = field(default_factory=list)
     _log_n: float | None = None
 
+    def _reference(self) -> None:
+        """The column scales and the nominal model's held-out sums of squares, once per
+        selection (every judgement compares against the same reference)."""
+        if self.scales is not None and self.nominal_held is not None:
+            return
+        nominal = FitContext(self.nominal, self.train, [], {}, self.columns)
+        self.columns = nominal.columns
+        held = nominal.residuals([], self.heldout)
+        self.scales = signal_scales(self.train, held.channels)
+        self.nominal_held = {c: held.column_sse(c) for c in held.channels}
+
     def context(self, kept: list[Effect]) -> tuple[FitContext, Judge]:
-        base = FitContext(self.nominal, self.train, kept, {}, self.columns)
-        self.columns = base.columns
-        base_res = base.residuals([])
-        if self.scales is None:
-            self.scales = signal_scales(self.train, base_res.channels)
+        self._reference()
+        base_res = FitContext(self.nominal, self.train, kept, {}, self.columns).residuals([])
         weights = fit_weights(base_res, self.scales)
         ctx = FitContext(self.nominal, self.train, kept, weights, self.columns)
-        if self.nominal_held is None:
-            held = FitContext(self.nominal, self.train, [], {}, self.columns).residuals(
-                [], self.heldout)
-            self.nominal_held = {c: held.column_sse(c) for c in held.channels}
         return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held,
                           scales=self.scales)
 
@@ -338,11 +342,10 @@ class _Search:
                       ) -> tuple[FitContext, Judge]:
         """A context fitting on the nominal model directly (earlier causes are re-fitted
         jointly with every new candidate) and a judge comparing with the current model."""
+        self._reference()
         current = fixed + _build(parts)
-        base = FitContext(self.nominal, self.train, current, {}, self.columns)
-        self.columns = base.columns
-        base_res = base.residuals([])
-        self.context([])        # the nominal held-out reference and the scales
+        base_res = FitContext(self.nominal, self.train, current, {}, self.columns
+                              ).residuals([])
         weights = fit_weights(base_res, self.scales)
         ctx = FitContext(self.nominal, self.train, fixed, weights, self.columns)
         return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held,
@@ -399,10 +402,8 @@ class _Search:
         """BIC of the nominal model extended by ``effects`` on the training runs (per
         channel Gaussian likelihood of the columns relative to their signals, as the
         judge's; constant terms dropped)."""
-        ctx = FitContext(self.nominal, self.train, [], {}, self.columns)
-        res = ctx.residuals(effects)
-        if self.scales is None:
-            self.scales = signal_scales(self.train, res.channels)
+        self._reference()
+        res = FitContext(self.nominal, self.train, [], {}, self.columns).residuals(effects)
         return float(sum(res.count(c) * np.log(relative_sse(res, c, self.scales)
                                                / res.count(c)) for c in res.channels)
                      + n_params * self.log_n())
