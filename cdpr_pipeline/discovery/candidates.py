@@ -126,6 +126,11 @@ class Candidate:
         Set for winch-separable effects: the variant is a template whose winches (and
         starting point) the data choose before it is fitted
         (:func:`~cdpr_pipeline.discovery.fitting.fit_winches`).
+    sparse : bool
+        The first start is the nominal model and each parameter may stay there (a
+        winch re-identification keeps what the data sheet got right): where the cause
+        is weighed against descriptions with fewer parameters, it counts only the
+        parameters the data need (best BIC subset, see ``_Search.parsimonious``).
     """
 
     effect: str
@@ -140,6 +145,7 @@ class Candidate:
     names: list[str] = field(default_factory=list)
     affects: frozenset[str] = frozenset({"torque", "length"})
     form: WinchForm | None = None
+    sparse: bool = False
 
     @property
     def n_params(self) -> int:

@@ -408,6 +408,43 @@ class _Search:
                                                / res.count(c)) for c in res.channels)
                      + n_params * self.log_n())
 
+    def parsimonious(self, cause: Judgement, others: list[Effect]
+                     ) -> tuple[list[Effect], int]:
+        """``cause`` on top of ``others`` with the parameters the data need: for a sparse
+        candidate (:attr:`Candidate.sparse`, linear, starting at the nominal model) the
+        subset of its parameters with the best BIC, each re-fitted by least squares;
+        any other cause as it is, with all its parameters."""
+        cand = cause.candidate
+        if cand is None or not cand.sparse or not cand.linear or cand.refit_winches:
+            return list(cause.effects), cause.n_params
+        ctx, _ = self.context(others)
+        x0 = np.asarray(cand.starts[0], float)
+
+        def vector(x: np.ndarray) -> np.ndarray:
+            return ctx.vector(ctx.training_residuals(cand.build(x), cand.affects), False)
+
+        v0 = vector(x0)
+        # linear in the parameters: one step per parameter gives the exact Jacobian
+        J = np.stack([(vector(x0 + h * e) - v0) / h for h, e in
+                      zip(cand.x_scale, np.eye(cand.n_params), strict=True)], axis=1)
+        best: dict[int, tuple[float, np.ndarray]] = {}
+        for mask in range(1, 2 ** cand.n_params):
+            keep = np.array([(mask >> k) & 1 for k in range(cand.n_params)], bool)
+            step = np.linalg.lstsq(J[:, keep], -v0, rcond=None)[0]
+            x = x0.copy()
+            x[keep] += step
+            x = np.clip(x, cand.lower, cand.upper)
+            sse = float(np.sum((v0 + J @ (x - x0)) ** 2))
+            size = int(keep.sum())
+            if size not in best or sse < best[size][0]:
+                best[size] = (sse, x)
+        # the BIC of the best subset of each size (the sums above are weighted alike,
+        # the BIC is the judge's likelihood)
+        scored = [(self.bic(others + list(cand.build(x)), size), size, x)
+                  for size, (_, x) in sorted(best.items())]
+        _, size, x = min(scored, key=lambda t: t[:2])
+        return list(cand.build(x)), size
+
     def log_n(self) -> float:
         """log of the number of training residual values (rows x columns x channels)."""
         if self._log_n is None:
@@ -449,7 +486,9 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
        also asked together: free-form terms searched in place of all of them replace
        them if they pass, need no more parameters and have a BIC better by one
        parameter's worth (named causes that imitate one thing outside the vocabulary
-       only together, each fitted around the others).
+       only together, each fitted around the others). In both comparisons a winch
+       re-identification counts only the parameters the data need changed
+       (:meth:`_Search.parsimonious`): a wrong F_c alone is one parameter.
     4. The free-form terms, re-selected on top of the named causes kept, are the
        ``unnamed`` cause if they pass the tests every candidate passes (they add
        significantly, and on held-out runs, beyond the named causes).
@@ -475,18 +514,20 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
             others = [o for o in causes if o is not c]
             without = search.refit(rest, _effects(others), n_tests)
             with_c = search.refit(rest, _effects(others + [c]), n_tests)
-            bic_with = search.bic(_effects(others + [c]) + list(with_c.effects),
-                                  c.n_params + with_c.n_params)
+            # c with the parameters the data need (a winch re-fit: what changed)
+            own, n_own = search.parsimonious(c, _effects(others) + list(with_c.effects))
+            bic_with = search.bic(_effects(others) + own + list(with_c.effects),
+                                  n_own + with_c.n_params)
             bic_without = search.bic(_effects(others) + list(without.effects),
                                      without.n_params)
             # the free-form parameters that take c's place
             replacing = without.n_params - with_c.n_params
             if bic_without + search.log_n() < bic_with and (rest.passed
-                                                            or replacing <= c.n_params):
+                                                            or replacing <= n_own):
                 if log:
                     log.info("  %s dropped: free-form terms explain it better (BIC %+.1f "
                              "with %d parameters for its %d): %s", c.label,
-                             bic_without - bic_with, replacing, c.n_params,
+                             bic_without - bic_with, replacing, n_own,
                              without.freeform.describe())
             else:
                 keep.append(c)
@@ -509,10 +550,16 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
             # the free-form judgement's effects are its own part only (its judge's
             # base is the kept causes, passed to the fit, not among its effects)
             extra = list(final.effects) if on_top else []
-            named = sum(c.n_params for c in torque) + (final.n_params if on_top else 0)
+            # each torque cause with the parameters the data need, around the others
+            lean = [search.parsimonious(c, [e for o in keep if o is not c
+                                            for e in o.effects] + extra)
+                    for c in torque] if alone.passed else []
+            named = sum(n for _, n in lean) + (final.n_params if on_top else 0)
             if alone.passed and alone.n_params <= named and search.bic(
                     _effects(others) + list(alone.effects), alone.n_params) \
-                    + search.log_n() < search.bic(_effects(keep) + extra, named):
+                    + search.log_n() < search.bic(
+                        _effects(others) + [e for own, _ in lean for e in own] + extra,
+                        named):
                 if log:
                     log.info("  %s dropped together: free-form terms explain them better "
                              "with %d parameters for their %d: %s",

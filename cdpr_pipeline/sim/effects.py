@@ -325,7 +325,8 @@ class WinchParameterError(Effect):
     def candidates(cls, rig, scale):
         """Re-identify one winch (four parameters, linear), one variant per winch.
         Inertia, viscous and Coulomb friction stay non-negative: a negative friction
-        coefficient is another effect being imitated, not a wrong data sheet."""
+        coefficient is another effect being imitated, not a wrong data sheet. Sparse:
+        a wrong F_c alone is one parameter against a free-form term's two."""
         from cdpr_pipeline.discovery.candidates import TORQUE
 
         return [_candidate(
@@ -334,7 +335,7 @@ class WinchParameterError(Effect):
             [_arr(1, 1, 1, 0)], _arr(0.0, 0.0, 0.0, -np.inf),
             _arr(np.inf, np.inf, np.inf, np.inf), _arr(0.1, 0.1, 0.1, 0.1), linear=True,
             names=["inertia_scale", "viscous_scale", "coulomb_scale", "offset_delta"],
-            affects=TORQUE) for cable in range(1, scale.n + 1)]
+            affects=TORQUE, sparse=True) for cable in range(1, scale.n + 1)]
 
     @classmethod
     def shapes(cls, speed_rms):

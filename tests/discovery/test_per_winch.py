@@ -32,6 +32,7 @@ from cdpr_pipeline.sim.effects import (
     CoggingTorque,
     QuadraticDamping,
     StribeckFriction,
+    WinchParameterError,
     make_effect,
     per_winch,
 )
@@ -221,6 +222,32 @@ def test_asymmetric_viscous_of_one_absolute_size_is_named(paper_rig, seed):
     assert p["cables"] == [1, 2, 3] and p["direction"] == [-1, -1, -1], case
     assert p["coefficient"] == pytest.approx([0.25] * 3, rel=0.05), case
     assert cause["evidence"]["n_params"] == 3
+
+
+def test_a_wrong_coulomb_friction_alone_is_a_winch_parameter_error(paper_rig, seed):
+    """A wrong F_c is one parameter of the winch re-fit. Weighed against a free-form
+    term of two (a wider ``tanh(w/0.16)`` and its width: seed 498035017 of the random
+    lab test) it keeps its name; counting all four re-fitted parameters it lost by BIC.
+    The winch with the smallest F_c (the smallest effect against the noise, where the
+    count decides); size drawn from the effect's range, 20-40 % either way; the
+    free-form library is handed a wide tanh (width drawn 0.1-0.2 rad/s, the law's is
+    0.05), so the competitor is always on offer."""
+    from cdpr_pipeline.discovery.freeform import FreeFormSearch
+
+    rng = rng_for(seed)
+    cable = int(np.argmin(paper_rig.winch_nominal.coulomb)) + 1
+    scale = 1.0 + float(rng.choice([-1, 1]) * rng.uniform(0.2, 0.4))
+    width = float(rng.uniform(0.1, 0.2))
+    effect = WinchParameterError(cable, coulomb_scale=scale)
+    wide = FreeFormSearch(gp=None, extra_terms=[f"softsign(omega, {width:.3f})"])
+    d = diagnose(lab_dataset(paper_rig, [effect], seed), fast_settings(freeform=wide))
+    record = d.as_json()
+    case = f"seed {seed}: winch {cable} F_c x{scale:.3f}, tanh width {width:.3f}: {d.sentence}"
+    assert record["verdict"] == "winch_parameter_error", case
+    change = {c["winch"]: c for c in record["causes"][0]["params"]["winches"]}[cable]
+    assert change["new"]["coulomb"] == pytest.approx(change["old"]["coulomb"] * scale,
+                                                     rel=0.05), case
+    assert record["gain"]["ci95"][0] > 0, case
 
 
 def test_actuator_lag_on_one_winch_names_only_that_winch(paper_rig, seed):
