@@ -13,6 +13,7 @@ from cdpr_pipeline.discovery.freeform import (
     Periodicity,
     base_library,
     periodic_peaks,
+    prune_weak_terms,
     row_state,
     term_columns,
 )
@@ -162,3 +163,20 @@ def test_joint_selection_finds_one_winchs_term_through_a_mixing_projection():
     own = np.einsum("kiil->kil", spread)
     named = [i for i in range(n) if L0Regression(3).fit(own[:, i], y[:, i]).support_]
     assert len(named) > 1
+
+
+def test_prune_weak_terms_drops_a_term_below_its_practical_share():
+    """A drag (83 % of the residual) and a slow harmonic (17 %) stay; a harmonic that
+    BIC keeps with this many rows (its sum of squares is far above the noise's) but
+    that explains 0.1 % goes, and the others are re-fitted without it."""
+    rng = np.random.default_rng(7)
+    theta = rng.uniform(0, 60, 40_000)
+    omega = rng.normal(0, 3, theta.size)
+    X = np.stack([omega * np.abs(omega), np.sin(13 * theta), np.cos(2 * theta)], axis=1)
+    y = 0.01 * X[:, 0] + 0.008 * X[:, 1] + 0.1 * X[:, 2] + 0.002 * rng.normal(size=theta.size)
+    support, coef = prune_weak_terms(X, y, [0, 1, 2], np.full(3, y @ y), 0.01)
+    assert support == [0, 2]
+    assert coef[0] == pytest.approx(0.01, rel=1e-3) and coef[1] == 0.0
+    assert coef[2] == pytest.approx(0.1, rel=1e-2)
+    # no threshold: every term stays
+    assert prune_weak_terms(X, y, [0, 1, 2], np.full(3, y @ y), 0.0)[0] == [0, 1, 2]
