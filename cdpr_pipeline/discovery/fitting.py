@@ -171,7 +171,6 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
     form = template.form
     r0 = base.stacked("torque")
     rows, n = r0.shape
-    sse0 = np.maximum(np.sum(r0 ** 2, axis=0), 1e-300)
     bounds = np.array([form.magnitude(i) for i in range(n)], float)
 
     mixes = any(s.mixes for s in ctx.train)
@@ -183,63 +182,87 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
         return r0 - ctx.training_residuals([*current, *form.make(parts)],
                                            TORQUE).stacked("torque")
 
-    def project(variant: Any, shapes: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """Best magnitude (n,) and SSE (n,) of every winch at the given shapes."""
-        if mixes:
-            # the internal-force projection carries a winch's effect into the others'
-            # residuals: each winch's own column comes from that winch alone
-            col = np.stack([unit(variant, shapes, range(i, i + 1))[:, i] for i in range(n)],
-                           axis=1)
-        else:
-            col = unit(variant, shapes, range(n))
-        den = np.sum(col ** 2, axis=0)
-        m = np.where(den > 0, np.sum(col * r0, axis=0) / np.where(den > 0, den, 1.0), 0.0)
-        m = np.clip(m, bounds[:, 0], bounds[:, 1])
-        return m, np.sum((r0 - m * col) ** 2, axis=0)
+    def search(target: np.ndarray, winches: list[int]) -> tuple[list, np.ndarray]:
+        """Per winch of ``winches``, the best variant, shape and magnitude on its own
+        column of ``target`` (rows, n), and the sum of squares left (n,)."""
+        best_sse = np.full(n, np.inf)
+        best: list[WinchPart | None] = [None] * n
 
-    best_sse = np.full(n, np.inf)
-    best: list[WinchPart | None] = [None] * n
+        def keep_best(variant: Any, shapes: np.ndarray | None) -> np.ndarray:
+            if mixes:
+                # the internal-force projection carries a winch's effect into the
+                # others' residuals: each winch's own column comes from that winch alone
+                col = np.zeros_like(r0)
+                for i in winches:
+                    col[:, i] = unit(variant, shapes, range(i, i + 1))[:, i]
+            else:
+                col = unit(variant, shapes, range(n))
+            den = np.sum(col ** 2, axis=0)
+            m = np.where(den > 0, np.sum(col * target, axis=0) / np.where(den > 0, den, 1.0),
+                         0.0)
+            m = np.clip(m, bounds[:, 0], bounds[:, 1])
+            sse = np.sum((target - m * col) ** 2, axis=0)
+            for i in winches:
+                if sse[i] < best_sse[i]:
+                    best_sse[i] = sse[i]
+                    best[i] = WinchPart(variant, float(m[i]),
+                                        None if shapes is None else float(shapes[i]))
+            return sse
 
-    def keep_best(variant: Any, shapes: np.ndarray | None) -> np.ndarray:
-        m, sse = project(variant, shapes)
-        for i in np.flatnonzero(sse < best_sse):
-            best_sse[i] = sse[i]
-            best[i] = WinchPart(variant, float(m[i]),
-                                None if shapes is None else float(shapes[i]))
-        return sse
+        for variant in form.variants:
+            if form.shape is None:
+                keep_best(variant, None)
+                continue
+            grid = np.log(np.geomspace(*form.shape, _SHAPE_GRID))
+            table = np.array([keep_best(variant, np.full(n, np.exp(g))) for g in grid])
+            k = np.argmin(table, axis=0)
+            a, b = grid[np.maximum(k - 1, 0)], grid[np.minimum(k + 1, len(grid) - 1)]
+            c, d = b - _GOLDEN * (b - a), a + _GOLDEN * (b - a)
+            fc, fd = keep_best(variant, np.exp(c)), keep_best(variant, np.exp(d))
+            for _ in range(_GOLDEN_STEPS):
+                left = fc < fd         # the minimum lies in [a, d]
+                b = np.where(left, d, b)
+                a = np.where(left, a, c)
+                new = np.where(left, b - _GOLDEN * (b - a), a + _GOLDEN * (b - a))
+                fnew = keep_best(variant, np.exp(new))
+                c, d = np.where(left, new, d), np.where(left, c, new)
+                fc, fd = np.where(left, fnew, fd), np.where(left, fc, fnew)
+        return best, best_sse
 
-    for variant in form.variants:
-        if form.shape is None:
-            keep_best(variant, None)
-            continue
-        grid = np.log(np.geomspace(*form.shape, _SHAPE_GRID))
-        table = np.array([keep_best(variant, np.full(n, np.exp(g))) for g in grid])
-        k = np.argmin(table, axis=0)
-        a, b = grid[np.maximum(k - 1, 0)], grid[np.minimum(k + 1, len(grid) - 1)]
-        c, d = b - _GOLDEN * (b - a), a + _GOLDEN * (b - a)
-        fc, fd = keep_best(variant, np.exp(c)), keep_best(variant, np.exp(d))
-        for _ in range(_GOLDEN_STEPS):
-            left = fc < fd         # the minimum lies in [a, d]
-            b = np.where(left, d, b)
-            a = np.where(left, a, c)
-            new = np.where(left, b - _GOLDEN * (b - a), a + _GOLDEN * (b - a))
-            fnew = keep_best(variant, np.exp(new))
-            c, d = np.where(left, new, d), np.where(left, c, new)
-            fc, fd = np.where(left, fnew, fd), np.where(left, fc, fnew)
+    def passing(target: np.ndarray, best_sse: np.ndarray, winches: list[int]) -> list[int]:
+        sse0 = np.maximum(np.sum(target ** 2, axis=0), 1e-300)
+        return [i for i in winches
+                if rows * np.log(sse0[i] / max(best_sse[i], 1e-300)) > form.k * np.log(rows)
+                and best_sse[i] <= (1 - min_gain) * sse0[i]]
 
-    lr = rows * np.log(sse0 / np.maximum(best_sse, 1e-300))
-    margin = lr - form.k * np.log(rows)
-    kept = [i for i in range(n) if margin[i] > 0 and best_sse[i] <= (1 - min_gain) * sse0[i]]
+    def column(i: int) -> np.ndarray:
+        shapes = None if form.shape is None else np.full(n, float(best[i].shape))
+        return unit(best[i].variant, shapes, range(i, i + 1))
+
+    best, best_sse = search(r0, list(range(n)))
+    kept = passing(r0, best_sse, list(range(n)))
     if not kept:
-        kept = [int(np.argmax(margin))]
+        sse0 = np.maximum(np.sum(r0 ** 2, axis=0), 1e-300)
+        kept = [int(np.argmax(rows * np.log(sse0 / np.maximum(best_sse, 1e-300))))]
     if mixes and len(kept) > 1:
-        def column(i: int) -> np.ndarray:
-            shapes = None if form.shape is None else np.full(n, float(best[i].shape))
-            return unit(best[i].variant, shapes, range(i, i + 1))
-
         kept, magnitudes = _joint_winches(kept, best, r0, form.k, bounds, column, min_gain)
         best = [p._replace(magnitude=float(m)) if p is not None else None
                 for p, m in zip(best, magnitudes, strict=True)]
+    rest = [i for i in range(n) if i not in kept]
+    if mixes and rest:
+        # a small effect on one winch hides under the projected share of a large one
+        # on another: search the winches left out again on what the kept winches do
+        # not explain of their own columns
+        spread = sum(best[j].magnitude * column(j) for j in kept)
+        best2, sse2 = search(r0 - spread, rest)
+        found = passing(r0 - spread, sse2, rest)
+        if found:
+            for i in found:
+                best[i] = best2[i]
+            kept, magnitudes = _joint_winches(sorted(kept + found), best, r0, form.k,
+                                              bounds, column, min_gain)
+            best = [p._replace(magnitude=float(m)) if p is not None else None
+                    for p, m in zip(best, magnitudes, strict=True)]
     return on_winches(template, {i + 1: best[i] for i in kept})
 
 
