@@ -3,6 +3,8 @@ own numerics, and that smoothing does not show at the scale of the data."""
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from cdpr_pipeline.sim import simulator
@@ -29,7 +31,8 @@ def test_hard_sign_rig_is_simulated_and_its_smoothing_is_numerical_only(paper_ri
     smooth = integration_plant(plant, dt)
     # the band where tanh(k w) is not +-1 (|k w| < 3) is under a hundredth of a rad/s
     assert 3.0 / smooth.sign_sharpness < 0.01
-    seed = int(np.random.default_rng().integers(2**31))
+    # replay a draw with CDPR_TEST_SEED
+    seed = int(os.environ.get("CDPR_TEST_SEED", np.random.default_rng().integers(2**31)))
     coarse = _run(rig, seed)
     assert np.isinf(coarse.nominal.sign_sharpness)       # the model stays the stated one
     # twice as sharp (and twice the sub-steps): once moving, the recorded motion agrees
@@ -47,6 +50,13 @@ def test_hard_sign_rig_is_simulated_and_its_smoothing_is_numerical_only(paper_ri
     # bound; that outlier is not yet explained (a zero-speed passage, as for the torques,
     # is the likely place)
     assert np.abs(a.truth["position"] - b.truth["position"])[:, moving].max() < 5e-5, seed
-    assert np.sqrt(np.mean((a.measured["torques"] - b.measured["torques"])[:, moving] ** 2)
-                   ) < 1e-2, seed
+    # a sample that falls on a reversal sees the friction jump by 2 F_c between two
+    # sub-steps, and which side it lands on is the integrator's choice in any resolution
+    # (seed 1528360198, a CI run: one such sample differed by 0.825 N m = 2 F_c of
+    # winch 2 and alone made the RMS 0.028; the 20 samples after it differed by 0.07 ->
+    # 0.01 N m). Those samples are left out, as the diagnosis leaves out reversals.
+    same_side = np.sign(a.truth["omega"]) == np.sign(b.truth["omega"])
+    du = np.where(same_side, a.measured["torques"] - b.measured["torques"], np.nan)
+    assert np.sqrt(np.nanmean(du[:, moving] ** 2)) < 1e-2, seed
+    assert np.mean(~same_side[:, moving]) < 0.01, seed       # only a few reversal samples
     assert np.abs(a.truth["position"] - b.truth["position"]).max() < 1e-3, seed
