@@ -186,74 +186,6 @@ def prune_weak_terms(X: np.ndarray, y: np.ndarray, support: Sequence[int],
     return support, coef
 
 
-def select_joint(X: np.ndarray, y: np.ndarray, cost: np.ndarray, groups: np.ndarray,
-                 max_per_group: int, max_overlap: float = 0.95,
-                 penalty: float | None = None) -> tuple[list[int], np.ndarray]:
-    """Sparse least squares over all columns of ``X`` (N, m) at once, at most
-    ``max_per_group`` columns of each group: forward selection by BIC with the
-    orthogonalised gain of every column in one product per step, then backward
-    elimination. Returns the support and the coefficients (m,).
-
-    The winch terms of a redundant cable robot: a term on one winch reaches every
-    winch's projected residual, so selecting each winch's terms on its own residual
-    takes the spread of one winch's term for terms of the others."""
-    N, m = X.shape
-    pen = np.log(N) if penalty is None else penalty
-    norms2 = np.einsum("ij,ij->j", X, X)
-    unit = X / np.sqrt(np.where(norms2 > 0, norms2, 1.0))
-
-    def criterion(support: list[int]) -> float:
-        if not support:
-            rss = float(y @ y)
-        else:
-            coef = np.linalg.lstsq(X[:, support], y, rcond=None)[0]
-            rss = float(np.sum((y - X[:, support] @ coef) ** 2))
-        return N * np.log(max(rss, 1e-300) / N) + pen * float(np.sum(cost[support]))
-
-    support: list[int] = []
-    best = criterion(support)
-    while True:
-        # orthonormal basis of the support, the residual orthogonal to it
-        if support:
-            Q, _ = np.linalg.qr(X[:, support])
-            r = y - Q @ (Q.T @ y)
-            P = Q.T @ X
-            perp2 = norms2 - np.einsum("ij,ij->j", P, P)
-        else:
-            r, perp2 = y, norms2.copy()
-        rss = float(r @ r)
-        ok = perp2 > 1e-10 * np.maximum(norms2, 1e-300)
-        ok[support] = False
-        for g in set(groups[support].tolist()):
-            if np.sum(groups[support] == g) >= max_per_group:
-                ok &= groups != g
-        if support:
-            ok &= np.max(np.abs(unit[:, support].T @ unit), axis=0) <= max_overlap
-        if not ok.any():
-            break
-        gain = np.where(ok, (X.T @ r) ** 2 / np.where(ok, perp2, 1.0), -np.inf)
-        spent = float(np.sum(cost[support]))
-        crit = N * np.log(np.maximum(rss - gain, 1e-300) / N) + pen * (spent + cost)
-        crit = np.where(ok, crit, np.inf)
-        j = int(np.argmin(crit))
-        if crit[j] >= best:
-            break
-        support, best = support + [j], criterion(support + [j])
-        improved = True
-        while improved and len(support) > 1:
-            improved = False
-            for k in list(support):
-                rest = [i for i in support if i != k]
-                value = criterion(rest)
-                if value < best:
-                    support, best, improved = rest, value, True
-                    break
-    coef = np.zeros(m)
-    if support:
-        coef[support] = np.linalg.lstsq(X[:, support], y, rcond=None)[0]
-    return sorted(support), coef
-
-
 @dataclass(frozen=True)
 class Periodicity:
     """How position-periodic terms (``sin(k theta)``) are built from a run's positions.
@@ -408,41 +340,70 @@ class L0Regression:
         pen = np.log(n) if self.penalty is None else self.penalty
         return n * np.log(max(rss, 1e-300) / n) + pen * float(np.sum(self._cost[support]))
 
-    def fit(self, X: np.ndarray, y: np.ndarray, cost: np.ndarray | None = None
-            ) -> L0Regression:
+    def fit(self, X: np.ndarray, y: np.ndarray, cost: np.ndarray | None = None,
+            groups: np.ndarray | None = None) -> L0Regression:
         """Select and fit; ``cost`` (per column, default 1) counts a term's parameters
-        (its coefficient plus the constants a search chose for it)."""
+        (its coefficient plus the constants a search chose for it); ``groups`` (per
+        column, default one group) caps the support at :attr:`max_terms` per group.
+
+        Each forward step scores every column at once by its gain orthogonal to the
+        support (one product), the same criterion as re-fitting each trial subset.
+        Groups serve the winch terms of a redundant cable robot, selected together on
+        the stacked residual (a term on one winch reaches every winch's projected
+        residual, so selected on its own residual each winch takes the spread of
+        another's term for its own)."""
         X = np.asarray(X, float)
         y = np.asarray(y, float)
-        self._cost = np.ones(X.shape[1]) if cost is None else np.asarray(cost, float)
+        N, m = X.shape
+        self._cost = np.ones(m) if cost is None else np.asarray(cost, float)
+        groups = np.zeros(m, int) if groups is None else np.asarray(groups)
+        pen = np.log(N) if self.penalty is None else self.penalty
+        norms2 = np.einsum("ij,ij->j", X, X)
+        norms = np.sqrt(np.where(norms2 > 0, norms2, 1.0))
         support: list[int] = []
         best = self._criterion(X, y, support)
-        norms = np.linalg.norm(X, axis=0)
-        unit = X / np.where(norms > 0, norms, 1.0)
-        while len(support) < self.max_terms:
-            overlap = (np.max(np.abs(unit[:, support].T @ unit), axis=0) if support
-                       else np.zeros(X.shape[1]))
-            trials = [(self._criterion(X, y, support + [j]), j)
-                      for j in range(X.shape[1])
-                      if j not in support and overlap[j] <= self.max_overlap]
-            if not trials:
+        while True:
+            # the residual orthogonal to the support, and each column's part orthogonal
+            # to it
+            if support:
+                Q, _ = np.linalg.qr(X[:, support])
+                r = y - Q @ (Q.T @ y)
+                P = Q.T @ X
+                perp2 = norms2 - np.einsum("ij,ij->j", P, P)
+            else:
+                r, perp2 = y, norms2.copy()
+            ok = perp2 > 1e-10 * np.maximum(norms2, 1e-300)
+            ok[support] = False
+            for g in set(groups[support].tolist()):
+                if np.sum(groups[support] == g) >= self.max_terms:
+                    ok &= groups != g
+            if support:
+                # cosine with the terms already in, without a normalised copy of X
+                cosine = (X[:, support].T @ X) / (norms[support, None] * norms[None, :])
+                ok &= np.max(np.abs(cosine), axis=0) <= self.max_overlap
+            if not ok.any():
                 break
-            value, j = min(trials)
-            if value >= best:
+            gain = np.where(ok, (X.T @ r) ** 2 / np.where(ok, perp2, 1.0), 0.0)
+            spent = float(np.sum(self._cost[support]))
+            crit = N * np.log(np.maximum(float(r @ r) - gain, 1e-300) / N) \
+                + pen * (spent + self._cost)
+            crit = np.where(ok, crit, np.inf)
+            j = int(np.argmin(crit))
+            if crit[j] >= best:
                 break
-            support, best = support + [j], value
+            support, best = support + [j], self._criterion(X, y, support + [j])
             # backward pass: drop terms a later one made redundant
             improved = True
             while improved and len(support) > 1:
                 improved = False
-                for j in list(support):
-                    rest = [k for k in support if k != j]
+                for k in list(support):
+                    rest = [i for i in support if i != k]
                     value = self._criterion(X, y, rest)
                     if value < best:
                         support, best, improved = rest, value, True
                         break
         self.support_ = sorted(support)
-        self.coef_ = np.zeros(X.shape[1])
+        self.coef_ = np.zeros(m)
         if self.support_:
             self.coef_[self.support_] = np.linalg.lstsq(X[:, self.support_], y, rcond=None)[0]
         return self
@@ -856,16 +817,18 @@ class FreeFormSearch:
                residual: np.ndarray, max_terms: int
                ) -> tuple[list[dict], SymbolicWinchTorque]:
         """Terms of every winch selected together on the stacked residual of a rig whose
-        projection mixes winches (:func:`select_joint`); a winch's terms stay only if
-        they explain :attr:`min_channel_gain` of its own residual's sum of squares."""
+        projection mixes winches (:class:`L0Regression` with a group per winch); a
+        winch's terms stay only if they explain :attr:`min_channel_gain` of its own
+        residual's sum of squares."""
         spread = term_spread_columns(library, signals)          # (rows, n, n, L)
         rows, n, _, L = spread.shape
         X = spread.reshape(rows * n, n * L)       # column j * L + l: term l on winch j
         y = residual.ravel()
         groups = np.repeat(np.arange(n), L)
         pair_cost = np.tile(cost, n)
-        support, coef = select_joint(X, y, pair_cost, groups, max_terms,
-                                     self.regression.max_overlap, self.regression.penalty)
+        reg = L0Regression(max_terms, self.regression.penalty, self.regression.max_overlap
+                           ).fit(X, y, pair_cost, groups)
+        support, coef = reg.support_, reg.coef_
         own = np.einsum("ij,ij->j", residual, residual)
         support, coef = prune_weak_terms(X, y, support, own[groups], self.min_term_gain)
         while support:

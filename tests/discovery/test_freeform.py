@@ -141,10 +141,8 @@ def test_gp_is_reproducible_and_leaves_the_global_random_state_alone():
 
 def test_joint_selection_finds_one_winchs_term_through_a_mixing_projection():
     """On a redundant rig the projection carries a term on one winch into every winch's
-    residual: selected together (``select_joint``), the term is found on its own winch
-    with its coefficient and nothing is named on the others."""
-    from cdpr_pipeline.discovery.freeform import select_joint
-
+    residual: selected together (:class:`L0Regression` with a group per winch), the term
+    is found on its own winch with its coefficient and nothing is named on the others."""
     rng = np.random.default_rng(7)
     rows, n, terms = 3000, 4, 6
     b = 1 + np.abs(rng.normal(size=(rows, n, 1)))   # internal-force direction (cables pull)
@@ -155,10 +153,10 @@ def test_joint_selection_finds_one_winchs_term_through_a_mixing_projection():
     spread = proj[:, :, :, None] * f[:, None, :, :]          # (rows, i, j, term)
     y = 0.7 * spread[:, :, 0, 2] + 0.05 * rng.normal(size=(rows, n))
     X = spread.reshape(rows * n, n * terms)
-    support, coef = select_joint(X, y.ravel(), np.ones(n * terms),
-                                 np.repeat(np.arange(n), terms), 3)
-    assert support == [2]
-    assert coef[2] == pytest.approx(0.7, rel=0.02)
+    joint = L0Regression(3).fit(X, y.ravel(), np.ones(n * terms),
+                                np.repeat(np.arange(n), terms))
+    assert joint.support_ == [2]
+    assert joint.coef_[2] == pytest.approx(0.7, rel=0.02)
     # each winch on its own residual (the diagonal) takes the spread for its own term
     own = np.einsum("kiil->kil", spread)
     named = [i for i in range(n) if L0Regression(3).fit(own[:, i], y[:, i]).support_]
