@@ -511,14 +511,16 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     withdrawn: list[str] = []
     # and every cause must still add to the others: causes were fitted jointly as they
     # were added, so one found early can end with nothing left to explain
+    with_res = None
     for c in sorted(causes, key=lambda c: c.bic_drop):
         if len(causes) < 2:
             break
         others = [o for o in causes if o is not c]
         without_res = residuals(nominal.with_effects([e for o in others for e in o.effects]),
                                 nominal, held)
-        with_res = residuals(nominal.with_effects([e for o in causes for e in o.effects]),
-                             nominal, held)
+        if with_res is None:        # every cause's model: recomputed only after a removal
+            with_res = residuals(nominal.with_effects([e for o in causes for e in o.effects]),
+                                 nominal, held)
         # on the channel where it adds most: a cause judged together with an earlier one
         # re-fitted beside it can carry that one's channel (a payload error found after
         # a drum radius error, judged on the lengths the drum's re-fit improved)
@@ -529,6 +531,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         if adds[ch] < settings.selection.min_gain:
             causes.remove(c)
             withdrawn.append(c.label)
+            with_res = without_res
             log.info("never worse: %s withdrawn (adds %.1f %% to the other causes on the "
                      "held-out %s)", c.label, 100 * adds[ch], ch)
     while True:

@@ -330,11 +330,15 @@ class _Search:
         self.scales = signal_scales(self.train, held.channels)
         self.nominal_held = {c: held.column_sse(c) for c in held.channels}
 
-    def context(self, kept: list[Effect]) -> tuple[FitContext, Judge]:
+    def fit_context(self, kept: list[Effect]) -> FitContext:
+        """A context fitting on top of ``kept``, weighted as every judgement weighs."""
         self._reference()
         base_res = FitContext(self.nominal, self.train, kept, {}, self.columns).residuals([])
         weights = fit_weights(base_res, self.scales)
-        ctx = FitContext(self.nominal, self.train, kept, weights, self.columns)
+        return FitContext(self.nominal, self.train, kept, weights, self.columns)
+
+    def context(self, kept: list[Effect]) -> tuple[FitContext, Judge]:
+        ctx = self.fit_context(kept)
         return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held,
                           scales=self.scales)
 
@@ -417,7 +421,7 @@ class _Search:
         cand = cause.candidate
         if cand is None or not cand.sparse or not cand.linear or cand.refit_winches:
             return list(cause.effects), cause.n_params
-        ctx, _ = self.context(others)
+        ctx = self.fit_context(others)      # no judge: only the fit's weights are needed
         x0 = np.asarray(cand.starts[0], float)
 
         def vector(x: np.ndarray) -> np.ndarray:
