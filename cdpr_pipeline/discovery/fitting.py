@@ -235,9 +235,16 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
                 if rows * np.log(sse0[i] / max(best_sse[i], 1e-300)) > form.k * np.log(rows)
                 and best_sse[i] <= (1 - min_gain) * sse0[i]]
 
+    columns: dict[tuple, np.ndarray] = {}
+
     def column(i: int) -> np.ndarray:
-        shapes = None if form.shape is None else np.full(n, float(best[i].shape))
-        return unit(best[i].variant, shapes, range(i, i + 1))
+        """What a unit magnitude on winch ``i`` alone explains, at its best variant and
+        shape (each a model evaluation: kept across the joint eliminations)."""
+        key = (i, best[i].variant, best[i].shape)
+        if key not in columns:
+            shapes = None if form.shape is None else np.full(n, float(best[i].shape))
+            columns[key] = unit(best[i].variant, shapes, range(i, i + 1))
+        return columns[key]
 
     best, best_sse = search(r0, list(range(n)))
     kept = passing(r0, best_sse, list(range(n)))
