@@ -437,6 +437,8 @@ def blackbox_share(nominal: Model, extended: Model, train: list[RunSignals],
                    ) -> BlackBoxShare:
     """Held-out share of the nominal residual a sequence network explains, against the
     share the named physics explains, on the same rows."""
+    import torch
+
     from cdpr_pipeline.identification.reconstruction import HighFrequencyModel
     from cdpr_pipeline.identification.regressors import WinchRegression
 
@@ -454,10 +456,19 @@ def blackbox_share(nominal: Model, extended: Model, train: list[RunSignals],
 
     tr, ho = regression(train), regression(held)
     n = tr.n
-    model = HighFrequencyModel(settings.net_factory, settings.window, settings.epochs,
-                               max_windows=settings.max_windows, seed=settings.seed,
-                               sample_rate_hz=1.0).fit(tr, np.zeros((n, tr.phi.shape[2])))
-    pred = model.predict(ho)
+    # its share goes into diagnosis.json, which must be the same on any machine: trained
+    # on the CPU (a GPU's kernels sum in another order) with one thread (so do the
+    # reductions), the process's thread count restored after
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        model = HighFrequencyModel(settings.net_factory, settings.window, settings.epochs,
+                                   max_windows=settings.max_windows, seed=settings.seed,
+                                   sample_rate_hz=1.0, accelerator="cpu"
+                                   ).fit(tr, np.zeros((n, tr.phi.shape[2])))
+        pred = model.predict(ho)
+    finally:
+        torch.set_num_threads(threads)
     runs = ho.run
     mask = np.concatenate([np.arange((runs == r).sum()) >= settings.window - 1
                            for r in np.unique(runs)])

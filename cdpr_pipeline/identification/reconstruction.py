@@ -42,6 +42,9 @@ class HighFrequencyModel:
     max_windows : int
         Training windows drawn per epoch.
     seed : int
+    accelerator : str
+        Lightning's accelerator: ``"auto"`` takes a GPU where there is one; ``"cpu"``
+        gives the same weights on any machine (the diagnosis's black box).
     """
 
     net_factory: object
@@ -52,6 +55,7 @@ class HighFrequencyModel:
     max_windows: int = 8192
     seed: int = 0
     sample_rate_hz: float = 1.0       # of the regression rows (for networks that filter)
+    accelerator: str = "auto"
 
     def fit(self, reg: WinchRegression, theta: np.ndarray) -> HighFrequencyModel:
         x = _inputs(reg, theta)
@@ -59,12 +63,12 @@ class HighFrequencyModel:
         self.x_mean, self.x_std = x.mean(axis=0), np.where(x.std(axis=0) > 0, x.std(axis=0), 1)
         self.y_mean, self.y_std = y.mean(axis=0), np.where(y.std(axis=0) > 0, y.std(axis=0), 1)
         rows = _runs(reg)
-        net = self.net_factory(layout=ChannelLayout(x.shape[1], reg.n, self.sample_rate_hz))
+        layout = ChannelLayout(x.shape[1], reg.n, self.sample_rate_hz)
         self.net = fit_window_network(
-            net, [(x[r] - self.x_mean) / self.x_std for r in rows],
+            lambda: self.net_factory(layout=layout), [(x[r] - self.x_mean) / self.x_std for r in rows],
             [(y[r] - self.y_mean) / self.y_std for r in rows], self.window, lr=self.lr,
             epochs=self.epochs, max_windows=self.max_windows, batch_size=self.batch_size,
-            seed=self.seed, accelerator="auto")
+            seed=self.seed, accelerator=self.accelerator)
         self.theta = np.asarray(theta, float)
         return self
 

@@ -97,21 +97,24 @@ class TimeToBest(L.Callback):
             self.epoch = int(trainer.current_epoch)
 
 
-def fit_window_network(net: nn.Module, inputs: list, targets: list, window: int, *,
-                       lr: float, epochs: int, max_windows: int, batch_size: int, seed: int,
-                       accelerator: str = "cpu") -> nn.Module:
-    """Train ``net`` on sliding windows of already standardised rows: ``inputs[i]``
-    (N_i, F) -> ``targets[i]`` (N_i, C), at most ``max_windows`` windows drawn per epoch.
-    The residual networks of reconstruction and of the comparison's hybrid use it.
+def fit_window_network(make_net: Callable[[], nn.Module], inputs: list, targets: list,
+                       window: int, *, lr: float, epochs: int, max_windows: int,
+                       batch_size: int, seed: int, accelerator: str = "cpu") -> nn.Module:
+    """Build a network with ``make_net()`` and train it on sliding windows of already
+    standardised rows: ``inputs[i]`` (N_i, F) -> ``targets[i]`` (N_i, C), at most
+    ``max_windows`` windows drawn per epoch. The residual networks of reconstruction, of
+    the diagnosis's black box and of the comparison's hybrid use it.
 
-    Random state stays local: torch's generator is forked and seeded for the fit and
-    restored after (no global seed is left behind)."""
+    Random state stays local: torch's generator is forked and seeded for the network's
+    initial weights and the fit, and restored after (no global seed is read or left
+    behind; a network built outside would take its weights from the global one)."""
     from functools import partial
 
     from cdpr_pipeline.models.datamodule import WindowDataset
 
     with torch.random.fork_rng():
         torch.manual_seed(seed)
+        net = make_net()
         ds = WindowDataset(list(inputs), list(targets), window)
         module = ForecastModule(net, partial(torch.optim.Adam, lr=lr))
         sampler = torch.utils.data.RandomSampler(ds, num_samples=min(max_windows, len(ds)))

@@ -140,3 +140,36 @@ def test_the_same_data_and_seed_give_the_same_diagnosis_json(quiet_lab):
     for frozen in (first, first.gain, *first.steps[0]):
         with pytest.raises(dataclasses.FrozenInstanceError):
             frozen.sentence = "edited"
+
+
+def test_the_black_box_share_does_not_depend_on_the_process_threads(quiet_lab):
+    """The black box's share is written into diagnosis.json, so it must not depend on the
+    machine: it trains on the CPU with one thread whatever the process uses (two threads
+    sum a batch's gradients in another order), and leaves the thread count as it was."""
+    import torch
+    from hydra.utils import instantiate
+
+    from cdpr_pipeline.config import compose_config
+    from cdpr_pipeline.discovery.diagnosis import BlackBoxSettings, blackbox_share
+    from cdpr_pipeline.discovery.residuals import nominal_model
+    from cdpr_pipeline.discovery.signals import dataset_signals
+    from cdpr_pipeline.identification.regressors import resolve_settings
+
+    cfg = compose_config("diagnose", ["blackbox.epochs=1", "blackbox.max_windows=256"])
+    settings = BlackBoxSettings(instantiate(cfg.blackbox.model.net), 16, 1, 256, 3)
+    reg = resolve_settings(fast_settings().regression, quiet_lab.trajectories, quiet_lab.rig)
+    sigs = dataset_signals(quiet_lab.trajectories, quiet_lab.rig, reg)
+    nominal = nominal_model(quiet_lab.rig, reg.sign_sharpness)
+    shares = []
+    before = torch.get_num_threads()
+    try:
+        for threads in (1, 2):
+            torch.set_num_threads(threads)
+            torch.manual_seed(threads)              # global state it must not read
+            shares.append(blackbox_share(nominal, nominal, sigs[:-1], sigs[-1:], "torque",
+                                         settings))
+            assert torch.get_num_threads() == threads
+    finally:
+        torch.set_num_threads(before)
+    assert shares[0] == shares[1]
+    assert shares[0].physics == 0.0                 # the nominal model explains nothing of itself
