@@ -387,9 +387,10 @@ def _full_rate_residual(model: Model, sig: RunSignals, channel: str) -> np.ndarr
 # ---------------------------------------------------------------------- gain
 def heldout_gain(before: Residuals, after: Residuals, held: list[RunSignals], channel: str,
                  block_s: float, n_boot: int, seed: int,
-                 scales: dict[str, np.ndarray] | None = None) -> HeldoutGain:
+                 scales: dict[str, np.ndarray] | None = None,
+                 per_column: bool = True) -> HeldoutGain:
     """Held-out RMSE of ``channel`` before and after, relative drop and its 95 % block
-    bootstrap interval; per channel column too.
+    bootstrap interval; per channel column too (unless ``per_column`` is false).
 
     The relative drop weights each column's squared error by ``scales``
     (:func:`~cdpr_pipeline.discovery.residuals.signal_scales`; equal weights when None),
@@ -407,7 +408,7 @@ def heldout_gain(before: Residuals, after: Residuals, held: list[RunSignals], ch
     est, lo, hi = (block_bootstrap(lambda x, y: stat(x @ w2, y @ w2), blocks, n_boot, 0.95,
                                    seed) if len(blocks) > 1
                    else (stat(b ** 2 @ w2, a ** 2 @ w2), -np.inf, np.inf))
-    for i, name in enumerate(channel_names(channel, b.shape[1])):
+    for i, name in enumerate(channel_names(channel, b.shape[1]) if per_column else ()):
         _, clo, chi = (block_bootstrap(lambda x, y, i=i: stat(x[:, i], y[:, i]), blocks, n_boot,
                                        0.95, seed) if len(blocks) > 1 else (0, -np.inf, np.inf))
         per_col[name] = ChannelGain(float(np.sqrt(np.mean(b[:, i] ** 2))),
@@ -539,12 +540,20 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
                 / max(relative_sse(without_res, ch, scales), 1e-300)
                 for ch in with_res.channels}
         ch = max(adds, key=adds.get)
-        if adds[ch] < settings.selection.min_gain:
+        # its own held-out interval, not only its point estimate, must lie above zero
+        own = (heldout_gain(without_res, with_res, held, ch, settings.selection.block_s,
+                            settings.selection.n_boot, settings.selection.seed, scales,
+                            per_column=False)
+               if adds[ch] >= settings.selection.min_gain else None)
+        if own is None or own.ci95[0] <= 0:
             causes.remove(c)
             withdrawn.append(c.label)
             with_res = without_res
             log.info("never worse: %s withdrawn (adds %.1f %% to the other causes on the "
-                     "held-out %s)", c.label, 100 * adds[ch], ch)
+                     "held-out %s%s)", c.label, 100 * adds[ch], ch,
+                     "" if own is None else
+                     f", 95 %% CI of its RMSE drop {100 * own.ci95[0]:.1f} to "
+                     f"{100 * own.ci95[1]:.1f} %%")
     while True:
         extension = [e for c in causes for e in c.effects]
         extended = nominal.with_effects(extension)

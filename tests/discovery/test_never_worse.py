@@ -83,3 +83,42 @@ def test_an_unusable_stated_model_is_re_identified_first(paper_rig):
                                    err_msg=f"{key}, seed {seed}")
     assert d.extended_metrics.heldout.relative_error_pct == pytest.approx(
         0, abs=0.1 * d.nominal_metrics.heldout.relative_error_pct)
+
+
+def test_a_cause_whose_own_interval_reaches_zero_is_withdrawn(paper_rig, monkeypatch):
+    """Each cause's own addition must have a 95 % interval above zero, not only a point
+    estimate over ``min_gain``: the two true causes of the test above are both kept, and
+    when the first interval asked for (the weaker cause's, checked first) is made to reach
+    below zero, that cause alone is withdrawn while its point estimate still passes."""
+    import dataclasses
+
+    seed = draw_seed()
+    rng = rng_for(seed)
+    drum = DrumRadiusError(float(rng.choice([-1, 1]) * rng.uniform(0.01, 0.03)))
+    payload = PayloadMassError(float(rng.choice([-1, 1]) * rng.uniform(0.1, 0.3)))
+    data = lab_dataset(paper_rig, [drum, payload], seed, duration_s=6.0)
+
+    def judged(effect, bic_drop):
+        return Judgement(effect.name, effect.name, (effect,), 1, {}, {}, bic_drop, 1e-9,
+                         bic_drop, "length", 0.9, (0.8, 0.95), ("l1",), passed=True)
+
+    causes = (judged(drum, 2e4), judged(payload, 1e4))
+    monkeypatch.setattr(diagnosis_module, "select_causes", lambda *a, **k: Selection(
+        causes, (causes,), tuple(e for c in causes for e in c.effects)))
+    real_gain, own = diagnosis_module.heldout_gain, []
+
+    def uncertain_first(*args, **kwargs):
+        gain = real_gain(*args, **kwargs)
+        if kwargs.get("per_column", True):
+            return gain
+        own.append(gain)
+        if len(own) > 1:
+            return gain
+        return dataclasses.replace(gain, ci95=(-0.01, gain.ci95[1]))
+
+    monkeypatch.setattr(diagnosis_module, "heldout_gain", uncertain_first)
+    d = diagnose(data, fast_settings())
+    case = f"seed {seed}: {drum.describe()}, {payload.describe()}: {d.sentence}"
+    assert own and own[0].relative > 0.05, case      # its point estimate passes
+    assert [c.effect for c in d.causes] == ["drum_radius_error"], case
+    assert d.gain.withdrawn == ("payload_mass_error",), case
