@@ -33,7 +33,8 @@ import operator
 import random
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from functools import lru_cache, partial
+from functools import cached_property, lru_cache, partial
+from typing import Any
 
 import numpy as np
 
@@ -704,23 +705,50 @@ def _one_point_crossover(a, b, rng: random.Random):
 
 
 # ------------------------------------------------------------------ the search
-@dataclass
-class FreeFormResult:
-    """Selected terms and the effect they make."""
+@dataclass(frozen=True)
+class FreeFormTerm:
+    """One selected term: ``coefficient * expression(theta_i, omega_i)`` added to winch
+    ``cable``'s resisting torque (1-based, as the report writes it)."""
 
-    terms: list[dict]
-    effect: SymbolicWinchTorque
-    gp_terms: list[tuple[str, float]]
+    cable: int
+    expression: str
+    coefficient: float
+
+    def as_dict(self) -> dict[str, Any]:
+        """The term as :class:`~cdpr_pipeline.sim.effects.SymbolicWinchTorque` and the
+        model file hold it."""
+        return {"cable": self.cable, "expression": self.expression,
+                "coefficient": self.coefficient}
+
+    def with_coefficient(self, value: float) -> FreeFormTerm:
+        return replace(self, coefficient=float(value))
+
+
+@dataclass(frozen=True)
+class FreeFormResult:
+    """Selected terms, the effect they make and what the GP proposed (expression, fitness)."""
+
+    terms: tuple[FreeFormTerm, ...]
+    gp_terms: tuple[tuple[str, float], ...] = ()
+
+    @cached_property
+    def effect(self) -> SymbolicWinchTorque:
+        return symbolic_torque(self.terms)
 
     @property
     def n_params(self) -> int:
         """Fitted parameters: every term's coefficient and the constants the search chose
         for it (a width, a harmonic), which were fitted to the same data."""
-        return int(sum(term_cost(t["expression"]) for t in self.terms))
+        return int(sum(term_cost(t.expression) for t in self.terms))
 
     def describe(self) -> str:
-        return "; ".join(f"u{t['cable']}: {t['coefficient']:+.4g} "
-                         f"{to_infix(t['expression'], str(t['cable']))}" for t in self.terms)
+        return "; ".join(f"u{t.cable}: {t.coefficient:+.4g} "
+                         f"{to_infix(t.expression, str(t.cable))}" for t in self.terms)
+
+
+def symbolic_torque(terms: Sequence[FreeFormTerm]) -> SymbolicWinchTorque:
+    """The simulator's effect of free-form ``terms``."""
+    return SymbolicWinchTorque([t.as_dict() for t in terms])
 
 
 @dataclass
@@ -761,7 +789,7 @@ class FreeFormSearch:
 
     def with_terms(self, result: FreeFormResult) -> FreeFormSearch:
         """This search with the terms another search generated added to its library."""
-        extra = [e for e, _ in result.gp_terms] + [t["expression"] for t in result.terms]
+        extra = [e for e, _ in result.gp_terms] + [t.expression for t in result.terms]
         return replace(self, extra_terms=list(dict.fromkeys(self.extra_terms + extra)))
 
     def fit(self, signals: Sequence[RunSignals], residual: np.ndarray, speed_rms: float,
@@ -792,8 +820,8 @@ class FreeFormSearch:
         cost = np.array([term_cost(e) for e in library], float)
         max_terms = min(self.regression.max_terms, MAX_TERMS_PER_CHANNEL)
         if any(s.mixes for s in signals):
-            return FreeFormResult(*self._joint(library, cost, signals, residual, max_terms),
-                                  found)
+            return FreeFormResult(self._joint(library, cost, signals, residual, max_terms),
+                                  tuple(found))
         X = term_columns(library, signals)
         terms = []
         for i in range(residual.shape[1]):
@@ -809,13 +837,12 @@ class FreeFormSearch:
                 continue
             for j in support:
                 # a residual r = u - u_model is explained by extra resisting torque +c f
-                terms.append({"cable": i + 1, "expression": library[j],
-                              "coefficient": float(coef[j])})
-        return FreeFormResult(terms, SymbolicWinchTorque(terms), found)
+                terms.append(FreeFormTerm(i + 1, library[j], float(coef[j])))
+        return FreeFormResult(tuple(terms), tuple(found))
 
     def _joint(self, library: list[str], cost: np.ndarray, signals: Sequence[RunSignals],
                residual: np.ndarray, max_terms: int
-               ) -> tuple[list[dict], SymbolicWinchTorque]:
+               ) -> tuple[FreeFormTerm, ...]:
         """Terms of every winch selected together on the stacked residual of a rig whose
         projection mixes winches (:class:`L0Regression` with a group per winch); a
         winch's terms stay only if they explain :attr:`min_channel_gain` of its own
@@ -848,6 +875,5 @@ class FreeFormSearch:
             coef = np.zeros_like(coef)
             if support:
                 coef[support] = np.linalg.lstsq(X[:, support], y, rcond=None)[0]
-        terms = [{"cable": int(k // L) + 1, "expression": library[k % L],
-                  "coefficient": float(coef[k])} for k in support]
-        return terms, SymbolicWinchTorque(terms)
+        return tuple(FreeFormTerm(int(k // L) + 1, library[k % L], float(coef[k]))
+                     for k in support)

@@ -56,6 +56,7 @@ from cdpr_pipeline.discovery.freeform import (
     FreeFormResult,
     FreeFormSearch,
     Periodicity,
+    symbolic_torque,
 )
 from cdpr_pipeline.discovery.residuals import (
     Model,
@@ -66,7 +67,7 @@ from cdpr_pipeline.discovery.residuals import (
 )
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.discovery.validity import block_bootstrap, split_blocks
-from cdpr_pipeline.sim.effects import Effect, SymbolicWinchTorque
+from cdpr_pipeline.sim.effects import Effect
 
 
 @dataclass
@@ -618,17 +619,16 @@ def _split(parts: list[tuple[Candidate, np.ndarray]], best: Judgement
 
 def _freeform_part(result: FreeFormResult) -> tuple[Candidate, np.ndarray]:
     """A kept free-form model as a linear candidate in its term coefficients."""
-    terms = [dict(t) for t in result.terms]
-    coef = np.array([t["coefficient"] for t in terms], float)
+    terms = result.terms
+    coef = np.array([t.coefficient for t in terms], float)
 
     def build(x: np.ndarray) -> list[Effect]:
-        return [SymbolicWinchTorque([{**t, "coefficient": float(v)}
-                                     for t, v in zip(terms, x, strict=True)])]
+        return [symbolic_torque([t.with_coefficient(v) for t, v in zip(terms, x, strict=True)])]
 
     inf = np.full(len(coef), np.inf)
     return (Candidate("unnamed", "free-form", build, [coef], -inf, inf,
                       np.maximum(np.abs(coef), 1e-6), linear=True,
-                      names=[t["expression"] for t in terms],
+                      names=[t.expression for t in terms],
                       affects=frozenset({"torque"})), coef)
 
 

@@ -65,7 +65,8 @@ class HighFrequencyModel:
         rows = _runs(reg)
         layout = ChannelLayout(x.shape[1], reg.n, self.sample_rate_hz)
         self.net = fit_window_network(
-            lambda: self.net_factory(layout=layout), [(x[r] - self.x_mean) / self.x_std for r in rows],
+            lambda: self.net_factory(layout=layout),
+            [(x[r] - self.x_mean) / self.x_std for r in rows],
             [(y[r] - self.y_mean) / self.y_std for r in rows], self.window, lr=self.lr,
             epochs=self.epochs, max_windows=self.max_windows, batch_size=self.batch_size,
             seed=self.seed, accelerator=self.accelerator)

@@ -395,7 +395,8 @@ class ResidualNetwork:
             raise ValueError(f"no training segment is longer than window+3 = {st.window + 3}")
         layout = ChannelLayout(x.shape[1], y.shape[1], sample_rate_hz)
         self.net = fit_window_network(
-            lambda: st.net_factory(layout=layout), [(inputs[i] - self.x_mean) / self.x_std for i in keep],
+            lambda: st.net_factory(layout=layout),
+            [(inputs[i] - self.x_mean) / self.x_std for i in keep],
             [(targets[i] - self.y_mean) / self.y_std for i in keep], st.window, lr=st.lr,
             epochs=st.epochs, max_windows=st.max_windows, batch_size=st.batch_size,
             seed=st.seed)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -53,10 +55,15 @@ def test_search_recovers_a_position_periodic_torque():
     residual = sig.rows(0.1 * evaluate(truth, {"theta": sig.theta, "omega": sig.omega}))
     residual = residual + 0.005 * rng.normal(size=residual.shape)
     res = FreeFormSearch(gp=None).fit([sig], residual, 1.0, WINCH_ANGLE)
-    found = {(t["cable"], t["expression"]) for t in res.terms}
+    found = {(t.cable, t.expression) for t in res.terms}
     assert {(c, truth) for c in (1, 2, 3)} <= found
-    coef = [t["coefficient"] for t in res.terms if t["expression"] == truth]
+    coef = [t.coefficient for t in res.terms if t.expression == truth]
     assert np.allclose(coef, 0.1, rtol=0.05)
+    # a typed, frozen result; the simulator's effect holds the same terms as plain data
+    for frozen in (res, res.terms[0]):
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            frozen.terms = ()
+    assert res.effect.terms == [t.as_dict() for t in res.terms]
 
 
 def _axes_signals(seed: int, spans: np.ndarray, seconds=20.0, fs=500.0):
@@ -94,8 +101,7 @@ def test_periodic_peaks_find_a_light_axis_wavenumber_the_base_harmonics_miss():
         found = [float(e.split(",")[1].rstrip(")")) for e in peaks]
         assert any(abs(f / k - 1) < 0.005 for f in found), (trial, k, found)
         res = FreeFormSearch(gp=None).fit([sig], residual, 1.0, periodicity)
-        mine = {t["expression"]: t["coefficient"] for t in res.terms
-                if t["cable"] == light + 1}
+        mine = {t.expression: t.coefficient for t in res.terms if t.cable == light + 1}
         at_k = [c for e, c in mine.items() if e.startswith(("sin_k", "cos_k"))
                 and abs(float(e.split(",")[1].rstrip(")")) / k - 1) < 0.005]
         # the peak's sine and cosine carry the force (a neighbour may add a trim)
