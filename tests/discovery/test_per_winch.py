@@ -197,45 +197,6 @@ def test_stribeck_of_different_sizes_per_winch_is_named_per_winch(paper_rig, see
     assert record["gain"]["ci95"][0] > 0
 
 
-def test_stribeck_drawn_from_its_range_is_the_only_cause(paper_rig, seed):
-    """The lab states a smooth Coulomb law (``tanh(20 w)``); a Stribeck friction makes
-    its winches creep at reversals, inside the law's transition band, where the
-    filtered speed cannot tell the friction. Kept in, that residual was named an extra
-    ``actuator_lag`` of 0.5-1 ms (3 of 3 detection-benchmark seeds, 3 of 4 of
-    ``bench_diagnose``'s): the band is now left out like a hard sign's stick. Ratio and
-    velocity drawn from the effect's documented ranges."""
-    from hydra.utils import instantiate
-
-    from cdpr_pipeline.config import compose_config
-
-    effect = make_effect("stribeck_friction", rng_for(seed), paper_rig.n)
-    # the command's reading of the data (cut-off and decimation chosen from the data), as
-    # a user's `cdpr diagnose` has it: the creep showed there
-    regression = instantiate(compose_config("diagnose").regression)
-    d = diagnose(lab_dataset(paper_rig, [effect], seed), fast_settings(regression=regression))
-    record = d.as_json()
-    case = f"seed {seed}: {effect}: {d.sentence}"
-    assert [c["effect"] for c in record["causes"]] == ["stribeck_friction"], case
-    p = record["causes"][0]["params"]
-    assert p["static_ratio"] == pytest.approx([effect.static_ratio] * 3, rel=0.1), case
-    assert p["stribeck_velocity"] == pytest.approx([effect.stribeck_velocity] * 3,
-                                                   rel=0.1), case
-
-
-def test_a_smooth_laws_transition_band_is_left_out():
-    """Below ``atanh(0.95) / k`` the law ``tanh(k w)`` has not reached 95 % of F_c:
-    those samples, and only those, take no part in the torque residual."""
-    from cdpr_pipeline.discovery.signals import SMOOTH_LAW_BAND, friction_known
-
-    for k in (5.0, 20.0, 300.0):
-        settings = RegressionSettings(sign_sharpness=k)
-        speed = np.linspace(-1.0, 1.0, 2001)[:, None] * np.array([1.0, 0.1])
-        known = friction_known(np.zeros_like(speed), speed, settings, 300.0)
-        np.testing.assert_array_equal(known == 0, np.abs(speed) < SMOOTH_LAW_BAND / k)
-        assert np.tanh(k * np.abs(speed[known == 1])).min() >= 0.95 - 1e-12
-        assert np.tanh(k * np.abs(speed[known == 0])).max() < 0.95
-
-
 def test_stribeck_on_one_winch_counts_only_that_winch(paper_rig, seed):
     effect = StribeckFriction(static_ratio=None, extra_static=0.5, stribeck_velocity=1.0,
                               cables=[2])
