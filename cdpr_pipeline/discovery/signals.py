@@ -20,9 +20,7 @@ filter (:meth:`RunSignals.torque_weighted`), as the identification's regression 
 in, their residual (holding torque minus ``+-F_c``, a pulse at every reversal placed by
 the stick) is fitted by any candidate with a pulse there: an ``actuator_lag`` of a few ms
 (whose ``tau du/dt`` has one at every sign switch), or a free-form low-speed term, on
-effect-free data with true stick-slip. A smooth law stated in rig.yaml (``tanh(k w)``)
-leaves out its transition band the same way, where the filtered speed cannot tell the
-friction either (:func:`friction_known`).
+effect-free data with true stick-slip.
 
 Those samples are not the only ones the stick or reversal spoils. At a reversal the
 friction jumps by ``2 F_c`` and the true acceleration with it; the zero-phase derivative
@@ -183,7 +181,7 @@ class RunSignals:
     slow_acceleration: np.ndarray | None = None
     #: (N, n) weights of the torque residual: 1 where the friction law predicts the
     #: friction, 0 where the winch sticks, stops, starts or reverses under a hard sign
-    #: or a smooth law's transition band (:func:`friction_known`); None: everywhere
+    #: (:func:`friction_known`); None: everywhere (a smooth law, or no standstill seen)
     friction_known: np.ndarray | None = None
     #: (N, n, n) operator taking a torque-side quantity to what the data can tell of it:
     #: the :attr:`friction_known` weights and, on a cable robot with more cables than
@@ -272,31 +270,12 @@ class RunSignals:
         return self.t[self.row_index()]
 
 
-#: a smooth Coulomb law ``tanh(k w)`` is in its transition band below
-#: ``atanh(0.95) / k``: there it has not reached 95 % of ``F_c`` (see :func:`friction_known`)
-SMOOTH_LAW_BAND = float(np.arctanh(0.95))
-
-
 def friction_known(position: np.ndarray, speed: np.ndarray, settings: RegressionSettings,
                    fs: float) -> np.ndarray | None:
-    """(N, n) weights, 1 where the stated Coulomb law gives the friction, 0 elsewhere;
-    None when nothing is dropped.
-
-    A smooth law ``tanh(k w)`` (rig.yaml's ``coulomb_law``) gives it outside its
-    transition band, ``|w| >= atanh(0.95) / k`` on the filtered ``speed``
-    (:data:`SMOOTH_LAW_BAND`). Inside, the friction moves by up to ``2 F_c`` over a few
-    hundredths of the speed's range, and a winch whose load drops below the friction
-    creeps there (a steep law holds it nearly still, as a stick would): the filtered speed
-    does not resolve those speeds, so the friction it predicts is as unknown as a hard
-    sign's at a stick. Kept in, the creep at every reversal left a residual that even the
-    true model could not remove (the lab's Stribeck datasets, ``tanh(20 w)``: residual
-    RMS 6-8 times the effect-free one's, 90 % of its energy in the slowest fifth of the
-    rows), and an ``actuator_lag`` of 0.5-1 ms fitted half of it (3 of 4 seeds of
-    ``benchmarks/bench_diagnose.py``'s dataset; none after).
-
-    A hard sign gives it where the winch or axis slides one way through the sample's
-    triangle, as the recorded ``position`` shows, and the filtered derivatives are not
-    spread from a sample where it does not.
+    """(N, n) weights, 1 where a hard-sign Coulomb law gives the friction (the winch or
+    axis slides one way through the sample's triangle, as the recorded ``position``
+    shows) and the filtered derivatives are not spread from a sample where it does not,
+    0 elsewhere; None for a smooth law or when nothing is dropped.
 
     The rule is the identification's
     (:func:`~cdpr_pipeline.identification.regressors._sliding`), applied only to
@@ -307,8 +286,7 @@ def friction_known(position: np.ndarray, speed: np.ndarray, settings: Regression
     within the derivative filter's reach
     (:func:`~cdpr_pipeline.identification.regressors.clear_of_reach`; module docstring)."""
     if settings.sign_sharpness is not None:
-        keep = np.abs(speed) >= SMOOTH_LAW_BAND / float(settings.sign_sharpness)
-        return None if keep.all() else keep.astype(float)
+        return None
     position = np.asarray(position, float)
     keep = _sliding(position, speed)
     keep[:, ~settings.rest_channels(position)] = True
