@@ -552,8 +552,8 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
             log.info("never worse: %s withdrawn (adds %.1f %% to the other causes on the "
                      "held-out %s%s)", c.label, 100 * adds[ch], ch,
                      "" if own is None else
-                     f", 95 %% CI of its RMSE drop {100 * own.ci95[0]:.1f} to "
-                     f"{100 * own.ci95[1]:.1f} %%")
+                     f", 95 % CI of its RMSE drop {100 * own.ci95[0]:.1f} to "
+                     f"{100 * own.ci95[1]:.1f} %")
     while True:
         extension = [e for c in causes for e in c.effects]
         extended = nominal.with_effects(extension)
