@@ -93,8 +93,18 @@ def _train_network(cfg: DictConfig, net: torch.nn.Module, dm: TrajectoryDataModu
 
 
 def train(cfg: DictConfig) -> TrainResult:
-    """Train (or fit) ``cfg.model`` on ``cfg.data``, evaluate it, log it to MLflow."""
-    L.seed_everything(int(cfg.seed), workers=True, verbose=False)
+    """Train (or fit) ``cfg.model`` on ``cfg.data``, evaluate it, log it to MLflow.
+
+    Random state stays local to the run: torch's generator (the network's initial
+    weights, the window sampler) is forked and seeded with ``cfg.seed`` and restored
+    after, so no global seed is read or left behind (nothing here draws from Python's or
+    NumPy's global generators)."""
+    with torch.random.fork_rng():
+        torch.manual_seed(int(cfg.seed))
+        return _train(cfg)
+
+
+def _train(cfg: DictConfig) -> TrainResult:
     out_dir = Path(cfg.out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     dm: TrajectoryDataModule = instantiate(cfg.data)

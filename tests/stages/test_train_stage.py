@@ -114,3 +114,24 @@ def test_compare_builds_tables_one_and_two_with_references(paper_multirun, small
     for name in ("table1.md", "table2.md", "table1.csv", "table2.csv", "comparison.png"):
         assert (tmp_path / name).stat().st_size > 0
     assert "| PPL (%) |" in (tmp_path / "table1.md").read_text()
+
+
+def test_training_keeps_its_random_state_local(small_lab, tracking, tmp_path):
+    """The same config trains the same network whatever the global generators hold, and
+    leaves them as they were (no global seed is read or set)."""
+    import random
+
+    import torch
+
+    runs = []
+    for k in range(2):
+        torch.manual_seed(100 + k)                       # global state it must not read
+        random.seed(k)
+        before = torch.get_rng_state()
+        result = train(compose_config("train", [
+            "model=tcn", *_overrides(small_lab, tracking, tmp_path / str(k))]))
+        assert torch.equal(torch.get_rng_state(), before)
+        runs.append(result.metrics)
+    keys = [k for k in runs[0] if not k.startswith("time/")]
+    assert {k: runs[0][k] for k in keys} == {k: runs[1][k] for k in keys}
+    assert runs[0]["epochs"] >= 0 and math.isfinite(runs[0]["onestep/test/all/overall/rmse"])
