@@ -364,11 +364,11 @@ def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
             # bands of the unfiltered full-rate residual of the longest run
             bands = _bands(full[:, i], longest.fs, settings.wavelet)
             inputs = sigs["winch speed"] if ch == "torque" else sigs["cable length"]
-            tests = correlation_tests(innovations[:, i], inputs,
-                                      min(settings.max_lag, len(r) // 4))
+            lags = _lags(settings.max_lag, len(innovations))
+            tests = correlation_tests(innovations[:, i], inputs, lags)
             out.append(Discrepancy(ch, name, float(np.sqrt(np.mean(r ** 2))),
                                    float(np.sum(r ** 2) / total), bands,
-                                   ljung_box_pvalue(innovations[:, i], settings.max_lag),
+                                   ljung_box_pvalue(innovations[:, i], lags),
                                    tuple(follows), corr, tests))
             plots[name] = {"residual": r, "explained": r - ext.stacked(ch)[:, i],
                            "signatures": sigs, "bands": bands, "tests": tests}
@@ -426,10 +426,18 @@ def _validity(res: Residuals, held: list[RunSignals], channel: str, max_lag: int
     r = _innovations(res, channel, noise)
     speed = np.concatenate([s.rows(s.omega) for s in held])
     out = {}
+    lags = _lags(max_lag, len(r))
     for i, name in enumerate(channel_names(channel, r.shape[1])):
-        tests = correlation_tests(r[:, i], speed[:, i], min(max_lag, len(r) // 4))
-        out[name] = ResidualValidity(tests, ljung_box_pvalue(r[:, i], max_lag))
+        tests = correlation_tests(r[:, i], speed[:, i], lags)
+        out[name] = ResidualValidity(tests, ljung_box_pvalue(r[:, i], lags))
     return out
+
+
+def _lags(max_lag: int, rows: int) -> int:
+    """Lags of the correlation and whiteness tests on ``rows`` rows: at most a quarter of
+    them (a short held-out block, e.g. of a single 8 s run read with the command's
+    decimation, has 20 rows: ``max_lag`` = 20 lags made Ljung-Box raise)."""
+    return max(1, min(max_lag, rows // 4))
 
 
 # ---------------------------------------------------------------------- black box

@@ -27,16 +27,33 @@ def test_whole_runs_by_default_and_by_name(quiet_lab):
         split_runs(quiet_lab.trajectories, ["nope"])
 
 
-def test_a_single_run_is_diagnosed_on_its_last_block(quiet_lab, tmp_path):
+@pytest.mark.parametrize("reading", ["fixed", "command"])
+def test_a_single_run_is_diagnosed_on_its_last_block(quiet_lab, tmp_path, reading):
+    """Also with the command's reading of the data (cut-off and decimation chosen from
+    the data): its held-out block of an 8 s run has 20 statistics rows, and the whiteness
+    test asked for 20 lags and raised."""
+    from hydra.utils import instantiate
+
+    from cdpr_pipeline.config import compose_config
+
     one = Dataset("one_run", quiet_lab.rig, quiet_lab.trajectories[:1])
     run = one[0]
     settings = fast_settings(closed_loop=True)
+    if reading == "command":
+        settings = fast_settings(closed_loop=True, regression=instantiate(
+            compose_config("diagnose").regression))
     split = diagnosis_split(one, settings)
     (train,), (held,) = split["train"], split["heldout"]
     assert split.blocks and held.run == train.run == run.name
-    # 25 % of 8 s is 2 s; the held-out block gets 3 s, at the end of the run
+    # 25 % of 8 s is 2 s; the held-out block gets 3 s, or the fewest samples a block
+    # needs for the regression's trims and rows if more, at the end of the run
+    from cdpr_pipeline.identification.pipeline import min_block_samples
+    from cdpr_pipeline.identification.regressors import resolve_settings
+
+    rate = one.rig.sample_rate_hz
+    fewest = min_block_samples(resolve_settings(settings.regression, [run], one.rig), rate)
     assert held.stop == run.n_samples and held.start == train.stop
-    assert held.t_start == pytest.approx(run.t[-1] - 3.0, abs=0.01)
+    assert held.t_start == pytest.approx(run.t[-1] - max(3.0, fewest / rate), abs=0.01)
 
     d = diagnose(one, settings)
     assert d.train == tuple(split.train) and d.heldout == tuple(split.heldout)
