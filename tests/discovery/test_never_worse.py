@@ -35,12 +35,10 @@ def test_a_cause_that_makes_held_out_runs_worse_is_withdrawn(paper_rig, monkeypa
     assert "withdrawn" in d.sentence
 
 
-def test_a_cause_is_kept_for_what_it_adds_on_any_channel(paper_rig, monkeypatch):
-    """A payload error found after a drum radius error was judged on the lengths (the
-    drum's joint re-fit improved them), added nothing there, and was withdrawn although
-    it explains the torque (seed 507 of the two-effect lab test). Each cause must add
-    to the others on the held-out channel where it adds most. Sizes drawn from the
-    effects' ranges (drum 1-3 %, payload 10-30 %, either sign)."""
+def _drum_and_payload(paper_rig, monkeypatch):
+    """A lab with a drum radius error and a payload mass error (sizes drawn from the
+    effects' ranges: drum 1-3 %, payload 10-30 %, either sign), and the selection fixed
+    to both, each judged on the lengths (the drum's joint re-fit improved them)."""
     seed = draw_seed()
     rng = rng_for(seed)
     drum = DrumRadiusError(float(rng.choice([-1, 1]) * rng.uniform(0.01, 0.03)))
@@ -51,11 +49,20 @@ def test_a_cause_is_kept_for_what_it_adds_on_any_channel(paper_rig, monkeypatch)
         return Judgement(effect.name, effect.name, (effect,), 1, {}, {}, bic_drop, 1e-9,
                          bic_drop, "length", 0.9, (0.8, 0.95), ("l1",), passed=True)
 
-    causes = (judged(drum, 2e4), judged(payload, 1e4))   # both judged on the lengths
+    causes = (judged(drum, 2e4), judged(payload, 1e4))
     monkeypatch.setattr(diagnosis_module, "select_causes", lambda *a, **k: Selection(
         causes, (causes,), tuple(e for c in causes for e in c.effects)))
+    return data, f"seed {seed}: {drum.describe()}, {payload.describe()}"
+
+
+def test_a_cause_is_kept_for_what_it_adds_on_any_channel(paper_rig, monkeypatch):
+    """A payload error found after a drum radius error was judged on the lengths (the
+    drum's joint re-fit improved them), added nothing there, and was withdrawn although
+    it explains the torque (seed 507 of the two-effect lab test). Each cause must add
+    to the others on the held-out channel where it adds most."""
+    data, drawn = _drum_and_payload(paper_rig, monkeypatch)
     d = diagnose(data, fast_settings())
-    case = f"seed {seed}: {drum.describe()}, {payload.describe()}: {d.sentence}"
+    case = f"{drawn}: {d.sentence}"
     assert [c.effect for c in d.causes] == ["drum_radius_error", "payload_mass_error"], case
     assert d.gain.withdrawn == (), case
 
@@ -92,19 +99,7 @@ def test_a_cause_whose_own_interval_reaches_zero_is_withdrawn(paper_rig, monkeyp
     below zero, that cause alone is withdrawn while its point estimate still passes."""
     import dataclasses
 
-    seed = draw_seed()
-    rng = rng_for(seed)
-    drum = DrumRadiusError(float(rng.choice([-1, 1]) * rng.uniform(0.01, 0.03)))
-    payload = PayloadMassError(float(rng.choice([-1, 1]) * rng.uniform(0.1, 0.3)))
-    data = lab_dataset(paper_rig, [drum, payload], seed, duration_s=6.0)
-
-    def judged(effect, bic_drop):
-        return Judgement(effect.name, effect.name, (effect,), 1, {}, {}, bic_drop, 1e-9,
-                         bic_drop, "length", 0.9, (0.8, 0.95), ("l1",), passed=True)
-
-    causes = (judged(drum, 2e4), judged(payload, 1e4))
-    monkeypatch.setattr(diagnosis_module, "select_causes", lambda *a, **k: Selection(
-        causes, (causes,), tuple(e for c in causes for e in c.effects)))
+    data, drawn = _drum_and_payload(paper_rig, monkeypatch)
     real_gain, own = diagnosis_module.heldout_gain, []
 
     def uncertain_first(*args, **kwargs):
@@ -118,7 +113,7 @@ def test_a_cause_whose_own_interval_reaches_zero_is_withdrawn(paper_rig, monkeyp
 
     monkeypatch.setattr(diagnosis_module, "heldout_gain", uncertain_first)
     d = diagnose(data, fast_settings())
-    case = f"seed {seed}: {drum.describe()}, {payload.describe()}: {d.sentence}"
+    case = f"{drawn}: {d.sentence}"
     assert own and own[0].relative > 0.05, case      # its point estimate passes
     assert [c.effect for c in d.causes] == ["drum_radius_error"], case
     assert d.gain.withdrawn == ("payload_mass_error",), case
