@@ -1,0 +1,87 @@
+"""Write a benchmark's figures into ``docs/measurements.md``, with where they came from.
+
+Every benchmark script ends with :func:`record`: its section of ``docs/measurements.md``
+(between ``<!-- begin NAME -->`` and ``<!-- end NAME -->``) is replaced by the figures of
+this run, headed by the command, the machine, the date and the commit. Sections of other
+benchmarks are left as they are. The file is never edited by hand.
+
+    from measurements import record
+    record("diagnose", "Speed of cdpr diagnose", table_markdown,
+           command="python benchmarks/bench_diagnose.py")
+
+(A benchmark script's own directory is on ``sys.path`` when it runs, so this module is
+imported by name.)
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import re
+import subprocess
+from datetime import datetime, timezone
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCUMENT = ROOT / "docs" / "measurements.md"
+HEADER = """# Measurements
+
+Written by the benchmark scripts in `benchmarks/` (`make bench` and the targets beside
+it); never edited by hand. Each section names the command that wrote it, the machine,
+the date and the commit it measured.
+"""
+
+
+def machine() -> str:
+    """CPU model and count, as read from this machine."""
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{model}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+def commit() -> str:
+    """Short commit of the checkout, ``+dirty`` when it has uncommitted changes."""
+    def git(*args: str) -> str:
+        return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
+                              check=False).stdout.strip()
+    head = git("rev-parse", "--short", "HEAD") or "unknown"
+    dirty = git("status", "--porcelain", "--untracked-files=no")
+    return f"{head}+dirty" if dirty else head
+
+
+def record(name: str, title: str, body: str, command: str,
+           document: Path = DOCUMENT) -> Path:
+    """Replace section ``name`` of ``document`` by ``body`` (markdown) and its provenance.
+
+    Parameters
+    ----------
+    name : str
+        Section key (letters, digits, ``-`` and ``_``), one per benchmark.
+    title : str
+        The section's heading.
+    body : str
+        The figures, as markdown (usually a table).
+    command : str
+        The command that produced them, as a user would type it.
+    """
+    if not re.fullmatch(r"[\w-]+", name):
+        raise ValueError(f"section name {name!r}: letters, digits, '-' and '_' only")
+    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    section = (f"<!-- begin {name} -->\n## {title}\n\n"
+               f"`{command}` on {machine()}, {stamp}, commit {commit()}.\n\n"
+               f"{body.rstrip()}\n<!-- end {name} -->\n")
+    text = document.read_text() if document.exists() else HEADER
+    pattern = re.compile(rf"<!-- begin {re.escape(name)} -->.*?<!-- end {re.escape(name)} -->\n?",
+                         re.DOTALL)
+    text = pattern.sub(lambda _: section, text) if pattern.search(text) \
+        else f"{text.rstrip()}\n\n{section}"
+    document.parent.mkdir(parents=True, exist_ok=True)
+    document.write_text(text)
+    print(f"figures written to {document} (section {name})")
+    return document
