@@ -41,7 +41,7 @@ from .trajectory import Trajectory, family_of
 
 log = logging.getLogger(__name__)
 
-#: families held out by default in identification and diagnosis (spec/diagnosis.md)
+#: families held out by default in identification and diagnosis (docs/diagnosis-format.md)
 DEFAULT_HELDOUT_FAMILIES = ("spiral", "pulses")
 #: share of a single run held out at its end (identification, diagnosis)
 HELDOUT_FRACTION = 0.25

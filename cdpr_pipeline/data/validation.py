@@ -1,4 +1,4 @@
-"""Checks of a dataset against the ``cdpr-measured/1`` spec (``measured-data.md``).
+"""Checks of a dataset against the ``cdpr-measured/1`` spec (``docs/data-format.md``).
 
 The validator is also the parser: :func:`cdpr_pipeline.data.io.load_dataset` reuses the
 arrays it reads, so a dataset is read once and can never load without being checked.

@@ -1,5 +1,5 @@
 """``cdpr diagnose``: show what the simulation gets wrong, name the cause, extend the
-model and measure the gain (``spec/diagnosis.md``, format ``cdpr-diagnosis/1``).
+model and measure the gain (``docs/diagnosis-format.md``, format ``cdpr-diagnosis/1``).
 
 :func:`diagnose` is a pure function of a dataset and settings; the stage wraps it with
 file output and MLflow. Everything it fits uses the training runs only; the held-out
@@ -72,7 +72,7 @@ from cdpr_pipeline.wavelet.split import WaveletSplit, band_energies
 log = logging.getLogger(__name__)
 
 FORMAT = "cdpr-diagnosis/1"
-#: families held out by default (spec/diagnosis.md)
+#: families held out by default (docs/diagnosis-format.md)
 HELDOUT_FAMILIES = ("spiral", "pulses")
 
 

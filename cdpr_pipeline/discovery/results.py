@@ -3,7 +3,7 @@
 The diagnosis reads its own results through attributes, never by string key; the
 dictionaries exist only at the file boundary (:meth:`Diagnosis.as_json
 <cdpr_pipeline.discovery.diagnosis.Diagnosis.as_json>`), where their layout is the one
-``../shared/spec/diagnosis.md`` states.
+``docs/diagnosis-format.md`` states.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ two ways, both used by the simulator *and* by diagnosis (one physics):
 * :meth:`Effect.winch_torque` returns an extra torque resisting the winch, as a function
   of winch angle and speed (friction-like effects).
 
-``name`` is the effect's key in the vocabulary of ``spec/diagnosis.md``; effects outside
+``name`` is the effect's key in the vocabulary of ``docs/diagnosis-format.md``; effects outside
 that vocabulary set ``in_vocabulary = False`` and must be diagnosed as ``unnamed``.
 ``ranges`` documents the magnitudes :meth:`Effect.sample` draws (the ranges the README
 calls detectable); cable numbers are 1-based like the ``u1..un`` columns.

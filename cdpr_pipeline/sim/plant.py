@@ -1,6 +1,6 @@
 """The true plant of the virtual lab: point-mass CDPR with winch dynamics.
 
-Sign conventions follow ``spec/measured-data.md``: the motor angle ``theta`` grows when
+Sign conventions follow ``docs/data-format.md``: the motor angle ``theta`` grows when
 the winch reels cable in, torque ``u`` is positive when it pulls, tension ``t >= 0``.
 Winch ``i`` obeys ``I theta'' + F_v theta' + F_c s(theta') + d = u - R t`` (``s`` the
 smooth sign ``tanh(k theta')`` of the paper's si-tanh) and the platform obeys

@@ -1,5 +1,5 @@
 """``cdpr diagnose data.path=DIR out_dir=OUT``: what the simulation gets wrong, the cause,
-the extended model and the gain (``spec/diagnosis.md``).
+the extended model and the gain (``docs/diagnosis-format.md``).
 
 Writes ``diagnosis.json``, ``report.html`` and ``extended_model.yaml`` (a ``cdpr-model/1``
 file that ``cdpr simulate model_file=...`` runs) and logs the run to MLflow.

@@ -1,4 +1,4 @@
-"""Never worse (spec/diagnosis.md): no cause is reported, nor put in the extended model,
+"""Never worse (docs/diagnosis-format.md): no cause is reported, nor put in the extended model,
 unless the held-out gain's 95 % interval lies above zero; a grossly wrong stated model is
 re-identified first and the report says it was unusable."""
 

@@ -1,4 +1,4 @@
-"""Per-winch magnitudes and the naming rules of ``spec/diagnosis.md``.
+"""Per-winch magnitudes and the naming rules of ``docs/diagnosis-format.md``.
 
 A winch-side effect has one magnitude per winch, and the data choose where it acts
 (one winch, some, all); free-form terms never take a vocabulary effect's shape, and an

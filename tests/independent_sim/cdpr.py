@@ -1,6 +1,6 @@
 """Kind ``cdpr``: a suspended point-mass cable robot with 3 or 4 cables.
 
-Physics (``measured-data.md``): winch i obeys
+Physics (``docs/data-format.md``): winch i obeys
 ``I theta'' + F_v theta' + F_c sign(theta') + d = u - r t`` (hard sign), the platform
 ``m p'' = sum_i t_i k_i + m g`` with ``k_i = (A_i - p) / |A_i - p|``; theta is positive
 reeling in.

@@ -1,4 +1,4 @@
-"""`cdpr diagnose` through the real config: the files of spec/diagnosis.md, the extended
+"""`cdpr diagnose` through the real config: the files of docs/diagnosis-format.md, the extended
 model `cdpr simulate` runs, MLflow, and datasets written by others (foreign rig, EMPS)."""
 
 from __future__ import annotations
