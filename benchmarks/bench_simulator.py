@@ -12,7 +12,9 @@ The reference takes ~1 s per simulated run-second, so by default it runs on a sa
 number of runs (it is a per-trajectory loop, so its cost is linear in runs);
 ``--reference-runs 0`` runs it on all of them.
 
-    python benchmarks/bench_simulator.py [--reference-runs 10] [overrides ...]
+    python -m benchmarks.bench_simulator [--reference-runs 10] [overrides ...]
+
+Writes its section of docs/measurements.md.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.measurements import invoked_as, record
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.sim.simulator import simulate_reference
 from cdpr_pipeline.stages.simulate import simulate
@@ -78,6 +81,21 @@ def main() -> None:
     print(f"speed-up of the batched simulator: {t_ref_all / t_batched:7.1f} x")
     print(f"max |p_batched - p_solve_ivp| on the reference runs: "
           f"{np.abs(check - reference).max():.2e} m")
+    scaled = " (scaled from the runs timed)" if k < n_runs else ""
+    body = "\n".join([
+        f"Dataset: {n_runs} runs, {samples} samples, {size / 1e6:.1f} MB of CSV, "
+        f"{batched.substeps} RK4 sub-steps per control tick.",
+        "",
+        "| what | seconds |",
+        "|---|---|",
+        f"| `cdpr simulate` (simulate and write; target < 60 s) | {total:.2f} |",
+        f"| batched simulation only | {t_batched:.2f} |",
+        f"| `solve_ivp` reference, per-run loop, {n_runs} runs{scaled} | {t_ref_all:.1f} |",
+        "",
+        f"Speed-up of the batched simulator: {t_ref_all / t_batched:.1f}x; largest "
+        f"position difference from the reference on {k} runs: "
+        f"{np.abs(check - reference).max():.2e} m."])
+    record("simulator", "Simulator speed", body, command=invoked_as())
 
 
 if __name__ == "__main__":

@@ -5,12 +5,12 @@ Every benchmark script ends with :func:`record`: its section of ``docs/measureme
 this run, headed by the command, the machine, the date and the commit. Sections of other
 benchmarks are left as they are. The file is never edited by hand.
 
-    from measurements import record
-    record("diagnose", "Speed of cdpr diagnose", table_markdown,
-           command="python benchmarks/bench_diagnose.py")
+    from benchmarks.measurements import invoked_as, record
+    record("diagnose", "Speed of cdpr diagnose", table_markdown, command=invoked_as())
 
-(A benchmark script's own directory is on ``sys.path`` when it runs, so this module is
-imported by name.)
+The benchmarks are modules of the ``benchmarks`` package, run from the project root as
+``python -m benchmarks.bench_NAME`` (the root is then on ``sys.path``, so they import this
+module and the tests' independent simulator without editing ``sys.path``).
 """
 
 from __future__ import annotations
@@ -18,7 +18,10 @@ from __future__ import annotations
 import os
 import platform
 import re
+import shlex
 import subprocess
+import sys
+from collections.abc import Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -53,6 +56,18 @@ def commit() -> str:
     head = git("rev-parse", "--short", "HEAD") or "unknown"
     dirty = git("status", "--porcelain", "--untracked-files=no")
     return f"{head}+dirty" if dirty else head
+
+
+def invoked_as(argv: Sequence[str] | None = None) -> str:
+    """The command line that ran this benchmark, as typed from the project root.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        ``sys.argv`` of the run (its first entry the benchmark's file) when None.
+    """
+    argv = list(sys.argv if argv is None else argv)
+    return shlex.join(["python", "-m", f"benchmarks.{Path(argv[0]).stem}", *argv[1:]])
 
 
 def record(name: str, title: str, body: str, command: str,
