@@ -12,7 +12,8 @@ XDIST = -n $(TEST_WORKERS) --dist loadfile
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.cdpr-installed
 
-.PHONY: install run test test-pipeline test-slow bench bench-models bench-detection lint clean
+.PHONY: install run test test-pipeline test-slow bench bench-null bench-pipeline \
+	bench-models bench-detection lint clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -46,20 +47,33 @@ test-pipeline: $(STAMP)
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -m slow $(XDIST) $(PYTEST_ARGS)
 
-## bench: benchmark scripts (figures quoted in the README)
+## bench: the quick benchmarks (a few minutes); each writes its section of
+## docs/measurements.md (bench_diagnose.py: see its own docstring)
 bench: $(STAMP)
-	$(BIN)/python benchmarks/bench_simulator.py
+	$(BIN)/python -m benchmarks.bench_simulator
 	$(BIN)/python benchmarks/bench_diagnose.py
+	$(BIN)/python -m benchmarks.bench_foreign_diagnose
+
+## bench-null: how often each of the diagnosis's tests fires on effect-free data
+## (24 datasets, both simulators; several minutes)
+bench-null: $(STAMP)
+	$(BIN)/python -m benchmarks.bench_null_calibration
+
+## bench-pipeline: the whole pipeline from nothing in a scratch copy, per stage
+## (the default profile: about 20 minutes on 2 cores)
+bench-pipeline: $(STAMP)
+	$(BIN)/python -m benchmarks.bench_pipeline
 
 ## bench-detection: detection and false-alarm rates of `cdpr diagnose` and the smallest
 ## magnitude of each hidden effect it detects reliably (about an hour on 2 cores)
 bench-detection: $(STAMP)
-	$(BIN)/python benchmarks/bench_detection.py
+	$(BIN)/python -m benchmarks.bench_detection
 
 ## bench-models: train every trajectory predictor on the default dataset (about an hour
-## on 2 cores) and print the table quoted in the README
+## on 2 cores); the dataset is simulated first if missing
 bench-models: $(STAMP)
-	$(BIN)/python benchmarks/bench_models.py
+	test -d data/generated/lab || $(BIN)/cdpr simulate quiet=true
+	$(BIN)/python -m benchmarks.bench_models
 
 lint: $(STAMP)
 	$(BIN)/ruff check cdpr_pipeline tests benchmarks

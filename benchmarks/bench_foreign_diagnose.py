@@ -14,15 +14,16 @@ the same process, so that figures taken on other machines, or on a busy one, com
   whose load changes during the case shows it as a spread). ``units`` is the diagnosis
   in those references (diagnose seconds / ref seconds).
 
-    python benchmarks/bench_foreign_diagnose.py [--effects none stribeck_friction ...]
+    python -m benchmarks.bench_foreign_diagnose [--effects none stribeck_friction ...]
         [--kinds cdpr axes] [--seeds 11 12 13]
+
+Writes the table into its section of docs/measurements.md.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -30,14 +31,13 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import cheby1, sosfiltfilt
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # tests.independent_sim
-
-from cdpr_pipeline.config import compose_config  # noqa: E402
-from cdpr_pipeline.data.io import load_dataset  # noqa: E402
-from cdpr_pipeline.discovery.diagnosis import diagnose  # noqa: E402
-from cdpr_pipeline.discovery.fitting import one_blas_thread  # noqa: E402
-from cdpr_pipeline.stages.diagnose import settings_from_config  # noqa: E402
-from tests.independent_sim import (  # noqa: E402
+from benchmarks.measurements import invoked_as, record
+from cdpr_pipeline.config import compose_config
+from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.discovery.diagnosis import diagnose
+from cdpr_pipeline.discovery.fitting import one_blas_thread
+from cdpr_pipeline.stages.diagnose import settings_from_config
+from tests.independent_sim import (
     random_axes_rig,
     random_rig,
     simulate_axes_dataset,
@@ -68,7 +68,8 @@ def reference_seconds(repeats: int = REFERENCE_REPEATS) -> float:
         return time.perf_counter() - start
 
 
-def _case(kind: str, effect: str, seed: int, root: Path) -> None:
+def _case(kind: str, effect: str, seed: int, root: Path) -> str:
+    """Generate and diagnose one case; print it and return its markdown table row."""
     out = root / f"{kind}_{effect}_{seed}"
     effects = [] if effect == "none" else [effect]
     start = time.perf_counter()
@@ -95,6 +96,8 @@ def _case(kind: str, effect: str, seed: int, root: Path) -> None:
           f"diagnose {t:5.1f} s (target {target:.0f} s; {parts}); "
           f"reference: gen {t_gen:.1f} s, ref {ref:.2f} s "
           f"({ref_before:.2f}/{ref_after:.2f}), units {t / ref:.1f}", flush=True)
+    return (f"| {kind} | {seed} | {'+'.join(hidden)} | `{d.verdict}` | {t:.1f} | "
+            f"{target:.0f} | {parts} | {t / ref:.1f} |")
 
 
 def main() -> None:
@@ -107,11 +110,20 @@ def main() -> None:
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"{os.cpu_count()} CPUs, load average {load:.1f}; reference workload "
           f"{reference_seconds():.2f} s", flush=True)
+    rows = ["| kind | seed | hidden | verdict | diagnose (s) | target (s) | phases | "
+            "in reference units |", "|---|---|---|---|---|---|---|---|"]
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
             for kind in args.kinds:
                 for effect in args.effects:
-                    _case(kind, effect, seed, Path(tmp))
+                    rows.append(_case(kind, effect, seed, Path(tmp)))
+    body = ("Independent generator (`tests/independent_sim`): a 3-cable robot, five 15 s runs "
+            "at 250 Hz; six drive axes, three 10 s runs at 250 Hz. `cdpr diagnose`'s "
+            "settings, black box off. Reference units: the diagnosis time over a fixed "
+            "workload's, measured before and after it in the same process "
+            f"(load average {load:.1f} at the start).\n\n" + "\n".join(rows))
+    record("foreign-diagnose", "Speed of cdpr diagnose on data it did not write", body,
+           command=invoked_as())
 
 
 if __name__ == "__main__":

@@ -5,10 +5,12 @@ free-run position RMSE on the test runs, and both as ratios to the two reference
 (constant-velocity extrapolation and linear ARX) trained on the same split in the same
 run. Every model is an MLflow run in experiment ``benchmark``.
 
-    python benchmarks/bench_models.py                      # default dataset, all models
-    python benchmarks/bench_models.py --models tcn arx -- trainer.max_epochs=5
+    python -m benchmarks.bench_models                      # default dataset, all models
+    python -m benchmarks.bench_models --models tcn arx -- trainer.max_epochs=5
 
-Arguments after ``--`` are Hydra overrides applied to every model.
+Arguments after ``--`` are Hydra overrides applied to every model. The dataset is made
+first with ``cdpr simulate`` (its default ``out_dir`` is the default ``--data``). Writes
+its section of docs/measurements.md.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import time
 
 import torch
 
+from benchmarks.measurements import invoked_as, record
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.stages.train import train
 
@@ -55,15 +58,20 @@ def main() -> None:
     head = ["model", "epochs", "to best (s)", "train (s)"]
     for k in keys:
         head += [f"{k} RMSE (m)"] + [f"{k} / {r}" for r in refs]
-    print("| " + " | ".join(head) + " |")
-    print("|" + "---|" * len(head))
+    table = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for m, r in rows.items():
         cells = [m, f"{r['epochs']:.0f}", f"{r['time/to_best_s']:.0f}",
                  f"{r['time/train_s']:.0f}"]
         for key in keys.values():
             cells.append(f"{r.get(key, float('nan')):.3g}")
             cells += [f"{r.get(key, float('nan')) / rows[ref][key]:.3g}" for ref in refs]
-        print("| " + " | ".join(cells) + " |")
+        table.append("| " + " | ".join(cells) + " |")
+    print("\n".join(table))
+    device = f"torch {torch.__version__}, {torch.get_num_threads()} threads, " + \
+        ("CUDA" if torch.cuda.is_available() else "no GPU")
+    record("models", "Trajectory predictors",
+           f"Dataset `{args.data}`; test runs, platform position; {device}.\n\n"
+           + "\n".join(table), command=invoked_as())
 
 
 if __name__ == "__main__":

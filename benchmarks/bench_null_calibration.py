@@ -19,12 +19,13 @@ statistics are recorded, with the thresholds the selection holds them to
 * the diagnosis's final ``gain`` interval (the never-worse rule) and its verdict: any
   verdict but ``none`` is a false alarm.
 
-    python benchmarks/bench_null_calibration.py [--lab 6 --cdpr 10 --axes 8]
+    python -m benchmarks.bench_null_calibration [--lab 6 --cdpr 10 --axes 8]
         [--first-seed 5000] [--settings cli|fast] [--out results/null_calibration.json]
 
 Prints the measured null distribution of each statistic (quantiles, and the fraction
 beyond each threshold next to the rate the threshold assumes) and the false-alarm rate
-per simulator; writes everything, per dataset and per candidate, as JSON.
+per simulator; writes everything, per dataset and per candidate, as JSON, and the summary
+table into its section of docs/measurements.md.
 """
 
 from __future__ import annotations
@@ -34,23 +35,19 @@ import json
 import logging
 import os
 import platform
-import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests" / "discovery")]
-
-from foreign_cases import (  # noqa: E402
+from benchmarks.measurements import invoked_as, record
+from cdpr_pipeline.config import compose_config
+from cdpr_pipeline.stages.simulate import rig_from_config
+from tests.discovery.foreign_cases import (
     add_settings_option,
     named_settings,
     null_datasets,
     run_null,
     summarise,
 )
-
-from cdpr_pipeline.config import compose_config  # noqa: E402
-from cdpr_pipeline.stages.simulate import rig_from_config  # noqa: E402
 
 
 def print_summary(summary: dict) -> None:
@@ -93,6 +90,35 @@ def print_summary(summary: dict) -> None:
         print("\nfalse alarms:\n  " + "\n  ".join(s["false_alarms"]))
 
 
+def summary_markdown(summary: dict, alpha: float, min_gain: float) -> str:
+    """The false alarms and each statistic's null rate beside the rate its threshold
+    assumes, per group of datasets, as markdown."""
+    def pct(x: float) -> str:
+        return f"{100 * x:.1f} %"
+
+    lines = [f"alpha {alpha}, min_gain {100 * min_gain:g} %; first-step candidates of "
+             "effect-free datasets. A p-value below alpha/m (Bonferroni over the step's "
+             "candidates) and a bootstrap lower end above zero should each occur at about "
+             "the nominal rate in brackets.", "",
+             "| group | datasets | candidates | p < 0.05 | p < alpha/m (nominal) | "
+             "gain >= min_gain | CI lower end > 0 (nominal) | false alarms |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, s in summary.items():
+        p, g, c = s["pvalue"], s["heldout_gain"], s["ci_lower"]
+        lines.append(
+            f"| {name} | {s['datasets']} | {s['candidates']} | {pct(p['below_0.05'])} | "
+            f"{pct(p['below_bonferroni'])} ({pct(p['nominal_below_bonferroni'])}) | "
+            f"{pct(g['at_least_min_gain'])} | {pct(c['above_zero'])} "
+            f"({pct(c['nominal_above_zero'])}) | {len(s['false_alarms'])} of "
+            f"{s['datasets']} |")
+    q = summary["all"]["heldout_gain"]["quantiles"]
+    lines += ["", "Held-out gain of the first-step candidates, quantiles: "
+              + ", ".join(f"{k} {100 * v:.2f} %" for k, v in q.items()) + "."]
+    if summary["all"]["false_alarms"]:
+        lines += ["", "False alarms: " + "; ".join(summary["all"]["false_alarms"]) + "."]
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--lab", type=int, default=6, help="lab datasets")
@@ -128,6 +154,8 @@ def main() -> None:
                     "load_avg_at_end": os.getloadavg()},
         "datasets": records, "summary": summary}, indent=1))
     print(f"\nwritten {args.out}")
+    record("null-calibration", "Null calibration of cdpr diagnose",
+           summary_markdown(summary, sel.alpha, sel.min_gain), command=invoked_as())
 
 
 if __name__ == "__main__":

@@ -16,7 +16,6 @@ and every case describes itself (:attr:`ForeignCase.describe`) for failure messa
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,12 +23,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-ROOT = Path(__file__).resolve().parents[2]
-if str(ROOT) not in sys.path:      # ``tests.independent_sim`` needs the project root
-    sys.path.insert(0, str(ROOT))
-
-from cdpr_pipeline.data.io import Dataset, load_dataset  # noqa: E402
-from tests.independent_sim import (  # noqa: E402
+from cdpr_pipeline.data.io import Dataset, load_dataset
+from tests.discovery.lab_cases import fast_settings, lab_dataset
+from tests.independent_sim import (
     EFFECT_KINDS,
     OUTSIDE_VOCABULARY,
     SlackCableError,
@@ -76,8 +72,6 @@ def add_settings_option(parser) -> None:
 
 def named_settings(name: str):
     """``cli``: :func:`foreign_settings`; ``fast``: ``lab_cases.fast_settings``."""
-    from lab_cases import fast_settings
-
     return foreign_settings() if name == "cli" else fast_settings()
 
 
@@ -376,8 +370,6 @@ def run_null(spec: dict, settings, tmp: Path, paper_rig) -> dict:
     return what the tests saw: the verdict and every first-step candidate's statistics
     (:func:`first_step`)."""
     import time
-
-    from lab_cases import lab_dataset
 
     from cdpr_pipeline.discovery.diagnosis import diagnose
 
