@@ -49,12 +49,14 @@ def machine() -> str:
 
 
 def commit() -> str:
-    """Short commit of the checkout, ``+dirty`` when it has uncommitted changes."""
+    """Short commit of the checkout, ``+dirty`` when it has uncommitted changes (other than
+    to this document, which the benchmark run before may have just written)."""
     def git(*args: str) -> str:
         return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
                               check=False).stdout.strip()
     head = git("rev-parse", "--short", "HEAD") or "unknown"
-    dirty = git("status", "--porcelain", "--untracked-files=no")
+    dirty = git("status", "--porcelain", "--untracked-files=no", "--", ".",
+                f":!{DOCUMENT.relative_to(ROOT).as_posix()}")
     return f"{head}+dirty" if dirty else head
 
 
