@@ -96,7 +96,8 @@ class LeastSquares:
     ``s^2 = RSS / (N - p)``: the Cramer-Rao bound if the residuals were white and
     Gaussian, and the convention of published IDIM results. After low-pass filtering the
     noise sits mostly above the band the regressors live in, so on the virtual lab these
-    standard deviations are conservative (see the README for the measured ratio)."""
+    standard deviations are conservative; ``tests/identification/test_identifiers.py``
+    checks them against repeated experiments."""
 
     name = "lsm"
 

@@ -10,8 +10,8 @@ two ways, both used by the simulator *and* by diagnosis (one physics):
 
 ``name`` is the effect's key in the vocabulary of ``docs/diagnosis-format.md``; effects outside
 that vocabulary set ``in_vocabulary = False`` and must be diagnosed as ``unnamed``.
-``ranges`` documents the magnitudes :meth:`Effect.sample` draws (the ranges the README
-calls detectable); cable numbers are 1-based like the ``u1..un`` columns.
+``ranges`` documents the magnitudes :meth:`Effect.sample` draws (the ranges ``docs/method.md``
+lists); cable numbers are 1-based like the ``u1..un`` columns.
 
 Winch-side effects have one magnitude per winch: a parameter is a scalar (the same on
 every affected winch) or a list with one value per affected winch (per entry of

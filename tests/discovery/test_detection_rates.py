@@ -77,6 +77,6 @@ def test_detection_and_false_alarm_rates(paper_rig, tmp_path):
     for sim, (_, false_alarm) in rates.items():
         assert false_alarm <= 0.1, f"{sim}:\n{report}"
     # detection: 90 % is required of the lab; on the independent generator it was 96 %
-    # in the last measurement with known gaps left (README), so there the rate is
+    # in the last measurement with known gaps left (docs/method.md), so there the rate is
     # printed and only false alarms gate
     assert rates["lab"][0] >= 0.9, f"lab:\n{report}"

@@ -59,7 +59,7 @@ def test_one_long_run_without_effect_gives_none(tmp_path, seed, kind):
 
 #: Known gaps on the independent simulator, by rig kind and hidden effect (measured with
 #: ``benchmarks/bench_detection.py --simulator both --seeds 3`` and these two tests over
-#: 90 random seeds, README *Discovery on data it did not write*): an actuator lag of a
+#: 90 random seeds; docs/method.md, known limits): an actuator lag of a
 #: few ms on some winches of a cable robot (named winch_parameter_error, or none when its
 #: held-out interval reaches zero; per-winch sizes 30-120 % off on some winch of 4-cable
 #: and sub-150 Hz rigs), a quadratic drag on a 4-cable robot with an extra

@@ -11,7 +11,7 @@ Nothing but ``profile=tiny dataset.source=ingest dataset.path=...`` is given: ev
 must finish or be skipped with one line saying why, the report must list which ran, and
 the diagnosis and the model comparison must be there. The stages expected to be skipped
 are listed per dataset below; a stage newly skipped (or newly running) fails the test, so
-the list stays what the README says.
+the list stays what the test says.
 
 Both datasets go through one scratch project, one after the other (the second repro
 reruns what depends on the dataset and leaves the EMPS branch, which does not, as it
