@@ -2,8 +2,8 @@
 
 Every benchmark script ends with :func:`record`: its section of ``docs/measurements.md``
 (between ``<!-- begin NAME -->`` and ``<!-- end NAME -->``) is replaced by the figures of
-this run, headed by the command, the machine, the date and the commit. Sections of other
-benchmarks are left as they are. The file is never edited by hand.
+this run, headed by the command, the machine (and its load), the date and the commit.
+Sections of other benchmarks are left as they are. The file is never edited by hand.
 
     from benchmarks.measurements import invoked_as, record
     record("diagnose", "Speed of cdpr diagnose", table_markdown, command=invoked_as())
@@ -46,6 +46,15 @@ def machine() -> str:
     except OSError:
         pass
     return f"{model}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+def load_average() -> str:
+    """``, load average X`` (one minute, at the end of the run): the machine may be shared,
+    and times measured under load are upper bounds. Empty where the OS does not tell."""
+    try:
+        return f", load average {os.getloadavg()[0]:.1f}"
+    except (AttributeError, OSError):
+        return ""
 
 
 def commit() -> str:
@@ -91,7 +100,7 @@ def record(name: str, title: str, body: str, command: str,
         raise ValueError(f"section name {name!r}: letters, digits, '-' and '_' only")
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     section = (f"<!-- begin {name} -->\n## {title}\n\n"
-               f"`{command}` on {machine()}, {stamp}, commit {commit()}.\n\n"
+               f"`{command}` on {machine()}{load_average()}, {stamp}, commit {commit()}.\n\n"
                f"{body.rstrip()}\n<!-- end {name} -->\n")
     text = document.read_text() if document.exists() else HEADER
     pattern = re.compile(rf"<!-- begin {re.escape(name)} -->.*?<!-- end {re.escape(name)} -->\n?",
