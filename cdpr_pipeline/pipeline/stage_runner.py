@@ -31,7 +31,7 @@ from cdpr_pipeline.pipeline.inputs import (
     inputs_state,
 )
 from cdpr_pipeline.pipeline.mlflow_logging import log_skipped, log_stage_outputs
-from cdpr_pipeline.pipeline.outputs import (
+from cdpr_pipeline.outputs import (
     commit_output,
     empty_dir,
     output_lock,

@@ -30,12 +30,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import hydra
 import pandas as pd
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR, compose_config
+from cdpr_pipeline.command import hydra_command
+from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.models.physics import (
     EXTENDED,
     NOMINAL,
@@ -555,7 +555,7 @@ def _fitted_on_test(extended: Path, split: dict) -> list[str]:
     return [r for r in test_runs if r in fitted_runs]
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="compare", version_base="1.3")
+@hydra_command("compare")
 def main(cfg: DictConfig) -> None:
     result = compare(cfg)
     print(to_markdown(result.summary))

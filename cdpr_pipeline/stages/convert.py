@@ -5,10 +5,9 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import hydra
 from omegaconf import DictConfig
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.convert import CONVERTERS
 
 log = logging.getLogger(__name__)
@@ -25,6 +24,6 @@ def convert(cfg: DictConfig) -> Path:
     return out
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="convert", version_base="1.3")
+@hydra_command("convert", nested=True)
 def main(cfg: DictConfig) -> None:
     convert(cfg)

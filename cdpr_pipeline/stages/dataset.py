@@ -14,10 +14,9 @@ import logging
 import shutil
 from pathlib import Path
 
-import hydra
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.errors import DataValidationError
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.validation import validate_dataset
@@ -73,6 +72,6 @@ def build_dataset(cfg: DictConfig) -> dict:
     return summary
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="dataset", version_base="1.3")
+@hydra_command("dataset")
 def main(cfg: DictConfig) -> None:
     build_dataset(cfg)

@@ -11,11 +11,10 @@ import logging
 import time
 from pathlib import Path
 
-import hydra
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.identification.pipeline import (
     Identification,
@@ -86,6 +85,6 @@ def identify(cfg: DictConfig) -> Identification:
     return result
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="identify", version_base="1.3")
+@hydra_command("identify")
 def main(cfg: DictConfig) -> None:
     identify(cfg)

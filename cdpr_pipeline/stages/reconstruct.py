@@ -13,13 +13,12 @@ import json
 import logging
 from pathlib import Path
 
-import hydra
 import numpy as np
 import pandas as pd
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.rig import WINCH_KEYS
 from cdpr_pipeline.data.split import Split
@@ -132,6 +131,6 @@ def reconstruct(cfg: DictConfig) -> dict:
     return result
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="reconstruct", version_base="1.3")
+@hydra_command("reconstruct")
 def main(cfg: DictConfig) -> None:
     reconstruct(cfg)

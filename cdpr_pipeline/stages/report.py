@@ -17,13 +17,12 @@ import logging
 from collections.abc import Mapping
 from pathlib import Path
 
-import hydra
 import numpy as np
 import pandas as pd
 import yaml
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.rig import WINCH_KEYS
 from cdpr_pipeline.pipeline.skip import skipped_reason
 from cdpr_pipeline.tables import to_markdown
@@ -227,6 +226,6 @@ def build_report(cfg: DictConfig) -> dict:
     return summary
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="report", version_base="1.3")
+@hydra_command("report")
 def main(cfg: DictConfig) -> None:
     build_report(cfg)

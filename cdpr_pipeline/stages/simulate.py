@@ -6,12 +6,11 @@ import logging
 from pathlib import Path
 from typing import Any
 
-import hydra
 import numpy as np
 from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.errors import DataValidationError
 from cdpr_pipeline.data.io import read_rig
 from cdpr_pipeline.data.rig import CdprRig
@@ -91,8 +90,6 @@ def simulate(cfg: DictConfig) -> LabRun:
     )
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="simulate", version_base="1.3")
+@hydra_command("simulate", nested=True)
 def main(cfg: DictConfig) -> None:
-    run = simulate(cfg)
-    log.info("dataset: %s", run.dataset_dir)
-    log.info("truth:   %s", run.truth_path)
+    simulate(cfg)   # the truth lands beside the dataset: <out_dir>.truth.yaml

@@ -16,11 +16,10 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-import hydra
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset, read_rig
 from cdpr_pipeline.data.rig import AxesRig, CdprRig
 from cdpr_pipeline.data.split import heldout_split
@@ -107,6 +106,6 @@ def virtual(cfg: DictConfig) -> Path:
     return out
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="virtual", version_base="1.3")
+@hydra_command("virtual", nested=True)
 def main(cfg: DictConfig) -> None:
     virtual(cfg)
