@@ -10,6 +10,9 @@ from __future__ import annotations
 import importlib
 import sys
 
+from cdpr_pipeline.cli_help import subcommand_help
+from cdpr_pipeline.errors import EXIT_USER_ERROR, CommandExit, reported
+
 #: subcommand -> module with a Hydra ``main`` (or ``module:function``)
 SUBCOMMANDS = {
     "simulate": "cdpr_pipeline.stages.simulate",
@@ -28,6 +31,10 @@ SUBCOMMANDS = {
     "stage": "cdpr_pipeline.pipeline.commands:stage_main",
     "repro": "cdpr_pipeline.pipeline.commands:repro_main",
 }
+
+#: Hydra subcommand -> its conf/<name>.yaml (for ``cdpr <sub> --help``)
+CONFIG_NAMES = {sub: "pipeline" if sub in ("params", "repro") else sub
+                for sub in SUBCOMMANDS if sub != "stage"}
 
 USAGE = """usage: cdpr <subcommand> [key=value ...] [-m] [--cfg job] [--help]
 
@@ -54,7 +61,26 @@ subcommands:
 """
 
 
+def _descriptions() -> dict[str, str]:
+    """Subcommand -> its paragraph of :data:`USAGE`."""
+    out: dict[str, str] = {}
+    for line in USAGE.split("subcommands:\n", 1)[1].splitlines():
+        name, _, text = line.strip().partition(" ")
+        if line.startswith("  ") and not line.startswith("    ") and name in SUBCOMMANDS:
+            current = name
+            out[current] = text.strip()
+        elif line.strip() and out:
+            out[current] += " " + line.strip()
+    return out
+
+
 def main(argv: list[str] | None = None) -> None:
+    """Run ``cdpr <subcommand> [args]`` (``argv`` default: ``sys.argv[1:]``).
+
+    Errors end in :class:`SystemExit` with a message on stderr (see
+    :mod:`cdpr_pipeline.errors`): 2 for bad data or configuration, 130 after Ctrl-C;
+    it can be called repeatedly in one process.
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help", "help"):
         sys.stdout.write(USAGE)
@@ -62,12 +88,27 @@ def main(argv: list[str] | None = None) -> None:
     sub = argv[0]
     if sub not in SUBCOMMANDS:
         sys.stderr.write(f"cdpr: unknown subcommand {sub!r}\n\n{USAGE}")
-        raise SystemExit(2)
-    module_name, _, func = SUBCOMMANDS[sub].partition(":")
-    entry = getattr(importlib.import_module(module_name), func or "main")
-    # Hydra reads its overrides from sys.argv; present the rest as the app's own argv
-    sys.argv = [f"cdpr {sub}", *argv[1:]]
-    entry()
+        raise SystemExit(EXIT_USER_ERROR)
+    if sub in CONFIG_NAMES and any(a in ("-h", "--help") for a in argv[1:]):
+        sys.stdout.write(subcommand_help(sub, CONFIG_NAMES[sub], _descriptions()[sub]))
+        return
+    saved_argv = sys.argv
+    with reported(f"cdpr {sub}"):
+        module_name, _, func = SUBCOMMANDS[sub].partition(":")
+        entry = getattr(importlib.import_module(module_name), func or "main")
+        # Hydra reads its overrides from sys.argv; present the rest as the app's own argv
+        sys.argv = [f"cdpr {sub}", *argv[1:]]
+        try:
+            entry()
+        except CommandExit:
+            raise
+        except SystemExit as exit_:
+            # Hydra's own report of a bad override or config (printed, no traceback)
+            if exit_.code == 1:
+                raise CommandExit(EXIT_USER_ERROR) from None
+            raise
+        finally:
+            sys.argv = saved_argv
 
 
 if __name__ == "__main__":

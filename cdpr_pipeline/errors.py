@@ -42,6 +42,11 @@ class OutputBusy(UserError, RuntimeError):
     """Another process is writing the same output directory (names its pid)."""
 
 
+class CommandExit(SystemExit):
+    """The exit of a command that has reported its error (a ``SystemExit``, which passes
+    through Hydra's own error handler untouched)."""
+
+
 def debug_enabled() -> bool:
     """Whether a debug flag asks for tracebacks (see :data:`DEBUG_ENV`)."""
     return any(os.environ.get(name, "") not in ("", "0") for name in DEBUG_ENV)
@@ -74,7 +79,7 @@ def reported(command: str) -> Iterator[None]:
 
     Raises
     ------
-    SystemExit
+    CommandExit
         :data:`EXIT_USER_ERROR` for a :class:`UserError` (and OmegaConf's, Hydra's and a
         missing file's errors), :data:`EXIT_INTERNAL_ERROR` for any other exception,
         :data:`EXIT_INTERRUPTED` after Ctrl-C. With a debug flag set the original
@@ -86,7 +91,7 @@ def reported(command: str) -> Iterator[None]:
         if debug_enabled():
             raise
         sys.stderr.write(f"{command}: interrupted (outputs left as they were)\n")
-        raise SystemExit(EXIT_INTERRUPTED) from None
+        raise CommandExit(EXIT_INTERRUPTED) from None
     except SystemExit:
         raise
     except Exception as err:
@@ -94,7 +99,7 @@ def reported(command: str) -> Iterator[None]:
             raise
         if isinstance(err, _user_error_types()):
             sys.stderr.write(f"{command}: error: {_one_line(err)}\n")
-            raise SystemExit(EXIT_USER_ERROR) from None
+            raise CommandExit(EXIT_USER_ERROR) from None
         sys.stderr.write(f"{command}: internal error: {type(err).__name__}: {_one_line(err)}\n"
                          f"  (set CDPR_DEBUG=1 for the traceback)\n")
-        raise SystemExit(EXIT_INTERNAL_ERROR) from None
+        raise CommandExit(EXIT_INTERNAL_ERROR) from None
