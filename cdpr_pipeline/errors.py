@@ -38,6 +38,10 @@ class ConfigError(UserError, ValueError):
     """A configuration value is missing or unusable (names the key)."""
 
 
+class InputError(UserError, ValueError):
+    """An input file or directory is unusable (names it and why)."""
+
+
 class OutputBusy(UserError, RuntimeError):
     """Another process is writing the same output directory (names its pid)."""
 

@@ -20,6 +20,7 @@ from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.errors import DataValidationError
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.validation import validate_dataset
+from cdpr_pipeline.errors import ConfigError
 from cdpr_pipeline.stages.simulate import simulate
 
 log = logging.getLogger(__name__)
@@ -57,11 +58,11 @@ def build_dataset(cfg: DictConfig) -> dict:
                   "effects": list((cfg.get("effects") or {}).keys())}
     elif cfg.source == "ingest":
         if not cfg.path:
-            raise ValueError("source=ingest needs path=DIR (a cdpr-measured/1 dataset)")
+            raise ConfigError("source=ingest needs path=DIR (a cdpr-measured/1 dataset)")
         ingest(cfg.path, dest)
         origin = {"source": "ingest", "path": str(Path(cfg.path).resolve())}
     else:
-        raise ValueError(f"source={cfg.source!r}: expected simulate or ingest")
+        raise ConfigError(f"source={cfg.source!r}: expected simulate or ingest")
     data = load_dataset(dest)
     summary = origin | {"kind": data.rig.kind, "runs": len(data),
                         "samples": int(sum(len(r.t) for r in data)),

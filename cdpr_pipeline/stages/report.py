@@ -24,6 +24,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.rig import WINCH_KEYS
+from cdpr_pipeline.errors import InputError
 from cdpr_pipeline.pipeline.skip import skipped_reason
 from cdpr_pipeline.tables import to_markdown
 from cdpr_pipeline.tracking import finished_or_failed, log_metrics, make_logger
@@ -37,7 +38,7 @@ def _read_json(path: Path, what: str) -> dict:
     try:
         return json.loads(path.read_text())
     except json.JSONDecodeError as err:
-        raise ValueError(f"{path}: not valid JSON ({what}): {err}") from err
+        raise InputError(f"{path}: not valid JSON ({what}): {err}") from err
 
 
 def stage_table(stages: Mapping[str, object]) -> pd.DataFrame:

@@ -24,6 +24,7 @@ from cdpr_pipeline.data.io import load_dataset, read_rig
 from cdpr_pipeline.data.rig import AxesRig, CdprRig
 from cdpr_pipeline.data.split import heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.errors import ConfigError
 from cdpr_pipeline.models.forecast import Forecaster
 from cdpr_pipeline.models.virtual import (
     physically_valid,
@@ -64,7 +65,7 @@ def virtual(cfg: DictConfig) -> Path:
         ``xd``/``qd`` columns), or the rig is of a kind without virtual runs.
     """
     if not cfg.forecaster:
-        raise ValueError("forecaster=PATH (a forecaster.pt written by `cdpr train`) is required")
+        raise ConfigError("forecaster=PATH (a forecaster.pt written by `cdpr train`) is required")
     rig = read_rig(Path(cfg.data.path) / "rig.yaml")
     fc = Forecaster.load(cfg.forecaster)
     if not fc.layout.has_desired:
