@@ -6,8 +6,8 @@ Subpackages map the architecture: ``sim`` (the virtual lab), ``data`` (the
 behind the ``cdpr`` subcommands).
 
 The commands as functions, with the command's defaults (:mod:`cdpr_pipeline.api`):
-``diagnose(path, **overrides)``, ``identify``, ``validate``, ``simulate`` and
-``command_config(name, *overrides)``.
+``diagnose(path, **overrides)``, ``identify``, ``validate``, ``simulate``,
+``command_config(name, *overrides)`` and ``diagnosis_settings(*overrides)``.
 """
 
 from typing import Any
@@ -16,7 +16,7 @@ __version__ = "0.1.0"
 FORMAT = "cdpr-measured/1"
 
 #: what ``cdpr_pipeline.<name>`` gives from :mod:`cdpr_pipeline.api`
-API = ("command_config", "diagnose", "identify", "simulate", "validate")
+API = ("command_config", "diagnose", "diagnosis_settings", "identify", "simulate", "validate")
 
 
 def __getattr__(name: str) -> Any:

@@ -115,6 +115,20 @@ def diagnose(path: str | Path, *overrides: str, **values: Any):
     return run_command(run_diagnosis, "diagnose", *overrides, **{"data.path": path}, **values)
 
 
+def diagnosis_settings(*overrides: str, **values: Any):
+    """The analysis settings ``cdpr diagnose`` uses (``conf/diagnose.yaml`` with these
+    overrides), for :func:`cdpr_pipeline.discovery.diagnosis.diagnose` on a dataset
+    loaded in Python, whose own defaults are not the command's.
+
+    Returns
+    -------
+    cdpr_pipeline.discovery.diagnosis.DiagnosisSettings
+    """
+    from cdpr_pipeline.stages.diagnose import settings_from_config
+
+    return settings_from_config(command_config("diagnose", *overrides, **values))
+
+
 def identify(path: str | Path, *overrides: str, **values: Any):
     """``cdpr identify data.path=PATH ...``: identification.json in ``out_dir``.
 

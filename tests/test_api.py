@@ -72,3 +72,16 @@ def test_api_diagnosis_is_the_commands(tmp_path, monkeypatch, new_mlflow_store):
     assert by_api["verdict"] == d.verdict
     assert sorted(p.name for p in (tmp_path / "api").iterdir()) == sorted(
         p.name for p in (tmp_path / "cmd").iterdir())
+
+
+def test_diagnosis_settings_are_the_commands():
+    """What a notebook passes to discovery.diagnosis.diagnose(load_dataset(path), ...):
+    the command's filter, decimation and free-form size, not the dataclass defaults."""
+    from cdpr_pipeline.config import compose_config
+    from cdpr_pipeline.stages.diagnose import settings_from_config
+
+    settings = cdpr_pipeline.diagnosis_settings("blackbox.enabled=false")
+    expected = settings_from_config(compose_config("diagnose", ["blackbox.enabled=false"]))
+    assert settings.blackbox is None
+    for part in ("regression", "freeform", "selection", "closed_loop", "max_lag"):
+        assert repr(getattr(settings, part)) == repr(getattr(expected, part))

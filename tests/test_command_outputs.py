@@ -157,3 +157,26 @@ def test_diagnose_killed_after_writing_diagnosis_json_leaves_the_previous_output
     proc.wait()
     assert written.exists(), "the diagnosis finished before it could be killed"
     assert sorted(p.name for p in out.iterdir()) == ["bands.json", "only_in_previous.txt"]
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_diagnose_exits_130_in_one_line_with_the_outputs_as_they_were(tmp_path):
+    out = tmp_path / "diag"
+    _previous(out)
+    env = dict(os.environ, MLFLOW_TRACKING_URI=f"sqlite:///{tmp_path / 'mlflow.db'}")
+    env.pop("CDPR_DEBUG", None)
+    env.pop("HYDRA_FULL_ERROR", None)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cdpr_pipeline.cli", "diagnose", f"data.path={FOREIGN}",
+         "blackbox.enabled=false", f"out_dir={out}"], env=env, cwd=tmp_path,
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    partial = out.with_name("diag.partial")
+    for _ in range(6000):     # polls; the diagnosis itself ends the wait
+        if partial.exists() or proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["cdpr diagnose: interrupted (outputs left as they were)"]
+    assert sorted(p.name for p in out.iterdir()) == ["bands.json", "only_in_previous.txt"]
