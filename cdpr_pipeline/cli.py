@@ -1,8 +1,10 @@
 """The ``cdpr`` console command: ``cdpr <subcommand> [key=value ...] [-m]``.
 
-Every subcommand is a Hydra app (overrides, ``-m`` multirun, ``--cfg job``, ``--help``)
-whose work is a plain function in :mod:`cdpr_pipeline.stages`; ``params``, ``stage`` and
-``repro`` run the staged pipeline (:mod:`cdpr_pipeline.pipeline`).
+Every subcommand is a Hydra app (overrides, ``-m`` multirun, ``--cfg job``) whose work is
+a plain function in :mod:`cdpr_pipeline.stages`; ``params``, ``stage`` and ``repro`` run
+the staged pipeline (:mod:`cdpr_pipeline.pipeline`). ``cdpr <sub> --help`` lists the
+subcommand's main keys (:mod:`cdpr_pipeline.cli_help`; Hydra's own at ``--hydra-help``).
+Errors print a message and exit non-zero (:mod:`cdpr_pipeline.errors`).
 """
 
 from __future__ import annotations
