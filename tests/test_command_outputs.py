@@ -180,3 +180,16 @@ def test_ctrl_c_during_diagnose_exits_130_in_one_line_with_the_outputs_as_they_w
     assert proc.returncode == 130, err
     assert err.strip().splitlines() == ["cdpr diagnose: interrupted (outputs left as they were)"]
     assert sorted(p.name for p in out.iterdir()) == ["bands.json", "only_in_previous.txt"]
+
+
+def test_simulate_replaces_the_dataset_and_its_truth_beside_it(tmp_path):
+    import yaml
+
+    out = tmp_path / "r" / "lab"
+    for seed in (3, 4):
+        cli.main(["simulate", "trajectory=tiny", "trajectory.duration_s=0.5", "quiet=true",
+                  f"seed={seed}", f"out_dir={out}"])
+        truth = yaml.safe_load(out.with_name("lab.truth.yaml").read_text())
+        assert truth["seed"] == seed and truth["dataset"] == "lab"
+    assert sorted(p.name for p in out.parent.iterdir()) == ["lab", "lab.truth.yaml"]
+    assert sorted(p.name for p in out.iterdir()) == ["rig.yaml", "trajectories"]
