@@ -96,12 +96,8 @@ def main(argv: list[str] | None = None) -> None:
         return
     saved_argv = sys.argv
     with reported(f"cdpr {sub}"):
-        module_name, _, func = SUBCOMMANDS[sub].partition(":")
-        entry = getattr(importlib.import_module(module_name), func or "main")
-        # Hydra reads its overrides from sys.argv; present the rest as the app's own argv
-        sys.argv = [f"cdpr {sub}", *argv[1:]]
         try:
-            entry()
+            _dispatch(sub, argv)
         except CommandExit:
             raise
         except SystemExit as exit_:
@@ -111,6 +107,15 @@ def main(argv: list[str] | None = None) -> None:
             raise
         finally:
             sys.argv = saved_argv
+
+
+def _dispatch(sub: str, argv: list[str]) -> None:
+    """Run the subcommand's entry point with ``argv[1:]`` as its arguments."""
+    module_name, _, func = SUBCOMMANDS[sub].partition(":")
+    entry = getattr(importlib.import_module(module_name), func or "main")
+    # Hydra reads its overrides from sys.argv; present the rest as the app's own argv
+    sys.argv = [f"cdpr {sub}", *argv[1:]]
+    entry()
 
 
 if __name__ == "__main__":
