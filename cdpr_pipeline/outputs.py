@@ -187,7 +187,8 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
     """Lock ``out_dir``, yield where to write it, and swap that in when the block ends.
 
     If the block raises (or the process dies) ``out_dir`` stays as it was and the work so
-    far stays in ``<out_dir>.partial`` (resumed by a run with the same ``digest``).
+    far stays in ``<out_dir>.partial`` (resumed by a run with the same ``digest``; removed
+    if the block raised before writing anything).
 
     Parameters
     ----------
@@ -211,15 +212,20 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
     out_dir = Path(out_dir)
     with output_lock(out_dir):
         partial = partial_dir(out_dir, digest)
+        work = partial / out_dir.name if nested else partial
+        if nested and work.exists():   # an interrupted writer's; a dataset writer does not
+            shutil.rmtree(work)        # resume
+        try:
+            yield work
+        except BaseException:
+            if not any(partial.iterdir()):    # it failed before writing: nothing to keep
+                partial.rmdir()
+                _sibling(out_dir, ".partial.params").unlink(missing_ok=True)
+            raise
         if not nested:
-            yield partial
             commit_output(partial, out_dir, carry)
             repoint_text_outputs(out_dir, str(partial), str(out_dir))
             return
-        work = partial / out_dir.name
-        if work.exists():     # an interrupted writer's; a dataset writer does not resume
-            shutil.rmtree(work)
-        yield work
         if not work.exists():
             raise FileNotFoundError(f"{work}: the run wrote no {out_dir.name}")
         sidecars = [p for p in partial.iterdir() if p.name != out_dir.name]
