@@ -56,6 +56,14 @@ def _ddp_worker() -> bool:
     return any(int(os.environ.get(name, "0") or 0) > 0 for name in ("LOCAL_RANK", "RANK"))
 
 
+def _config(tree: dict[str, Any], old: str, new: str) -> DictConfig:
+    """``tree`` with its paths under ``old`` moved under ``new``, as a struct config
+    (an unknown key raises, as in the config Hydra passes)."""
+    cfg = OmegaConf.create(rebase_paths(tree, old, new))
+    OmegaConf.set_struct(cfg, True)
+    return cfg
+
+
 def _digest(tree: dict[str, Any]) -> str:
     """Stamp of a resolved config and of its dataset's files (size, mtime): a partial
     output (a training's last checkpoint) is resumed only under both unchanged."""
@@ -110,11 +118,11 @@ def run_staged(func: Callable[[DictConfig], T], cfg: DictConfig, *, nested: bool
         # rank 0 holds the lock and commits; a worker writes into the same partial dir
         work = Path(out_dir + ".partial")
         work = work / Path(out_dir).name if nested else work
-        return func(OmegaConf.create(rebase_paths(tree, out_dir, str(work))))
+        return func(_config(tree, out_dir, str(work)))
     if nested and tree.get("overwrite") is False and Path(out_dir).exists():
         raise UserError(f"out_dir={out_dir} exists; overwrite=true replaces it")
     with staged_output(Path(out_dir), _digest(tree), nested=nested, carry=carry) as work:
-        result = func(OmegaConf.create(rebase_paths(tree, out_dir, str(work))))
+        result = func(_config(tree, out_dir, str(work)))
     log.info("wrote %s", out_dir)
     return result
 
