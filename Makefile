@@ -29,6 +29,10 @@ install: $(STAMP)
 ## params.yaml from conf/, then `dvc repro` under one MLflow parent run (`cdpr repro`);
 ## a second run does nothing unless inputs changed. ARGS="profile=paper" for the paper's sizes
 ARGS ?=
+# the pipeline's MLflow store: the project root's mlflow.db (MLflow's default is the working
+# directory's); an MLFLOW_TRACKING_URI set in the environment wins
+MLFLOW_TRACKING_URI ?= sqlite:///$(CURDIR)/mlflow.db
+run: export MLFLOW_TRACKING_URI := $(MLFLOW_TRACKING_URI)
 run: $(STAMP)
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/cdpr repro $(ARGS)
 

@@ -1,14 +1,19 @@
 """The ``cdpr`` console command: ``cdpr <subcommand> [key=value ...] [-m]``.
 
-Every subcommand is a Hydra app (overrides, ``-m`` multirun, ``--cfg job``, ``--help``)
-whose work is a plain function in :mod:`cdpr_pipeline.stages`; ``params``, ``stage`` and
-``repro`` run the staged pipeline (:mod:`cdpr_pipeline.pipeline`).
+Every subcommand is a Hydra app (overrides, ``-m`` multirun, ``--cfg job``) whose work is
+a plain function in :mod:`cdpr_pipeline.stages`; ``params``, ``stage`` and ``repro`` run
+the staged pipeline (:mod:`cdpr_pipeline.pipeline`). ``cdpr <sub> --help`` lists the
+subcommand's main keys (:mod:`cdpr_pipeline.cli_help`; Hydra's own at ``--hydra-help``).
+Errors print a message and exit non-zero (:mod:`cdpr_pipeline.errors`).
 """
 
 from __future__ import annotations
 
 import importlib
 import sys
+
+from cdpr_pipeline.cli_help import subcommand_help
+from cdpr_pipeline.errors import EXIT_USER_ERROR, CommandExit, reported
 
 #: subcommand -> module with a Hydra ``main`` (or ``module:function``)
 SUBCOMMANDS = {
@@ -28,6 +33,10 @@ SUBCOMMANDS = {
     "stage": "cdpr_pipeline.pipeline.commands:stage_main",
     "repro": "cdpr_pipeline.pipeline.commands:repro_main",
 }
+
+#: Hydra subcommand -> its conf/<name>.yaml (for ``cdpr <sub> --help``)
+CONFIG_NAMES = {sub: "pipeline" if sub in ("params", "repro") else sub
+                for sub in SUBCOMMANDS if sub != "stage"}
 
 USAGE = """usage: cdpr <subcommand> [key=value ...] [-m] [--cfg job] [--help]
 
@@ -54,7 +63,26 @@ subcommands:
 """
 
 
+def _descriptions() -> dict[str, str]:
+    """Subcommand -> its paragraph of :data:`USAGE`."""
+    out: dict[str, str] = {}
+    for line in USAGE.split("subcommands:\n", 1)[1].splitlines():
+        name, _, text = line.strip().partition(" ")
+        if line.startswith("  ") and not line.startswith("    ") and name in SUBCOMMANDS:
+            current = name
+            out[current] = text.strip()
+        elif line.strip() and out:
+            out[current] += " " + line.strip()
+    return out
+
+
 def main(argv: list[str] | None = None) -> None:
+    """Run ``cdpr <subcommand> [args]`` (``argv`` default: ``sys.argv[1:]``).
+
+    Errors end in :class:`SystemExit` with a message on stderr (see
+    :mod:`cdpr_pipeline.errors`): 2 for bad data or configuration, 130 after Ctrl-C;
+    it can be called repeatedly in one process.
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help", "help"):
         sys.stdout.write(USAGE)
@@ -62,7 +90,27 @@ def main(argv: list[str] | None = None) -> None:
     sub = argv[0]
     if sub not in SUBCOMMANDS:
         sys.stderr.write(f"cdpr: unknown subcommand {sub!r}\n\n{USAGE}")
-        raise SystemExit(2)
+        raise SystemExit(EXIT_USER_ERROR)
+    if sub in CONFIG_NAMES and any(a in ("-h", "--help") for a in argv[1:]):
+        sys.stdout.write(subcommand_help(sub, CONFIG_NAMES[sub], _descriptions()[sub]))
+        return
+    saved_argv = sys.argv
+    with reported(f"cdpr {sub}"):
+        try:
+            _dispatch(sub, argv)
+        except CommandExit:
+            raise
+        except SystemExit as exit_:
+            # Hydra's own report of a bad override or config (printed, no traceback)
+            if exit_.code == 1:
+                raise CommandExit(EXIT_USER_ERROR) from None
+            raise
+        finally:
+            sys.argv = saved_argv
+
+
+def _dispatch(sub: str, argv: list[str]) -> None:
+    """Run the subcommand's entry point with ``argv[1:]`` as its arguments."""
     module_name, _, func = SUBCOMMANDS[sub].partition(":")
     entry = getattr(importlib.import_module(module_name), func or "main")
     # Hydra reads its overrides from sys.argv; present the rest as the app's own argv

@@ -16,6 +16,7 @@ import numpy as np
 from cdpr_pipeline.data.io import write_dataset
 from cdpr_pipeline.data.rig import AxesRig, WinchParams
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.errors import InputError
 
 #: published IDIM-LS parameters of DATA_EMPS.mat (data README) and their std
 EMPS_PUBLISHED = {"inertia": 95.1089, "viscous": 203.5034, "coulomb": 20.3935,
@@ -34,10 +35,10 @@ def _emps_run(path: Path, name: str) -> tuple[Trajectory, dict]:
     try:
         d = loadmat(path)
     except Exception as err:   # scipy raises several types for non-MAT input
-        raise ValueError(f"{path}: not a readable MAT file ({err})") from err
+        raise InputError(f"{path}: not a readable MAT file ({err})") from err
     missing = [k for k in ("t", "qm", "qg", "vir", "gtau") if k not in d]
     if missing:
-        raise ValueError(f"{path}: variables {missing} missing; is this an EMPS file?")
+        raise InputError(f"{path}: variables {missing} missing; is this an EMPS file?")
     col = lambda k: np.asarray(d[k], float).ravel()   # noqa: E731
     gtau = float(np.asarray(d["gtau"]).ravel()[0])
     extra = {"pulses_n": col("pulses_N")} if "pulses_N" in d else {}

@@ -7,6 +7,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from cdpr_pipeline.errors import UserError
+
 Severity = Literal["error", "warning"]
 
 ROW_NOTE = "rows are line numbers in the file, the header being line 1"
@@ -58,7 +60,7 @@ class Problem:
         return text
 
 
-class DataValidationError(Exception):
+class DataValidationError(UserError):
     """A dataset (or rig file) violates ``cdpr-measured/1``.
 
     Parameters

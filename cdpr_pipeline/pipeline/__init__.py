@@ -6,7 +6,8 @@ One module per job (the stage functions themselves are in :mod:`cdpr_pipeline.st
 - :mod:`~cdpr_pipeline.pipeline.params`: ``params.yaml`` from ``conf/pipeline.yaml``;
 - :mod:`~cdpr_pipeline.pipeline.inputs`: a stage's declared inputs (resume stamp, blame,
   skipped inputs);
-- :mod:`~cdpr_pipeline.pipeline.outputs`: locks, partial directories, the swap, repointing;
+- :mod:`cdpr_pipeline.outputs` (shared with the standalone commands): locks, partial
+  directories, the swap, repointing;
 - :mod:`~cdpr_pipeline.pipeline.skip`: :class:`StageNotApplicable` and skip markers;
 - :mod:`~cdpr_pipeline.pipeline.mlflow_logging`: what the runner logs to MLflow;
 - :mod:`~cdpr_pipeline.pipeline.stage_runner`: ``run_stage`` (``cdpr stage NAME``);

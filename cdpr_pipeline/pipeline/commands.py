@@ -13,10 +13,10 @@ import logging
 import sys
 from collections.abc import Sequence
 
-import hydra
 from omegaconf import DictConfig
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
+from cdpr_pipeline.errors import CommandExit
 from cdpr_pipeline.pipeline.params import PARAMS_FILE, pipeline_params, write_params
 from cdpr_pipeline.pipeline.repro import repro
 from cdpr_pipeline.pipeline.stage_runner import run_stage
@@ -24,7 +24,7 @@ from cdpr_pipeline.pipeline.stage_runner import run_stage
 log = logging.getLogger(__name__)
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="pipeline", version_base="1.3")
+@hydra_command("pipeline", name="params", writes=False)
 def params_main(cfg: DictConfig) -> None:
     """``cdpr params [overrides]``."""
     changed = write_params(pipeline_params(cfg))
@@ -59,12 +59,12 @@ def stage_main(argv: Sequence[str] | None = None) -> None:
         run_stage(args[0], params_file)
     except (KeyError, FileNotFoundError, RuntimeError) as err:   # StageFailed included
         log.error("%s", err.args[0] if isinstance(err, KeyError) else err)
-        raise SystemExit(1) from None
+        raise CommandExit(1) from None
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="pipeline", version_base="1.3")
+@hydra_command("pipeline", name="repro", writes=False)
 def repro_main(cfg: DictConfig) -> None:
     """``cdpr repro [overrides]``."""
     rc = repro(cfg)
     if rc:
-        raise SystemExit(rc)
+        raise CommandExit(rc)   # dvc's status, as it is

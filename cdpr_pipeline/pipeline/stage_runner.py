@@ -23,6 +23,14 @@ from typing import Any
 from hydra.utils import get_method
 from omegaconf import OmegaConf
 
+from cdpr_pipeline.outputs import (
+    commit_output,
+    empty_dir,
+    output_lock,
+    partial_dir,
+    rebase_paths,
+    repoint_text_outputs,
+)
 from cdpr_pipeline.pipeline.inputs import (
     SkippedInputs,
     blame,
@@ -31,14 +39,6 @@ from cdpr_pipeline.pipeline.inputs import (
     inputs_state,
 )
 from cdpr_pipeline.pipeline.mlflow_logging import log_skipped, log_stage_outputs
-from cdpr_pipeline.pipeline.outputs import (
-    commit_output,
-    empty_dir,
-    output_lock,
-    partial_dir,
-    rebase_paths,
-    repoint_text_outputs,
-)
 from cdpr_pipeline.pipeline.params import PARAMS_FILE, read_section
 from cdpr_pipeline.pipeline.skip import Skipped, StageNotApplicable, write_skip_markers
 from cdpr_pipeline.tracking import flatten_params, log_params_once, stage_run

@@ -1,5 +1,7 @@
 """Task functions behind the ``cdpr`` subcommands.
 
-Each module has a plain function taking a composed config (tests call it directly) and a
-thin ``@hydra.main`` wrapper ``main`` that the CLI dispatches to.
+Each module has a plain function taking a composed config (tests and
+:mod:`cdpr_pipeline.api` call it) and a thin wrapper ``main`` that the CLI dispatches to,
+made a Hydra app by :func:`cdpr_pipeline.command.hydra_command` (errors reported without
+a traceback, ``out_dir`` written whole by one process).
 """

@@ -30,12 +30,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import hydra
 import pandas as pd
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR, compose_config
+from cdpr_pipeline.command import hydra_command
+from cdpr_pipeline.config import compose_config
+from cdpr_pipeline.errors import ConfigError
 from cdpr_pipeline.models.physics import (
     EXTENDED,
     NOMINAL,
@@ -396,7 +397,7 @@ def compare(cfg: DictConfig) -> Comparison:
             runs = runs_from_dirs(list(cfg.train_dirs))
             other = runs[runs["tags.data_digest"] != digest] if digest else runs.iloc[:0]
             if not other.empty:
-                raise ValueError(f"train_dirs {list(other['tags.model'])} were trained on "
+                raise ConfigError(f"train_dirs {list(other['tags.model'])} were trained on "
                                  f"another dataset than data.path={path}")
             return runs
         return latest_runs(cfg.tracking.experiment, cfg.tracking.uri, "train", digest)
@@ -404,7 +405,7 @@ def compare(cfg: DictConfig) -> Comparison:
     runs = fetch()
     found = set(runs["tags.model"]) if not runs.empty else set()
     if not found & set(models):
-        raise RuntimeError(f"no finished train runs of {models} on {path} in experiment "
+        raise ConfigError(f"no finished train runs of {models} on {path} in experiment "
                            f"{cfg.tracking.experiment!r}; run `cdpr train -m model=...` first")
     sources = {r["tags.model"]: _source(r) for _, r in runs.iterrows()}
     missing_refs = [r for r in refs if r not in found]
@@ -555,7 +556,7 @@ def _fitted_on_test(extended: Path, split: dict) -> list[str]:
     return [r for r in test_runs if r in fitted_runs]
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="compare", version_base="1.3")
+@hydra_command("compare")
 def main(cfg: DictConfig) -> None:
     result = compare(cfg)
     print(to_markdown(result.summary))

@@ -14,13 +14,13 @@ import logging
 import shutil
 from pathlib import Path
 
-import hydra
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.errors import DataValidationError
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.validation import validate_dataset
+from cdpr_pipeline.errors import ConfigError
 from cdpr_pipeline.stages.simulate import simulate
 
 log = logging.getLogger(__name__)
@@ -58,11 +58,11 @@ def build_dataset(cfg: DictConfig) -> dict:
                   "effects": list((cfg.get("effects") or {}).keys())}
     elif cfg.source == "ingest":
         if not cfg.path:
-            raise ValueError("source=ingest needs path=DIR (a cdpr-measured/1 dataset)")
+            raise ConfigError("source=ingest needs path=DIR (a cdpr-measured/1 dataset)")
         ingest(cfg.path, dest)
         origin = {"source": "ingest", "path": str(Path(cfg.path).resolve())}
     else:
-        raise ValueError(f"source={cfg.source!r}: expected simulate or ingest")
+        raise ConfigError(f"source={cfg.source!r}: expected simulate or ingest")
     data = load_dataset(dest)
     summary = origin | {"kind": data.rig.kind, "runs": len(data),
                         "samples": int(sum(len(r.t) for r in data)),
@@ -73,6 +73,6 @@ def build_dataset(cfg: DictConfig) -> dict:
     return summary
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="dataset", version_base="1.3")
+@hydra_command("dataset")
 def main(cfg: DictConfig) -> None:
     build_dataset(cfg)

@@ -13,12 +13,11 @@ import math
 from pathlib import Path
 from typing import Any
 
-import hydra
 import numpy as np
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.split import Split
 from cdpr_pipeline.discovery.diagnosis import (
@@ -147,6 +146,6 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
     return d
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="diagnose", version_base="1.3")
+@hydra_command("diagnose")
 def main(cfg: DictConfig) -> None:
     run_diagnosis(cfg)

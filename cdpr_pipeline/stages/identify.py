@@ -11,12 +11,12 @@ import logging
 import time
 from pathlib import Path
 
-import hydra
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.errors import ConfigError
 from cdpr_pipeline.identification.pipeline import (
     Identification,
     identify_dataset,
@@ -45,7 +45,7 @@ def _flat_metrics(metrics: dict) -> dict[str, float]:
 def identify(cfg: DictConfig) -> Identification:
     """Identify the winch (axis) parameters of ``cfg.data.path`` with ``cfg.method``."""
     if cfg.method not in cfg.identification:
-        raise ValueError(f"unknown method {cfg.method!r}; known: "
+        raise ConfigError(f"unknown method {cfg.method!r}; known: "
                          f"{sorted(cfg.identification)}")
     data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
                         min_samples=cfg.data.min_samples)
@@ -86,6 +86,6 @@ def identify(cfg: DictConfig) -> Identification:
     return result
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="identify", version_base="1.3")
+@hydra_command("identify")
 def main(cfg: DictConfig) -> None:
     identify(cfg)

@@ -13,16 +13,16 @@ import json
 import logging
 from pathlib import Path
 
-import hydra
 import numpy as np
 import pandas as pd
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.rig import WINCH_KEYS
 from cdpr_pipeline.data.split import Split
+from cdpr_pipeline.errors import InputError
 from cdpr_pipeline.identification.identifiers import LeastSquares
 from cdpr_pipeline.identification.reconstruction import (
     HighFrequencyModel,
@@ -69,7 +69,7 @@ def reconstruct(cfg: DictConfig) -> dict:
     """Tables IV and V for an identification; returns the scores."""
     ident = json.loads(Path(cfg.identification_json).read_text())
     if not ident.get("heldout_runs"):
-        raise ValueError(f"{cfg.identification_json}: no held-out runs; "
+        raise InputError(f"{cfg.identification_json}: no held-out runs; "
                          "identify with holdout=[...]")
     data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
                         min_samples=cfg.data.min_samples)
@@ -132,6 +132,6 @@ def reconstruct(cfg: DictConfig) -> dict:
     return result
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="reconstruct", version_base="1.3")
+@hydra_command("reconstruct")
 def main(cfg: DictConfig) -> None:
     reconstruct(cfg)

@@ -17,14 +17,14 @@ import logging
 from collections.abc import Mapping
 from pathlib import Path
 
-import hydra
 import numpy as np
 import pandas as pd
 import yaml
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.rig import WINCH_KEYS
+from cdpr_pipeline.errors import InputError
 from cdpr_pipeline.pipeline.skip import skipped_reason
 from cdpr_pipeline.tables import to_markdown
 from cdpr_pipeline.tracking import finished_or_failed, log_metrics, make_logger
@@ -38,7 +38,7 @@ def _read_json(path: Path, what: str) -> dict:
     try:
         return json.loads(path.read_text())
     except json.JSONDecodeError as err:
-        raise ValueError(f"{path}: not valid JSON ({what}): {err}") from err
+        raise InputError(f"{path}: not valid JSON ({what}): {err}") from err
 
 
 def stage_table(stages: Mapping[str, object]) -> pd.DataFrame:
@@ -227,6 +227,6 @@ def build_report(cfg: DictConfig) -> dict:
     return summary
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="report", version_base="1.3")
+@hydra_command("report")
 def main(cfg: DictConfig) -> None:
     build_report(cfg)

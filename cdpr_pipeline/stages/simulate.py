@@ -6,16 +6,16 @@ import logging
 from pathlib import Path
 from typing import Any
 
-import hydra
 import numpy as np
 from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.errors import DataValidationError
 from cdpr_pipeline.data.io import read_rig
 from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.validation import parse_rig
+from cdpr_pipeline.errors import ConfigError, InputError
 from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.lab import LabRun, generate_dataset
 from cdpr_pipeline.sim.model_file import read_model
@@ -36,7 +36,7 @@ def rig_from_config(cfg: DictConfig) -> CdprRig:
         if rig is None or any(p.severity == "error" for p in problems):
             raise DataValidationError(problems)
     if not isinstance(rig, CdprRig):
-        raise ValueError("the virtual lab simulates cable robots (kind: cdpr) only")
+        raise ConfigError("the virtual lab simulates cable robots (kind: cdpr) only")
     return rig
 
 
@@ -64,7 +64,7 @@ def simulate(cfg: DictConfig) -> LabRun:
     if cfg.get("model_file"):
         rig, effects = read_model(cfg.model_file)
         if not isinstance(rig, CdprRig):
-            raise ValueError(f"{cfg.model_file}: the virtual lab simulates cable robots only")
+            raise InputError(f"{cfg.model_file}: the virtual lab simulates cable robots only")
         log.info("model %s: %d effect(s)", cfg.model_file, len(effects))
         effects += effects_from_config(cfg.get("effects"), rig.n, cfg.seed)
     else:
@@ -91,8 +91,6 @@ def simulate(cfg: DictConfig) -> LabRun:
     )
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="simulate", version_base="1.3")
+@hydra_command("simulate", nested=True)
 def main(cfg: DictConfig) -> None:
-    run = simulate(cfg)
-    log.info("dataset: %s", run.dataset_dir)
-    log.info("truth:   %s", run.truth_path)
+    simulate(cfg)   # the truth lands beside the dataset: <out_dir>.truth.yaml

@@ -14,7 +14,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import hydra
 import lightning as L
 import numpy as np
 import torch
@@ -22,7 +21,7 @@ import yaml
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.models.datamodule import TrajectoryDataModule
 from cdpr_pipeline.models.evaluation import evaluate, plot_predictions
 from cdpr_pipeline.models.forecast import Forecaster
@@ -170,6 +169,6 @@ def _train(cfg: DictConfig) -> TrainResult:
     return TrainResult(run_id, metrics, fc_path, out_dir)
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="train", version_base="1.3")
+@hydra_command("train")
 def main(cfg: DictConfig) -> None:
     train(cfg)

@@ -16,15 +16,15 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-import hydra
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset, read_rig
 from cdpr_pipeline.data.rig import AxesRig, CdprRig
 from cdpr_pipeline.data.split import heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.errors import ConfigError
 from cdpr_pipeline.models.forecast import Forecaster
 from cdpr_pipeline.models.virtual import (
     physically_valid,
@@ -65,7 +65,7 @@ def virtual(cfg: DictConfig) -> Path:
         ``xd``/``qd`` columns), or the rig is of a kind without virtual runs.
     """
     if not cfg.forecaster:
-        raise ValueError("forecaster=PATH (a forecaster.pt written by `cdpr train`) is required")
+        raise ConfigError("forecaster=PATH (a forecaster.pt written by `cdpr train`) is required")
     rig = read_rig(Path(cfg.data.path) / "rig.yaml")
     fc = Forecaster.load(cfg.forecaster)
     if not fc.layout.has_desired:
@@ -107,6 +107,6 @@ def virtual(cfg: DictConfig) -> Path:
     return out
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="virtual", version_base="1.3")
+@hydra_command("virtual", nested=True)
 def main(cfg: DictConfig) -> None:
     virtual(cfg)

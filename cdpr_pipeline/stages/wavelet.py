@@ -12,12 +12,11 @@ import json
 import logging
 from pathlib import Path
 
-import hydra
 import numpy as np
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.identification.pipeline import split_regression
 from cdpr_pipeline.identification.regressors import COLUMNS, dataset_regression
@@ -57,6 +56,6 @@ def decompose(cfg: DictConfig) -> dict:
     return summary
 
 
-@hydra.main(config_path=CONFIG_DIR, config_name="wavelet", version_base="1.3")
+@hydra_command("wavelet")
 def main(cfg: DictConfig) -> None:
     decompose(cfg)

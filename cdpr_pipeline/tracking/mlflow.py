@@ -1,7 +1,8 @@
 """MLflow helpers.
 
 The tracking URI is ``tracking.uri`` from the config if set, else ``MLFLOW_TRACKING_URI``,
-else ``sqlite:///mlflow.db`` in the project root (an embedded store, nothing to start).
+else MLflow's own default, ``sqlite:///mlflow.db`` in the working directory (an embedded
+store, nothing to start; ``make run`` sets ``MLFLOW_TRACKING_URI`` to the project root's).
 
 Pipeline stages run inside :func:`stage_run`: one MLflow run per stage, nested under the
 pipeline's parent run when ``CDPR_MLFLOW_PARENT_RUN_ID`` is set (``cdpr repro`` sets it
@@ -20,9 +21,9 @@ from typing import Any
 
 import pandas as pd
 
-from cdpr_pipeline.config import PROJECT_ROOT
-
-DEFAULT_TRACKING_URI = f"sqlite:///{PROJECT_ROOT / 'mlflow.db'}"
+#: MLflow's default store (``mlflow.store.tracking.DEFAULT_TRACKING_URI``): relative to the
+#: working directory; :func:`tracking_uri` makes it absolute when it is used
+DEFAULT_TRACKING_URI = "sqlite:///mlflow.db"
 #: environment variable holding the pipeline's parent run (set by ``cdpr repro``)
 PARENT_RUN_ENV = "CDPR_MLFLOW_PARENT_RUN_ID"
 #: the open stage run the next :func:`make_logger` call writes into (claimed once)
@@ -30,8 +31,13 @@ _STAGE_RUN: ContextVar[str | None] = ContextVar("cdpr_stage_run", default=None)
 
 
 def tracking_uri(configured: str | None = None) -> str:
-    """The tracking URI to use (see the module docstring for the order)."""
-    return configured or os.environ.get("MLFLOW_TRACKING_URI") or DEFAULT_TRACKING_URI
+    """The tracking URI to use (see the module docstring for the order); the default
+    store is named by its absolute path, so a later change of directory (a DDP worker,
+    a subprocess) keeps using the same file."""
+    uri = configured or os.environ.get("MLFLOW_TRACKING_URI")
+    if uri:
+        return uri
+    return f"sqlite:///{Path(DEFAULT_TRACKING_URI[len('sqlite:///'):]).resolve()}"
 
 
 def artifact_location(uri: str) -> str | None:

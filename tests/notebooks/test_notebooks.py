@@ -56,7 +56,7 @@ def test_notebook_writes_under_its_work_directory_and_uses_the_default_tracking(
     nb = _read(path)
     source = "\n".join(c.source for c in _code_cells(nb))
     assert 'os.environ.get("CDPR_NOTEBOOK_WORK")' in source
-    # no tracking.uri: $MLFLOW_TRACKING_URI, else the project's sqlite:///mlflow.db, applies
+    # no tracking.uri: $MLFLOW_TRACKING_URI, else MLflow's sqlite:///mlflow.db in the cwd, applies
     assert "tracking.uri" not in source
     assert nb.cells[0].cell_type == "markdown"
 

@@ -8,9 +8,14 @@ from cdpr_pipeline.tracking import experiment_id, tracking_uri
 from cdpr_pipeline.tracking.mlflow import DEFAULT_TRACKING_URI, artifact_location
 
 
-def test_uri_order(monkeypatch):
+def test_uri_order(monkeypatch, tmp_path):
+    import mlflow.store.tracking
+
     monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
-    assert tracking_uri() == DEFAULT_TRACKING_URI
+    monkeypatch.chdir(tmp_path)
+    # MLflow's own default, in the working directory (never inside the installed package)
+    assert DEFAULT_TRACKING_URI == mlflow.store.tracking.DEFAULT_TRACKING_URI
+    assert tracking_uri() == f"sqlite:///{tmp_path.resolve() / 'mlflow.db'}"
     monkeypatch.setenv("MLFLOW_TRACKING_URI", "http://127.0.0.1:5000")
     assert tracking_uri() == "http://127.0.0.1:5000"
     assert tracking_uri("sqlite:///x.db") == "sqlite:///x.db"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from cdpr_pipeline.pipeline.outputs import (
+from cdpr_pipeline.outputs import (
     commit_output,
     empty_dir,
     output_lock,
