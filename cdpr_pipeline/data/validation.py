@@ -707,7 +707,8 @@ class _FileChecker:
             return  # with a wrong rate every interval would also look like a gap
         # the interval after a time step backwards or repeated is not a separate gap
         gap = (dt > GAP_FACTOR * period) & ~np.r_[False, dt[:-1] <= 0]
-        hint = "accepted (allow_gaps=True)" if self.allow_gaps else "pass allow_gaps=True to accept"
+        hint = ("the run is cut here into two runs (allow_gaps=True)" if self.allow_gaps
+                else "pass allow_gaps=True to cut the run at its gaps")
         self.flag("t", gap, "gap",
                   lambda i: f"gap of {dt[i - 1]:.6g} s (about "
                   f"{_count(round(dt[i - 1] / period) - 1)} sample(s) missing) "
