@@ -13,7 +13,7 @@ import logging
 import math
 import re
 from collections import Counter
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,6 +24,7 @@ import yaml
 
 from .errors import ROW_NOTE, DataValidationError, Problem, Severity
 from .rig import FORMAT, WINCH_KEYS, AxesRig, CdprRig, ControllerSpec, Rig, WinchParams
+from .trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -905,3 +906,50 @@ def validate_dataset(
     """
     return check_dataset(path, min_samples=min_samples, allow_gaps=allow_gaps,
                          rate_tolerance=rate_tolerance)[0]
+
+
+# --------------------------------------------------------------------------- analysis needs
+
+
+def run_file(name: str) -> str:
+    """The file a run (or a time block of it, ``<run>@...``) was read from."""
+    return f"{TRAJ_DIR}/{name.split('@', 1)[0]}.csv"
+
+
+def check_run_lengths(runs: Sequence[Trajectory], needs: Mapping[str, int], rate_hz: float,
+                      command: str, why: str, root: str | Path | None = None) -> None:
+    """Refuse runs shorter than a command needs, before any analysis.
+
+    Parameters
+    ----------
+    runs : sequence of Trajectory
+        The runs (or time blocks) the command analyses.
+    needs : mapping of str to int
+        Fewest samples per run name (a run not in it needs nothing).
+    rate_hz : float
+        The rig's sample rate, for the message's seconds.
+    command : str
+        The command (``identify``, ``diagnose``), named in the message.
+    why : str
+        What the minimum is made of, in words.
+    root : str or Path, optional
+        The dataset, named in the message.
+
+    Raises
+    ------
+    DataValidationError
+        Naming each short run's file, column ``t``, its length and the minimum.
+    """
+    problems = []
+    for tr in runs:
+        need = int(needs.get(tr.name, 0))
+        if tr.n_samples < need:
+            label = f" ({tr.name})" if "@" in tr.name else ""
+            problems.append(Problem(
+                run_file(tr.name), "t", None,
+                f"run{label} has {tr.n_samples} samples ({tr.n_samples / rate_hz:.3g} s); "
+                f"`cdpr {command}` needs at least {need} samples ({need / rate_hz:.3g} s at "
+                f"{rate_hz:g} Hz) in this run: {why}; record a longer run",
+                "error", "too_few_samples"))
+    if problems:
+        raise DataValidationError(problems, root=root)

@@ -12,11 +12,14 @@ from typing import Any
 import numpy as np
 import yaml
 
+from cdpr_pipeline.data.errors import DataValidationError, Problem
 from cdpr_pipeline.data.io import Dataset
-from cdpr_pipeline.data.rig import WINCH_KEYS
+from cdpr_pipeline.data.rig import WINCH_KEYS, CdprRig
 from cdpr_pipeline.data.split import Split, heldout_split
+from cdpr_pipeline.data.validation import check_run_lengths, run_file
 from cdpr_pipeline.identification.identifiers import Estimate, fit_metrics
 from cdpr_pipeline.identification.regressors import (
+    TRIM_PERIODS,
     RegressionSettings,
     WinchRegression,
     dataset_regression,
@@ -35,6 +38,59 @@ def min_block_samples(settings: RegressionSettings, sample_rate_hz: float) -> in
     regression rows."""
     trim = int(round(settings.filter.trim_s * sample_rate_hz))
     return 2 * trim + MIN_BLOCK_ROWS * max(1, int(settings.decimate))
+
+
+def trim_words(settings: RegressionSettings, rate_hz: float) -> str:
+    """What a block of :func:`min_block_samples` is made of, in words (for messages)."""
+    trim = int(round(settings.filter.trim_s * rate_hz))
+    return (f"the derivative filter's edge trims ({trim} samples at each end: "
+            f"{TRIM_PERIODS:g} periods of its {settings.filter.cutoff_hz:.3g} Hz cut-off) and "
+            f"{MIN_BLOCK_ROWS} regression rows after decimation by {settings.decimate}")
+
+
+def identification_needs(dataset: Dataset, settings: RegressionSettings
+                         ) -> tuple[dict[str, int], str]:
+    """Fewest samples per run that :func:`identify_dataset` can use, and why.
+
+    Every run needs :func:`min_block_samples` (``settings`` resolved); a single run twice
+    that, since its last block is held out (:func:`identification_split`).
+    """
+    rate = dataset.rig.sample_rate_hz
+    block = min_block_samples(settings, rate)
+    single = len(dataset.trajectories) == 1
+    why = trim_words(settings, rate) + (
+        ", for a fitted and a held-out block of the one run" if single else "")
+    return {tr.name: block * (2 if single else 1) for tr in dataset.trajectories}, why
+
+
+def check_reversals(reg: WinchRegression, dataset: Dataset, runs: Sequence[str]) -> None:
+    """Refuse a fit whose velocity never reverses on a channel.
+
+    The Coulomb column ``sign(q')`` is then the constant column of the offset ``d`` (up
+    to its sign), so the two are not identifiable apart and least squares splits the
+    sum between them arbitrarily. Fewer than :data:`MIN_BLOCK_ROWS` rows moving either
+    way count as no reversal.
+
+    Raises
+    ------
+    DataValidationError
+        Naming the first fitted run's file and the position column of each channel.
+    """
+    problems = []
+    column = "l" if isinstance(dataset.rig, CdprRig) else "q"
+    for i in range(reg.n):
+        b = reg.phi[:, i, 1]
+        up, down = int(np.sum(b > 0)), int(np.sum(b < 0))
+        if min(up, down) < MIN_BLOCK_ROWS:
+            problems.append(Problem(
+                run_file(runs[0]), f"{column}{i + 1}", None,
+                f"in the fitted runs ({', '.join(runs)}) channel {i + 1} moves one way in "
+                f"{up} regression rows and the other way in {down}: with fewer than "
+                f"{MIN_BLOCK_ROWS} either way, Coulomb friction and the offset are one "
+                "column of the regression and cannot be identified apart; record motion "
+                "in both directions", "error", "no_reversal"))
+    if problems:
+        raise DataValidationError(problems, root=dataset.root)
 
 
 def identification_split(dataset: Dataset, holdout: Sequence[str] | None = None,
@@ -135,6 +191,9 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
     # filter, decimation and Coulomb law chosen once from the whole dataset, so the fit
     # and the held-out runs see the same regression
     settings = resolve_settings(settings, dataset.trajectories, dataset.rig)
+    needs, why = identification_needs(dataset, settings)
+    check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "identify",
+                      why, dataset.root)
     data_split = identification_split(dataset, holdout, runs, settings)
     fit_names, held_names = list(data_split.train), list(data_split.heldout)
     fit_reg = dataset_regression(data_split.trajectories("train", dataset), dataset.rig,
@@ -142,6 +201,7 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
     parts = [fit_reg] + [dataset_regression(d, d.rig, settings) for d in extra]
     if extra:
         fit_reg = WinchRegression.concatenate(parts)
+    check_reversals(fit_reg, dataset, fit_names)
     # a redundant cable robot's internal forces: fitted per row and taken out first
     fit_reg = fit_reg.without_internal_forces()
     est = identifier.fit(lowpass_regression(fit_reg, split))
