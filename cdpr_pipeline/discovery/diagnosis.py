@@ -64,7 +64,11 @@ from cdpr_pipeline.discovery.validity import (
     ljung_box_pvalue,
     split_blocks,
 )
-from cdpr_pipeline.identification.pipeline import min_block_samples, trim_words
+from cdpr_pipeline.identification.pipeline import (
+    check_torque_labels,
+    min_block_samples,
+    trim_words,
+)
 from cdpr_pipeline.identification.regressors import RegressionSettings, resolve_settings
 from cdpr_pipeline.sim.effects import Effect, WinchParameterError
 from cdpr_pipeline.sim.plant import smooth_sign
@@ -537,6 +541,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     needs, why = diagnosis_needs(dataset, settings)
     check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "diagnose",
                       why, dataset.root)
+    check_torque_labels(dataset, settings.regression)
     clock: dict[str, float] = {}
     start = time.perf_counter()
     rig = dataset.rig

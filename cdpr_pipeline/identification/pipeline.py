@@ -22,6 +22,7 @@ from cdpr_pipeline.identification.regressors import (
     TRIM_PERIODS,
     RegressionSettings,
     WinchRegression,
+    build_regression,
     dataset_regression,
     resolve_settings,
 )
@@ -91,6 +92,67 @@ def check_reversals(reg: WinchRegression, dataset: Dataset, runs: Sequence[str])
                 "in both directions", "error", "no_reversal"))
     if problems:
         raise DataValidationError(problems, root=dataset.root)
+
+
+#: a pair of torque columns is taken for swapped in a run when exchanging them lowers the
+#: stated model's torque error (sum of squares) by this factor or more ...
+SWAP_FACTOR = 10.0
+#: ... and the model then fits that run within this relative error (%), the threshold
+#: above which the diagnosis calls a stated model unusable
+SWAP_FIT_PCT = 100.0
+
+
+def check_torque_labels(dataset: Dataset, settings: RegressionSettings) -> None:
+    """Refuse a run whose torque columns look exchanged (``u1`` recorded as ``u2``).
+
+    Per run, the stated (nominal) model's torque residual with the columns as labelled
+    is compared with the residual after exchanging each pair: the regression's target
+    ``U* = u - r t`` takes the tension from the platform's motion, not from ``u``, so a
+    mislabelled pair shows as a large error that the exchange removes. A pair is
+    refused when the exchange lowers the sum of squares :data:`SWAP_FACTOR`-fold and
+    the model then fits the run within :data:`SWAP_FIT_PCT` percent.
+
+    Raises
+    ------
+    DataValidationError
+        Naming the run's file and the first column of each exchanged pair.
+    """
+    rig = dataset.rig
+    if rig.n < 2:
+        return
+    theta = (rig.winch_nominal if isinstance(rig, CdprRig) else rig.nominal).as_matrix()
+    found: list[tuple[str, int, int, float, float]] = []
+    for tr in dataset.trajectories:
+        reg = build_regression(tr, rig, settings)
+        # U* is linear in u: its u part is the labelled target minus the target of the
+        # same run with no torque; an exchange swaps those parts between channels
+        rest = build_regression(replace(tr, torques=np.zeros_like(tr.torques)), rig,
+                                settings).target
+        applied = reg.target - rest
+        model = reg.predict(theta)
+        labelled = float(np.sum((reg.target - model) ** 2))
+        for a in range(rig.n):
+            for b in range(a + 1, rig.n):
+                target = reg.target.copy()
+                target[:, a] = rest[:, a] + applied[:, b]
+                target[:, b] = rest[:, b] + applied[:, a]
+                swapped = float(np.sum((target - model) ** 2))
+                fit_pct = 100 * np.sqrt(swapped / max(float(np.sum(target ** 2)), 1e-300))
+                if labelled >= SWAP_FACTOR * swapped and fit_pct <= SWAP_FIT_PCT:
+                    found.append((tr.name, a + 1, b + 1, labelled / max(swapped, 1e-300),
+                                  fit_pct))
+    if not found:
+        return
+    everywhere = len({name for name, *_ in found}) == len(dataset.trajectories) > 1
+    advice = ("in every run: check the column names, or the order of anchors_m and the "
+              "winch lists in rig.yaml" if everywhere or len(dataset.trajectories) == 1
+              else "check the columns of this file")
+    raise DataValidationError([Problem(
+        run_file(name), f"u{a}", None,
+        f"u{a} and u{b} look exchanged: with them swapped, the stated model's torque "
+        f"error in this run drops {ratio:.3g}-fold (sum of squares; {pct:.2g} % left); "
+        + advice, "error", "swapped_torques") for name, a, b, ratio, pct in found],
+        root=dataset.root)
 
 
 def identification_split(dataset: Dataset, holdout: Sequence[str] | None = None,
@@ -194,6 +256,7 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
     needs, why = identification_needs(dataset, settings)
     check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "identify",
                       why, dataset.root)
+    check_torque_labels(dataset, settings)
     data_split = identification_split(dataset, holdout, runs, settings)
     fit_names, held_names = list(data_split.train), list(data_split.heldout)
     fit_reg = dataset_regression(data_split.trajectories("train", dataset), dataset.rig,

@@ -202,7 +202,7 @@ CDPR = [
     Case("unknown_format", "cdpr", rig_dict(_put("cdpr-measured/9", "format")),
          ("rig.yaml", "key 'format'")),
     Case("duplicate_yaml_key", "cdpr", rig_text(_dup_key),
-         ("rig.yaml", "key 'sample_rate_hz'", "row 2", "twice")),
+         ("rig.yaml", "key 'sample_rate_hz'", "row 3", "twice", "line 2")),
     Case("identical_anchors", "cdpr", rig_dict(_same_anchor),
          ("rig.yaml", "key 'anchors_m[1]'", "same point")),
     Case("collinear_anchors", "cdpr", rig_dict(_line_anchors), ("rig.yaml", "anchors_m")),
@@ -239,11 +239,17 @@ CDPR = [
     Case("no_trajectories", "cdpr", remove("trajectories"), ("trajectories/",)),
     Case("header_only", "cdpr", truncate(0, CF, CS), (CF, "column 't'")),
     Case("too_few_samples", "cdpr", truncate(40, CF, CS), (CF, "column 't'", "50")),
-    Case("half_second_runs", "cdpr", truncate(100, CF, CS), (CF, "column 't'", "needs at least"),
+    # identify: long enough for two runs' regressions, but no velocity reversal
+    Case("half_second_runs", "cdpr", truncate(100, CF, CS), ("trajectories/", "column"),
          accepted=frozenset({"validate"})),
     Case("all_zero_torques", "cdpr", both(*(set_column(f"u{i}", 0.0, CF, CS)
                                             for i in (1, 2, 3))),
          (CF, "column 'u1'", "row 2", "0 in every sample")),
+    Case("u1_u2_swapped_in_one_run", "cdpr", swap_columns("u1", "u2", CS),
+         (CS, "column 'u1'", "u1 and u2 look exchanged"), accepted=frozenset({"validate"})),
+    Case("u2_u3_swapped_everywhere", "cdpr", both(swap_columns("u2", "u3", CF),
+                                                  swap_columns("u2", "u3", CS)),
+         (CF, CS, "column 'u2'", "in every run"), accepted=frozenset({"validate"})),
     Case("platform_never_moves", "cdpr",
          still(["x", "y", "z", "xd", "yd", "zd", "l1", "l2", "l3"], CF, CS),
          (CF, "column 'x'", "never moves")),
@@ -280,12 +286,12 @@ AXES = [
     Case("upper_case_suffix", "axes", rename(AP, AP.replace(".csv", ".CSV")),
          ("001_pulses.CSV", "'.CSV'")),
     Case("too_few_samples", "axes", truncate(30, AF), (AF, "column 't'", "50")),
-    Case("half_second_runs", "axes", truncate(500, AF, AP), ("column", "needs at least"),
+    Case("half_second_runs", "axes", truncate(500, AF, AP), ("trajectories/", "column"),
          accepted=frozenset({"validate"})),
     Case("all_zero_force", "axes", set_column("u1", 0.0, AF, AP),
          (AF, "column 'u1'", "row 2", "0 in every sample")),
     Case("axis_never_moves", "axes", still(["q1", "qd1"], AF, AP),
-         (AF, "column 'q1'", "never moves")),
+         (AF, "column 'q1'", "no axis moves")),
 ]
 
 CASES = CDPR + AXES
