@@ -124,20 +124,16 @@ def check_torque_labels(dataset: Dataset, settings: RegressionSettings) -> None:
     found: list[tuple[str, int, int, float, float]] = []
     for tr in dataset.trajectories:
         reg = build_regression(tr, rig, settings)
-        # U* is linear in u: its u part is the labelled target minus the target of the
-        # same run with no torque; an exchange swaps those parts between channels
-        rest = build_regression(replace(tr, torques=np.zeros_like(tr.torques)), rig,
-                                settings).target
-        applied = reg.target - rest
-        model = reg.predict(theta)
-        labelled = float(np.sum((reg.target - model) ** 2))
+        labelled = float(np.sum((reg.target - reg.predict(theta)) ** 2))
         for a in range(rig.n):
             for b in range(a + 1, rig.n):
-                target = reg.target.copy()
-                target[:, a] = rest[:, a] + applied[:, b]
-                target[:, b] = rest[:, b] + applied[:, a]
-                swapped = float(np.sum((target - model) ** 2))
-                fit_pct = 100 * np.sqrt(swapped / max(float(np.sum(target ** 2)), 1e-300))
+                order = list(range(rig.n))
+                order[a], order[b] = b, a
+                # rebuilt, not permuted: U* = u - r t is not linear in the columns of u
+                alt = build_regression(replace(tr, torques=tr.torques[:, order]), rig,
+                                       settings)
+                swapped = float(np.sum((alt.target - alt.predict(theta)) ** 2))
+                fit_pct = 100 * np.sqrt(swapped / max(float(np.sum(alt.target ** 2)), 1e-300))
                 if labelled >= SWAP_FACTOR * swapped and fit_pct <= SWAP_FIT_PCT:
                     found.append((tr.name, a + 1, b + 1, labelled / max(swapped, 1e-300),
                                   fit_pct))
