@@ -40,6 +40,8 @@ ANCHOR_TOLERANCE_M = 1e-6  # anchors closer than this are one point (a typo, not
 #: Time: 30 years; axis positions 1000 km or 1.6e5 turns; forces/torques 1e10 N (N m),
 #: 10x the largest presses and drives; velocity 1e4 m/s; acceleration 1e6 m/s^2.
 PHYSICAL_LIMITS = {"t": 1e9, "q": 1e6, "qd": 1e6, "u": 1e10, "v": 1e4, "a": 1e6}
+#: the same for any number in rig.yaml (rates, masses, gains, friction coefficients)
+RIG_LIMIT = 1e12
 #: a motion above fs / 8 (aliasing territory, never a rig's motion) is the fastest that
 #: the no-motion test must still see as motion; see :func:`moves`
 STATIC_RANGE_PER_SIGMA = 3.0
@@ -107,6 +109,12 @@ def _count(value: float) -> str:
     return f"{value:.0f}" if abs(value) < 1e9 else f"{value:.3g}"
 
 
+def _short(value: Any, limit: int = 60) -> str:
+    """``repr`` of a YAML value for a message, cut to ``limit`` characters."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit - 12]}... ({len(text)} characters)"
+
+
 def moves(values: np.ndarray) -> bool:
     """Whether a measured position channel moves beyond its own noise.
 
@@ -142,11 +150,17 @@ class _RigChecker:
                non_negative: bool = False) -> float | None:
         # bool is an int subclass; `true` in YAML is never a meaningful number here
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.error(key, f"must be a number, got {value!r}", "rig_type")
+            self.error(key, f"must be a number, got {_short(value)}", "rig_type")
             return None
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:  # an integer of hundreds of digits
+            value = math.inf
         if not math.isfinite(value):
             self.error(key, f"must be finite, got {value}", "rig_value")
+        elif abs(value) > RIG_LIMIT:
+            self.error(key, f"{value:.3g} is beyond any physical range (|value| <= "
+                       f"{RIG_LIMIT:.0e} in SI units)", "rig_value")
         elif positive and value <= 0:
             self.error(key, f"must be positive, got {value:g}", "rig_value")
         elif non_negative and value < 0:
@@ -166,7 +180,7 @@ class _RigChecker:
     def vector(self, key: str, value: Any, n: int | None, what: str, *, positive: bool = False,
                non_negative: bool = False) -> np.ndarray | None:
         if not isinstance(value, (list, tuple)):
-            self.error(key, f"must be a list of numbers, got {value!r}", "rig_shape")
+            self.error(key, f"must be a list of numbers, got {_short(value)}", "rig_shape")
             return None
         if n is not None and len(value) != n:
             self.error(key, f"has {len(value)} entries but {what}", "rig_count")
@@ -207,7 +221,7 @@ class _RigChecker:
             k = self.number(f"{key}.coulomb_law.tanh", law["tanh"], positive=True)
             return k
         self.error(f"{key}.coulomb_law", f"must be 'sign' or {{tanh: k}} with k > 0 in s/rad, "
-                   f"got {law!r}", "rig_type")
+                   f"got {_short(law)}", "rig_type")
         return None
 
     def header(self) -> str | None:
@@ -217,11 +231,11 @@ class _RigChecker:
             self.error("format", f"required key missing (expected '{FORMAT}')", "format")
             return None
         if fmt != FORMAT:
-            self.error("format", f"unknown format {fmt!r} (expected '{FORMAT}')", "format")
+            self.error("format", f"unknown format {_short(fmt)} (expected '{FORMAT}')", "format")
             return None
         kind = self.raw.get("kind", "cdpr")
         if kind not in ("cdpr", "axes"):
-            self.error("kind", f"unknown kind {kind!r} (expected 'cdpr' or 'axes')", "kind")
+            self.error("kind", f"unknown kind {_short(kind)} (expected 'cdpr' or 'axes')", "kind")
             return None
         return kind
 
@@ -255,11 +269,11 @@ class _RigChecker:
         if names is not None:
             if (not isinstance(names, (list, tuple)) or not names
                     or not all(isinstance(a, str) and a for a in names)):
-                self.error("axes", f"must be a non-empty list of axis names, got {names!r}",
+                self.error("axes", f"must be a non-empty list of axis names, got {_short(names)}",
                            "rig_shape")
                 names = None
             elif len(set(names)) != len(names):
-                self.error("axes", f"axis names must be unique, got {names!r}", "rig_shape")
+                self.error("axes", f"axis names must be unique, got {_short(names)}", "rig_shape")
                 names = None
         n = None if names is None else len(names)
         nominal = self.winch("nominal", n, f"axes lists {n} " + ("axis" if n == 1 else "axes"))
@@ -285,7 +299,7 @@ class _RigChecker:
         points = []
         for i, point in enumerate(raw):
             if not isinstance(point, (list, tuple)) or len(point) != 3:
-                self.error(f"anchors_m[{i}]", f"must be an [x, y, z] point, got {point!r}",
+                self.error(f"anchors_m[{i}]", f"must be an [x, y, z] point, got {_short(point)}",
                            "rig_shape")
                 points.append(None)
             else:
@@ -323,7 +337,7 @@ class _RigChecker:
         for key, value in raw.items():
             if key in ("type", "feedforward"):
                 if not isinstance(value, str):
-                    self.error(f"controller.{key}", f"must be a string, got {value!r}",
+                    self.error(f"controller.{key}", f"must be a string, got {_short(value)}",
                                "rig_type")
                 values[key] = value
             elif key in ("kp", "kd", "rate_hz", "min_tension_n"):
@@ -345,12 +359,12 @@ class _RigChecker:
             box = np.empty(0)
         if box.shape != (2, 3) or not np.all(np.isfinite(box)) or np.any(box[0] >= box[1]):
             self.error("frame_m", f"must be [[xmin, ymin, zmin], [xmax, ymax, zmax]] with "
-                       f"min < max, got {raw!r}", "rig_shape")
+                       f"min < max, got {_short(raw)}", "rig_shape")
 
     def _virtual(self) -> bool:
         value = self.raw.get("virtual", False)
         if not isinstance(value, bool):
-            self.error("virtual", f"must be true or false, got {value!r}", "rig_type")
+            self.error("virtual", f"must be true or false, got {_short(value)}", "rig_type")
             return False
         return value
 
