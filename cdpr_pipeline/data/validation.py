@@ -40,6 +40,9 @@ ANCHOR_TOLERANCE_M = 1e-6  # anchors closer than this are one point (a typo, not
 #: Time: 30 years; axis positions 1000 km or 1.6e5 turns; forces/torques 1e10 N (N m),
 #: 10x the largest presses and drives; velocity 1e4 m/s; acceleration 1e6 m/s^2.
 PHYSICAL_LIMITS = {"t": 1e9, "q": 1e6, "qd": 1e6, "u": 1e10, "v": 1e4, "a": 1e6}
+#: fastest a measured position may change, m/s or rad/s (about 1e6 rpm): a faster
+#: jump between two samples is a corrupt sample, not motion
+MAX_SPEED = 1e5
 #: the same for any number in rig.yaml (rates, masses, gains, friction coefficients)
 RIG_LIMIT = 1e12
 #: a motion above fs / 8 (aliasing territory, never a rig's motion) is the fastest that
@@ -700,6 +703,15 @@ class _FileChecker:
         else:
             channels = [f"q{i}" for i in range(1, self.rig.n + 1)]
         self.moving = {c: moves(columns[c]) for c in channels if c in columns}
+        dt = np.diff(columns["t"])
+        for c in channels:
+            if c in columns:
+                speed = np.abs(np.diff(columns[c])) / dt
+                self.flag(c, speed > MAX_SPEED, "jump", lambda i, c=c, v=speed: (
+                    f"the position jumps by {_num(columns[c][i] - columns[c][i - 1])} from "
+                    f"the sample before, a speed of {_num(v[i - 1])} per second: beyond any "
+                    f"drive or platform ({MAX_SPEED:.0e} m/s or rad/s); a corrupt sample?"),
+                    offset=1)
         self.zero = {f"u{i}": bool(np.all(columns[f"u{i}"] == 0))
                      for i in range(1, self.rig.n + 1) if f"u{i}" in columns}
 

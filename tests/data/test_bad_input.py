@@ -273,6 +273,10 @@ AXES = [
     Case("huge_position", "axes", cell(AP, 700, "q1", "1e300"), (AP, "column 'q1'", "row 700")),
     Case("huge_reference", "axes", cell(AP, 701, "qd1", "-1e300"),
          (AP, "column 'qd1'", "row 701")),
+    Case("encoder_1000m", "axes", cell(AF, 3000, "q1", "1000"), (AF, "column 'q1'", "row 3000")),
+    Case("rig_number_of_400_digits", "axes", rig_text(
+        lambda text: text.replace("sample_rate_hz: 1000.0", "sample_rate_hz: " + "9" * 400)),
+         ("rig.yaml", "key 'sample_rate_hz'", "must be finite")),
     Case("time_repeated", "axes", cell(AF, 2001, "t", "1.998"), (AF, "column 't'", "row 2001")),
     Case("wrong_rate", "axes", set_column("t", lambda f: f["t"] / 10, AF, AP),
          (AF, "column 't'")),
