@@ -45,8 +45,8 @@ PHYSICAL_LIMITS = {"t": 1e9, "q": 1e6, "qd": 1e6, "u": 1e10, "v": 1e4, "a": 1e6}
 MAX_SPEED = 1e5
 #: the same for any number in rig.yaml (rates, masses, gains, friction coefficients)
 RIG_LIMIT = 1e12
-#: a motion above fs / 8 (aliasing territory, never a rig's motion) is the fastest that
-#: the no-motion test must still see as motion; see :func:`moves`
+#: a position channel moves when its range exceeds this many times sqrt(2 ln N) noise
+#: deviations; static white noise stays below 2 of them (see :func:`moves`)
 STATIC_RANGE_PER_SIGMA = 3.0
 NAME_RE = re.compile(r"^(\d+)_([A-Za-z0-9][A-Za-z0-9_-]*)\.csv$")
 NAN_WORDS = frozenset({"nan", "-nan", "+nan"})
@@ -122,10 +122,11 @@ def moves(values: np.ndarray) -> bool:
     """Whether a measured position channel moves beyond its own noise.
 
     The noise is estimated from second differences (a smooth motion has almost none;
-    white noise of standard deviation s gives ``sqrt(6) s``). A static channel's range
-    stays below ``sqrt(2 ln N)`` noise deviations either side; a channel moves when its
-    range exceeds ``3 sqrt(2 ln N)`` of them. A sinusoid passes this unless it is faster
-    than about an eighth of the sample rate. An exactly constant channel never moves.
+    white noise of standard deviation s gives ``sqrt(6) s``). The N samples of a static
+    channel stay within ``sqrt(2 ln N)`` noise deviations either side of their mean; a
+    channel moves when its range exceeds :data:`STATIC_RANGE_PER_SIGMA` ``sqrt(2 ln N)``
+    deviations. A sinusoid passes unless it is faster than about an eighth of the sample
+    rate (where no rig's motion is). An exactly constant channel never moves.
     """
     v = np.asarray(values, dtype=float)
     if v.size < 3:
