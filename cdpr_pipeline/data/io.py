@@ -28,6 +28,7 @@ from .validation import (
     DEFAULT_RATE_TOLERANCE,
     FIRST_DATA_LINE,
     GAP_FACTOR,
+    LEFT_OUT,
     NAME_RE,
     RIG_FILE,
     TRAJ_DIR,
@@ -175,6 +176,8 @@ def load_dataset(
     Returns
     -------
     Dataset
+        Without the runs that validation leaves out with a warning (no motion, or a
+        torque channel of zeros, beside runs that have them).
 
     Raises
     ------
@@ -186,7 +189,10 @@ def load_dataset(
     report.raise_for_errors()
     for warning in report.warnings:
         log.warning("%s: %s", report.root, warning)
-    trajectories = [_to_trajectory(name, rig, cols) for name, cols in columns.items()]
+    # a static run, or one with a silent motor, beside proper runs: only the warning
+    left_out = {w.file for w in report.warnings if w.kind in LEFT_OUT}
+    trajectories = [_to_trajectory(name, rig, cols) for name, cols in columns.items()
+                    if f"{TRAJ_DIR}/{name}.csv" not in left_out]
     if allow_gaps:
         # the analysis assumes even sampling: a run with a time gap becomes one run per
         # evenly sampled stretch

@@ -48,6 +48,9 @@ RIG_LIMIT = 1e12
 #: a position channel moves when its range exceeds this many times sqrt(2 ln N) noise
 #: deviations; static white noise stays below 2 of them (see :func:`moves`)
 STATIC_RANGE_PER_SIGMA = 3.0
+#: warnings whose run :func:`~cdpr_pipeline.data.io.load_dataset` leaves out: a run
+#: without motion, or with a torque channel of zeros, beside runs that have them
+LEFT_OUT = frozenset({"no_motion", "zero_torque"})
 NAME_RE = re.compile(r"^(\d+)_([A-Za-z0-9][A-Za-z0-9_-]*)\.csv$")
 NAN_WORDS = frozenset({"nan", "-nan", "+nan"})
 FIRST_DATA_LINE = 2  # header is line 1
@@ -812,7 +815,7 @@ def _check_dataset_content(motion: dict[str, dict[str, bool]], zero: dict[str, d
                 rel, channel, FIRST_DATA_LINE, "torque (force) is 0 in every sample" + (
                     " of every run: nothing can be identified for this channel (the "
                     "regression's left side is 0); was the column exported?" if everywhere
-                    else "; this run tells nothing about the channel's parameters"),
+                    else "; the run is left out of the analysis"),
                 "error" if everywhere else "warning", "zero_torque"))
     static_runs = [rel for rel, m in motion.items() if m and not any(m.values())]
     cdpr = isinstance(rig, CdprRig)
@@ -821,7 +824,7 @@ def _check_dataset_content(motion: dict[str, dict[str, bool]], zero: dict[str, d
     severity: Severity = "error" if len(static_runs) == len(motion) else "warning"
     advice = ("; a dataset needs motion to show dynamics (a static hold tells nothing "
               "about inertia or friction)" if severity == "error"
-              else "; the run adds nothing to the analysis")
+              else "; the run is left out of the analysis")
     for rel in static_runs:
         report.add(Problem(rel, "x" if cdpr else "q1", None, what + advice, severity,
                            "no_motion"))

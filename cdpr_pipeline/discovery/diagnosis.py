@@ -134,17 +134,22 @@ def diagnosis_needs(dataset: Dataset, settings: DiagnosisSettings
     ``settings.regression`` resolved. Every run needs the regression's
     :func:`~cdpr_pipeline.identification.pipeline.min_block_samples`; a held-out run (or
     the held-out block of a single run) also two bootstrap blocks of
-    ``settings.selection.block_s`` after the filter trims: with fewer, every candidate's
-    held-out gain interval is unbounded and no cause could ever be named.
+    ``settings.selection.block_s`` after the filter trims (the second may be half a
+    block, as :func:`~cdpr_pipeline.discovery.validity.split_blocks` keeps it): with
+    one, every candidate's held-out gain interval is unbounded and no cause could ever
+    be named.
     """
     regression = settings.regression
     rate = dataset.rig.sample_rate_hz
     block = min_block_samples(regression, rate)
     trim = int(round(regression.filter.trim_s * rate))
-    held_need = 2 * trim + int(np.ceil(2 * settings.selection.block_s * rate))
-    why = (trim_words(regression, rate) + f"; held-out data also needs two "
-           f"{settings.selection.block_s:g} s bootstrap blocks (selection.block_s) after "
-           "the trims")
+    # split_blocks keeps a tail of half a block: two blocks take 1.5 block lengths of
+    # rows, plus a row's worth of samples for the rounding of the block length
+    held_need = (2 * trim + int(np.ceil(1.5 * settings.selection.block_s * rate))
+                 + max(1, int(regression.decimate)))
+    why = (trim_words(regression, rate) + f"; held-out data also needs, after the trims, "
+           f"two {settings.selection.block_s:g} s bootstrap blocks (selection.block_s; the "
+           "second may be half a block)")
     runs = dataset.trajectories
     if len(runs) == 1:
         # the single run's last block is held out (heldout_split): the shortest run

@@ -151,6 +151,7 @@ def test_no_motion_anywhere_is_an_error_one_static_run_a_warning(cdpr_dir: Path)
     edit_csv(cdpr_dir, F, hold)
     report = validate_dataset(cdpr_dir)
     assert report.ok and [(w.file, w.kind) for w in report.warnings] == [(F, "no_motion")]
+    assert load_dataset(cdpr_dir).names == ["000_flat_circle"]    # left out of the analysis
     edit_csv(cdpr_dir, "trajectories/000_flat_circle.csv", hold)
     assert sorted(p.kind for p in errors(cdpr_dir)) == ["no_motion", "no_motion"]
 
@@ -159,6 +160,7 @@ def test_zero_torque_everywhere_is_an_error_in_one_run_a_warning(cdpr_dir: Path)
     edit_csv(cdpr_dir, F, lambda f: f.assign(u3=0.0))
     report = validate_dataset(cdpr_dir)
     assert report.ok and [(w.column, w.kind) for w in report.warnings] == [("u3", "zero_torque")]
+    assert load_dataset(cdpr_dir).names == ["000_flat_circle"]
     edit_csv(cdpr_dir, "trajectories/000_flat_circle.csv", lambda f: f.assign(u3=0.0))
     assert {(p.column, p.row) for p in errors(cdpr_dir)} == {("u3", 2)}
 
@@ -211,14 +213,17 @@ def test_identify_needs_trims_and_rows_per_run(foreign) -> None:
 
 
 def test_diagnose_needs_two_bootstrap_blocks_held_out(foreign) -> None:
-    settings = DiagnosisSettings(regression=_settings(foreign))
-    needs, _ = diagnosis_needs(foreign, settings)
-    # the spiral is held out: trims (2 x 100) + two 1 s blocks (400); the circle trains
-    assert needs == {"000_flat_circle": 600, "001_spiral": 600}
-    one, _ = diagnosis_needs(foreign.select(["000_flat_circle"]), settings)
-    n = one["000_flat_circle"]
-    # the single run's held-out block (half of it, below 6 s) holds the 600 samples
-    assert n == 1200
+    regression = resolve_settings(RegressionSettings(
+        DerivativeFilter(cutoff_hz=10.0, trim_s=0.5), decimate=5), foreign.trajectories,
+        foreign.rig)
+    needs, _ = diagnosis_needs(foreign, DiagnosisSettings(regression=regression))
+    # the circle trains: trims (2 x 100) + 20 rows decimated by 5; the spiral is held
+    # out: trims + 1.5 blocks of 1 s (300 samples) + one decimated row (5)
+    assert needs == {"000_flat_circle": 300, "001_spiral": 505}
+    one, _ = diagnosis_needs(foreign.select(["000_flat_circle"]),
+                             DiagnosisSettings(regression=regression))
+    # a single run below 6 s holds out its second half, which must hold the 505
+    assert one == {"000_flat_circle": 1010}
 
 
 def test_velocity_without_reversal_is_refused(foreign) -> None:
