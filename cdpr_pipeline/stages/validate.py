@@ -30,11 +30,16 @@ def validate(cfg: DictConfig) -> ValidationReport:
     for problem in report.errors:
         log.error("%s", problem)
     if report.ok:
-        data = load_dataset(cfg.data.path, allow_gaps=bool(cfg.data.allow_gaps),
-                            min_samples=int(cfg.data.min_samples))
-        for problem in analysis_needs(data, instantiate(cfg.regression)):
+        try:   # what loading adds: runs cut at their gaps, each long enough
+            data = load_dataset(cfg.data.path, allow_gaps=bool(cfg.data.allow_gaps),
+                                min_samples=int(cfg.data.min_samples))
+            found = analysis_needs(data, instantiate(cfg.regression))
+        except DataValidationError as exc:
+            found = exc.problems
+        for problem in found:
             report.add(problem)
-            log.warning("%s", problem)
+            (log.error if problem.severity == "error" else log.warning)("%s", problem)
+    if report.ok:
         log.info("%s: valid cdpr-measured/1 dataset (%d warnings)", cfg.data.path,
                  len(report.warnings))
     return report
