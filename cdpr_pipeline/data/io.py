@@ -12,7 +12,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from itertools import chain
 from pathlib import Path
 from typing import Any
@@ -22,10 +22,13 @@ import yaml
 
 from .errors import DataValidationError, Problem
 from .rig import CdprRig, Rig
-from .trajectory import Trajectory
+from .trajectory import Trajectory, block_name
 from .validation import (
     DEFAULT_MIN_SAMPLES,
     DEFAULT_RATE_TOLERANCE,
+    FIRST_DATA_LINE,
+    GAP_FACTOR,
+    LEFT_OUT,
     NAME_RE,
     RIG_FILE,
     TRAJ_DIR,
@@ -162,8 +165,9 @@ def load_dataset(
     path : str or Path
         Dataset directory.
     allow_gaps : bool
-        Accept gaps as warnings (empty cells are filled by linear interpolation in time;
-        time gaps are kept as recorded, so use ``Trajectory.t``); otherwise gaps are errors.
+        Accept gaps as warnings: empty cells are filled by linear interpolation in time,
+        and a run with a time gap is cut at the gap into evenly sampled runs
+        (:func:`split_at_gaps`); otherwise gaps are errors.
     min_samples : int
         Fewest samples per trajectory.
     rate_tolerance : float
@@ -172,6 +176,8 @@ def load_dataset(
     Returns
     -------
     Dataset
+        Without the runs that validation leaves out with a warning (no motion, or a
+        torque channel of zeros, beside runs that have them).
 
     Raises
     ------
@@ -183,8 +189,57 @@ def load_dataset(
     report.raise_for_errors()
     for warning in report.warnings:
         log.warning("%s: %s", report.root, warning)
-    trajectories = [_to_trajectory(name, rig, cols) for name, cols in columns.items()]
+    # a static run, or one with a silent motor, beside proper runs: only the warning
+    left_out = {w.file for w in report.warnings if w.kind in LEFT_OUT}
+    trajectories = [_to_trajectory(name, rig, cols) for name, cols in columns.items()
+                    if f"{TRAJ_DIR}/{name}.csv" not in left_out]
+    if allow_gaps:
+        # the analysis assumes even sampling: a run with a time gap becomes one run per
+        # evenly sampled stretch
+        parts = [split_at_gaps(tr, rig.sample_rate_hz, min_samples) for tr in trajectories]
+        trajectories = [part for group in parts for part in group]
     return Dataset(Path(path), rig, trajectories, list(report.warnings))
+
+
+def split_at_gaps(tr: Trajectory, sample_rate_hz: float, min_samples: int = 1
+                  ) -> list[Trajectory]:
+    """A run cut at every time gap (an interval above ``GAP_FACTOR`` sample periods)
+    into evenly sampled runs, named as time blocks (``000_spiral@0-4.2s``, same family).
+
+    Raises
+    ------
+    DataValidationError
+        If a stretch between gaps has fewer than ``min_samples`` samples (naming the
+        file, column ``t`` and the row where the stretch starts).
+    """
+    t = np.asarray(tr.t, dtype=float)
+    cuts = np.flatnonzero(np.diff(t) > GAP_FACTOR / sample_rate_hz) + 1
+    if cuts.size == 0:
+        return [tr]
+    bounds = [0, *cuts.tolist(), t.size]
+    short = [(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b - a < min_samples]
+    if short:
+        a, b = short[0]
+        raise DataValidationError([Problem(
+            f"{TRAJ_DIR}/{tr.name}.csv", "t", a + FIRST_DATA_LINE,
+            f"allow_gaps=True cuts this run at its {cuts.size} time gap(s); the stretch "
+            f"starting here has {b - a} samples, fewer than the {min_samples} a run needs; "
+            "remove it or record without gaps", "error", "gap", len(short))])
+    parts = []
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        sl = slice(a, b)
+
+        def part(x: np.ndarray | None, sl: slice = sl) -> np.ndarray | None:
+            return None if x is None else x[sl]
+
+        parts.append(replace(
+            tr, name=block_name(tr.name, t[a], t[b - 1]), t=tr.t[sl], position=tr.position[sl],
+            torques=tr.torques[sl], desired=part(tr.desired), lengths=part(tr.lengths),
+            velocity=part(tr.velocity), acceleration=part(tr.acceleration),
+            extra={k: v[sl] for k, v in tr.extra.items()}))
+    log.warning("%s: cut at %d time gap(s) into %s", tr.name, cuts.size,
+                ", ".join(p.name for p in parts))
+    return parts
 
 
 # --------------------------------------------------------------------------- writing

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from .io import Dataset
-from .trajectory import Trajectory, family_of
+from .trajectory import Trajectory, block_name, family_of
 
 log = logging.getLogger(__name__)
 
@@ -47,16 +47,6 @@ DEFAULT_HELDOUT_FAMILIES = ("spiral", "pulses")
 HELDOUT_FRACTION = 0.25
 #: the held-out block of a single run is at least this long, if the run is twice as long
 MIN_HELDOUT_S = 3.0
-
-
-def _time_label(t: float) -> str:
-    text = f"{t:.3f}".rstrip("0")
-    return text + "0" if text.endswith(".") else text
-
-
-def block_name(run: str, t_start: float, t_stop: float) -> str:
-    """Name of a time block of ``run``: ``<run>@<t_start>-<t_stop>s`` (ms resolution)."""
-    return f"{run}@{_time_label(t_start)}-{_time_label(t_stop)}s"
 
 
 @dataclass(frozen=True)

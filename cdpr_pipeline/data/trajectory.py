@@ -18,6 +18,16 @@ def family_of(name: str) -> str:
     return rest if sep and rest else stem
 
 
+def _time_label(t: float) -> str:
+    text = f"{t:.3f}".rstrip("0")
+    return text + "0" if text.endswith(".") else text
+
+
+def block_name(run: str, t_start: float, t_stop: float) -> str:
+    """Name of a time block of ``run``: ``<run>@<t_start>-<t_stop>s`` (ms resolution)."""
+    return f"{run}@{_time_label(t_start)}-{_time_label(t_stop)}s"
+
+
 @dataclass
 class Trajectory:
     """Arrays of one run. Shapes: ``N`` samples, ``n`` cables or axes.

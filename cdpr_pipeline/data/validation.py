@@ -13,7 +13,7 @@ import logging
 import math
 import re
 from collections import Counter
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,6 +24,7 @@ import yaml
 
 from .errors import ROW_NOTE, DataValidationError, Problem, Severity
 from .rig import FORMAT, WINCH_KEYS, AxesRig, CdprRig, ControllerSpec, Rig, WinchParams
+from .trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -33,6 +34,23 @@ DEFAULT_MIN_SAMPLES = 50
 DEFAULT_RATE_TOLERANCE = 0.05
 GAP_FACTOR = 1.5  # an interval above 1.5 nominal periods means at least one lost sample
 FRAME_TOLERANCE_M = 0.01  # motion-capture noise may put a point at the frame edge just outside
+ANCHOR_TOLERANCE_M = 1e-6  # anchors closer than this are one point (a typo, not a rig)
+#: magnitudes (SI) that no rig of this format reaches, by column: beyond them a cell is
+#: corrupt, not a measurement (a unit slip of 1e3 stays far inside; a 1e300 does not).
+#: Time: 30 years; axis positions 1000 km or 1.6e5 turns; forces/torques 1e10 N (N m),
+#: 10x the largest presses and drives; velocity 1e4 m/s; acceleration 1e6 m/s^2.
+PHYSICAL_LIMITS = {"t": 1e9, "q": 1e6, "qd": 1e6, "u": 1e10, "v": 1e4, "a": 1e6}
+#: fastest a measured position may change, m/s or rad/s (about 1e6 rpm): a faster
+#: jump between two samples is a corrupt sample, not motion
+MAX_SPEED = 1e5
+#: the same for any number in rig.yaml (rates, masses, gains, friction coefficients)
+RIG_LIMIT = 1e12
+#: a position channel moves when its range exceeds this many times sqrt(2 ln N) noise
+#: deviations; static white noise stays below 2 of them (see :func:`moves`)
+STATIC_RANGE_PER_SIGMA = 3.0
+#: warnings whose run :func:`~cdpr_pipeline.data.io.load_dataset` leaves out: a run
+#: without motion, or with a torque channel of zeros, beside runs that have them
+LEFT_OUT = frozenset({"no_motion", "zero_torque"})
 NAME_RE = re.compile(r"^(\d+)_([A-Za-z0-9][A-Za-z0-9_-]*)\.csv$")
 NAN_WORDS = frozenset({"nan", "-nan", "+nan"})
 FIRST_DATA_LINE = 2  # header is line 1
@@ -84,6 +102,43 @@ class ValidationReport:
         return "\n".join([head, *(f"  {p.severity}: {p}" for p in self.problems)])
 
 
+def _num(value: Any) -> str:
+    """A number (or array) for a message: 6 significant digits, never 300 of them."""
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        return f"{float(arr):.6g}"
+    return "[" + ", ".join(f"{v:.6g}" for v in arr.ravel()) + "]"
+
+
+def _count(value: float) -> str:
+    """A count that may be astronomically large (a corrupt time stamp) for a message."""
+    return f"{value:.0f}" if abs(value) < 1e9 else f"{value:.3g}"
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    """``repr`` of a YAML value for a message, cut to ``limit`` characters."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit - 12]}... ({len(text)} characters)"
+
+
+def moves(values: np.ndarray) -> bool:
+    """Whether a measured position channel moves beyond its own noise.
+
+    The noise is estimated from second differences (a smooth motion has almost none;
+    white noise of standard deviation s gives ``sqrt(6) s``). The N samples of a static
+    channel stay within ``sqrt(2 ln N)`` noise deviations either side of their mean; a
+    channel moves when its range exceeds :data:`STATIC_RANGE_PER_SIGMA` ``sqrt(2 ln N)``
+    deviations. A sinusoid passes unless it is faster than about an eighth of the sample
+    rate (where no rig's motion is). An exactly constant channel never moves.
+    """
+    v = np.asarray(values, dtype=float)
+    if v.size < 3:
+        return bool(np.ptp(v) > 0) if v.size else False
+    span = float(np.ptp(v))
+    sigma = float(np.std(np.diff(v, 2))) / np.sqrt(6.0)
+    return span > STATIC_RANGE_PER_SIGMA * np.sqrt(2 * np.log(v.size)) * sigma and span > 0
+
+
 # --------------------------------------------------------------------------- rig.yaml
 
 
@@ -102,11 +157,17 @@ class _RigChecker:
                non_negative: bool = False) -> float | None:
         # bool is an int subclass; `true` in YAML is never a meaningful number here
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self.error(key, f"must be a number, got {value!r}", "rig_type")
+            self.error(key, f"must be a number, got {_short(value)}", "rig_type")
             return None
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:  # an integer of hundreds of digits
+            value = math.inf
         if not math.isfinite(value):
             self.error(key, f"must be finite, got {value}", "rig_value")
+        elif abs(value) > RIG_LIMIT:
+            self.error(key, f"{value:.3g} is beyond any physical range (|value| <= "
+                       f"{RIG_LIMIT:.0e} in SI units)", "rig_value")
         elif positive and value <= 0:
             self.error(key, f"must be positive, got {value:g}", "rig_value")
         elif non_negative and value < 0:
@@ -126,7 +187,7 @@ class _RigChecker:
     def vector(self, key: str, value: Any, n: int | None, what: str, *, positive: bool = False,
                non_negative: bool = False) -> np.ndarray | None:
         if not isinstance(value, (list, tuple)):
-            self.error(key, f"must be a list of numbers, got {value!r}", "rig_shape")
+            self.error(key, f"must be a list of numbers, got {_short(value)}", "rig_shape")
             return None
         if n is not None and len(value) != n:
             self.error(key, f"has {len(value)} entries but {what}", "rig_count")
@@ -167,7 +228,7 @@ class _RigChecker:
             k = self.number(f"{key}.coulomb_law.tanh", law["tanh"], positive=True)
             return k
         self.error(f"{key}.coulomb_law", f"must be 'sign' or {{tanh: k}} with k > 0 in s/rad, "
-                   f"got {law!r}", "rig_type")
+                   f"got {_short(law)}", "rig_type")
         return None
 
     def header(self) -> str | None:
@@ -177,11 +238,11 @@ class _RigChecker:
             self.error("format", f"required key missing (expected '{FORMAT}')", "format")
             return None
         if fmt != FORMAT:
-            self.error("format", f"unknown format {fmt!r} (expected '{FORMAT}')", "format")
+            self.error("format", f"unknown format {_short(fmt)} (expected '{FORMAT}')", "format")
             return None
         kind = self.raw.get("kind", "cdpr")
         if kind not in ("cdpr", "axes"):
-            self.error("kind", f"unknown kind {kind!r} (expected 'cdpr' or 'axes')", "kind")
+            self.error("kind", f"unknown kind {_short(kind)} (expected 'cdpr' or 'axes')", "kind")
             return None
         return kind
 
@@ -215,11 +276,11 @@ class _RigChecker:
         if names is not None:
             if (not isinstance(names, (list, tuple)) or not names
                     or not all(isinstance(a, str) and a for a in names)):
-                self.error("axes", f"must be a non-empty list of axis names, got {names!r}",
+                self.error("axes", f"must be a non-empty list of axis names, got {_short(names)}",
                            "rig_shape")
                 names = None
             elif len(set(names)) != len(names):
-                self.error("axes", f"axis names must be unique, got {names!r}", "rig_shape")
+                self.error("axes", f"axis names must be unique, got {_short(names)}", "rig_shape")
                 names = None
         n = None if names is None else len(names)
         nominal = self.winch("nominal", n, f"axes lists {n} " + ("axis" if n == 1 else "axes"))
@@ -245,7 +306,7 @@ class _RigChecker:
         points = []
         for i, point in enumerate(raw):
             if not isinstance(point, (list, tuple)) or len(point) != 3:
-                self.error(f"anchors_m[{i}]", f"must be an [x, y, z] point, got {point!r}",
+                self.error(f"anchors_m[{i}]", f"must be an [x, y, z] point, got {_short(point)}",
                            "rig_shape")
                 points.append(None)
             else:
@@ -256,7 +317,20 @@ class _RigChecker:
             self.error("anchors_m", f"needs at least 3 anchors (cables), got {len(points)}",
                        "rig_count")
             return None
-        return np.asarray(points, dtype=float)
+        anchors = np.asarray(points, dtype=float)
+        for i in range(len(anchors)):
+            for j in range(i + 1, len(anchors)):
+                if np.allclose(anchors[i], anchors[j], rtol=0.0, atol=ANCHOR_TOLERANCE_M):
+                    self.error(f"anchors_m[{j}]", f"is the same point as anchors_m[{i}] "
+                               f"({_num(anchors[i])}): two cables cannot leave from one "
+                               "point (a copy-paste slip in rig.yaml?)", "rig_value")
+                    return None
+        spread = np.linalg.svd(anchors - anchors.mean(axis=0), compute_uv=False)
+        if spread[1] <= ANCHOR_TOLERANCE_M:
+            self.error("anchors_m", "all anchors lie on one line: the cables cannot hold a "
+                       "platform in space; check the coordinates in rig.yaml", "rig_value")
+            return None
+        return anchors
 
     def _controller(self, rate: float | None) -> ControllerSpec | None:
         raw = self.raw.get("controller")
@@ -270,7 +344,7 @@ class _RigChecker:
         for key, value in raw.items():
             if key in ("type", "feedforward"):
                 if not isinstance(value, str):
-                    self.error(f"controller.{key}", f"must be a string, got {value!r}",
+                    self.error(f"controller.{key}", f"must be a string, got {_short(value)}",
                                "rig_type")
                 values[key] = value
             elif key in ("kp", "kd", "rate_hz", "min_tension_n"):
@@ -292,12 +366,12 @@ class _RigChecker:
             box = np.empty(0)
         if box.shape != (2, 3) or not np.all(np.isfinite(box)) or np.any(box[0] >= box[1]):
             self.error("frame_m", f"must be [[xmin, ymin, zmin], [xmax, ymax, zmax]] with "
-                       f"min < max, got {raw!r}", "rig_shape")
+                       f"min < max, got {_short(raw)}", "rig_shape")
 
     def _virtual(self) -> bool:
         value = self.raw.get("virtual", False)
         if not isinstance(value, bool):
-            self.error("virtual", f"must be true or false, got {value!r}", "rig_type")
+            self.error("virtual", f"must be true or false, got {_short(value)}", "rig_type")
             return False
         return value
 
@@ -330,13 +404,41 @@ def parse_rig(raw: Any, file: str = RIG_FILE) -> tuple[Rig | None, list[Problem]
     return rig, checker.problems
 
 
+class DuplicateKeyError(yaml.constructor.ConstructorError):
+    """A mapping key given twice in a YAML file (PyYAML would keep the last silently)."""
+
+    def __init__(self, key: Any, first_line: int, node: yaml.Node) -> None:
+        super().__init__(None, None, f"key {key!r} is given twice (first on line "
+                         f"{first_line}); which one was meant is unknown", node.start_mark)
+        self.key = key
+
+
+class UniqueKeyLoader(yaml.SafeLoader):
+    """:class:`yaml.SafeLoader` that refuses duplicate mapping keys."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen: dict[Any, int] = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                first = seen.setdefault(key, key_node.start_mark.line + 1)
+            except TypeError:
+                continue  # an unhashable key: construct_mapping reports it
+            if first != key_node.start_mark.line + 1:
+                raise DuplicateKeyError(key, first, key_node)
+        return super().construct_mapping(node, deep=deep)
+
+
 def read_rig_file(path: Path, file: str = RIG_FILE) -> tuple[Rig | None, list[Problem]]:
     """Read and check a ``rig.yaml`` file; see :func:`parse_rig`."""
     if not path.is_file():
         return None, [Problem(file, None, None, "missing rig.yaml (the rig description)",
                               "error", "missing_rig")]
     try:
-        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
+        raw = yaml.load(path.read_text(encoding="utf-8"), Loader=UniqueKeyLoader)  # noqa: S506
+    except DuplicateKeyError as exc:
+        return None, [Problem(file, str(exc.key), exc.problem_mark.line + 1,
+                              f"not valid rig.yaml: {exc.problem}", "error", "duplicate_key")]
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
         mark = getattr(exc, "problem_mark", None)
         row = mark.line + 1 if mark is not None else None
@@ -370,6 +472,15 @@ def _read_header(path: Path) -> list[str] | None:
     return None if first is None else [name.strip() for name in first]
 
 
+def _foreign_delimiter(names: list[str]) -> str | None:
+    """The delimiter a header was written with, when it is not a comma."""
+    line = ",".join(names)
+    for char, label in ((";", "semicolons (';')"), ("\t", "tabs"), ("|", "bars ('|')")):
+        if char in line and "t" in (part.strip() for part in line.split(char)):
+            return label
+    return None
+
+
 def _is_number(dtype: Any) -> bool:
     return pd.api.types.is_numeric_dtype(dtype) and not pd.api.types.is_bool_dtype(dtype)
 
@@ -398,6 +509,8 @@ class _FileChecker:
         self.failed = False
         self.repeats: set[str] = set()
         self.lines = np.empty(0, dtype=int)  # file line of each sample
+        self.moving: dict[str, bool] = {}  # position channel -> moves beyond its noise
+        self.zero: dict[str, bool] = {}  # torque channel -> 0 in every sample
 
     def add(self, column: str | None, row: int | None, message: str, kind: str,
             severity: Severity = "error", count: int = 1) -> None:
@@ -424,6 +537,13 @@ class _FileChecker:
             return None
         if not names or names == [""]:
             self.add(None, 1, "empty file: a header row is required", "no_header")
+            return None
+        delimiter = _foreign_delimiter(names)
+        if delimiter is not None:
+            # one message, not one "column missing" per column
+            self.add(None, 1, f"the header is separated by {delimiter}, not by commas: "
+                     "cdpr-measured/1 files are comma-separated (export the file as CSV with "
+                     "',' as the delimiter and '.' as the decimal point)", "delimiter")
             return None
         required, optional, channel_re, _ = self._check_header(names)
         frame = self._read(names)
@@ -458,13 +578,16 @@ class _FileChecker:
         if n_rows < self.min_samples:
             self.add("t", None, f"only {n_rows} samples; the analysis needs at least "
                      f"{self.min_samples}", "too_few_samples")
+        self._check_limits(columns)
         if "t" in columns:
             self._check_time(columns["t"])
         if isinstance(self.rig, CdprRig):
             self._check_cdpr(columns)
         if self.failed:
             return None
-        return self._fill_gaps(columns, known)
+        columns = self._fill_gaps(columns, known)
+        self._check_content(columns)
+        return None if self.failed else columns
 
     def _check_header(self, names: list[str]):
         required, optional, channel_re, counted = _layout(self.rig)
@@ -558,6 +681,44 @@ class _FileChecker:
                       "allow_gaps=True to fill it by interpolation")
         return values
 
+    def _check_limits(self, columns: dict[str, np.ndarray]) -> None:
+        """Values beyond :data:`PHYSICAL_LIMITS` (cable-robot positions are held to the
+        anchor frame instead, in :meth:`_check_cdpr`)."""
+        for name, values in columns.items():
+            match = re.match(r"^(t|qd|q|u|v|a)[0-9xyz]*$", name)
+            if match is None or (match.group(1) in ("q", "qd")
+                                 and isinstance(self.rig, CdprRig)):
+                continue
+            if match.group(1) in ("v", "a") and name[1:] not in ("x", "y", "z"):
+                continue  # an extra column such as 'alpha': not a velocity
+            limit = PHYSICAL_LIMITS[match.group(1)]
+            with np.errstate(invalid="ignore"):
+                beyond = np.abs(values) > limit
+            self.flag(name, beyond & np.isfinite(values), "out_of_range",
+                      lambda i, v=values, lim=limit: f"value {_num(v[i])} is beyond any "
+                      f"physical range (|value| <= {lim:.0e} in SI units); a corrupt cell?")
+
+    def _check_content(self, columns: dict[str, np.ndarray]) -> None:
+        """What the analysis needs of a run's numbers, judged over the dataset by
+        :func:`_check_dataset_content`: which position channels move beyond their noise,
+        and which torque channels are zero in every sample."""
+        if isinstance(self.rig, CdprRig):
+            channels = ["x", "y", "z", *(f"l{i}" for i in range(1, self.rig.n + 1))]
+        else:
+            channels = [f"q{i}" for i in range(1, self.rig.n + 1)]
+        self.moving = {c: moves(columns[c]) for c in channels if c in columns}
+        dt = np.diff(columns["t"])
+        for c in channels:
+            if c in columns:
+                speed = np.abs(np.diff(columns[c])) / dt
+                self.flag(c, speed > MAX_SPEED, "jump", lambda i, c=c, v=speed: (
+                    f"the position jumps by {_num(columns[c][i] - columns[c][i - 1])} from "
+                    f"the sample before, a speed of {_num(v[i - 1])} per second: beyond any "
+                    f"drive or platform ({MAX_SPEED:.0e} m/s or rad/s); a corrupt sample?"),
+                    offset=1)
+        self.zero = {f"u{i}": bool(np.all(columns[f"u{i}"] == 0))
+                     for i in range(1, self.rig.n + 1) if f"u{i}" in columns}
+
     def _check_time(self, t: np.ndarray) -> None:
         dt = np.diff(t)
         self.flag("t", dt <= 0, "time_order",
@@ -577,10 +738,12 @@ class _FileChecker:
             return  # with a wrong rate every interval would also look like a gap
         # the interval after a time step backwards or repeated is not a separate gap
         gap = (dt > GAP_FACTOR * period) & ~np.r_[False, dt[:-1] <= 0]
-        hint = "accepted (allow_gaps=True)" if self.allow_gaps else "pass allow_gaps=True to accept"
+        hint = ("the run is cut here into two runs (allow_gaps=True)" if self.allow_gaps
+                else "pass allow_gaps=True to cut the run at its gaps")
         self.flag("t", gap, "gap",
-                  lambda i: f"gap of {dt[i - 1]:.6g} s (about {round(dt[i - 1] / period) - 1} "
-                  f"sample(s) missing) before this row; {hint}",
+                  lambda i: f"gap of {dt[i - 1]:.6g} s (about "
+                  f"{_count(round(dt[i - 1] / period) - 1)} sample(s) missing) "
+                  f"before this row; {hint}",
                   "warning" if self.allow_gaps else "error", offset=1)
 
     def _check_cdpr(self, columns: dict[str, np.ndarray]) -> None:
@@ -599,6 +762,25 @@ class _FileChecker:
                 v = columns[name]
                 self.flag(name, v <= 0, "non_positive_length",
                           lambda j, v=v: f"cable length {v[j]:.6g} m is not positive")
+        if self.failed or not all(c in columns for c in ("x", "y", "z")):
+            return
+        # an encoder may count from any zero, but its length follows the geometry: over
+        # a run, length minus |anchor - platform| stays near one offset. No cable on this
+        # frame can leave it by more than the frame's diagonal.
+        p = np.column_stack([columns[c] for c in ("x", "y", "z")])
+        lo, hi = self.rig.frame_bounds()
+        diagonal = float(np.linalg.norm(hi - lo))
+        for i, anchor in enumerate(self.rig.anchors_m, start=1):
+            v = columns.get(f"l{i}")
+            if v is None or not np.all(np.isfinite(v)):
+                continue
+            offset = v - np.linalg.norm(anchor - p, axis=1)
+            dev = np.abs(offset - np.median(offset))
+            self.flag(f"l{i}", dev > diagonal, "length_geometry",
+                      lambda j, v=v, d=dev: f"cable length {_num(v[j])} m is {_num(d[j])} m "
+                      "off what the platform position and anchor give (beyond the run's "
+                      f"encoder offset); no cable on this frame (diagonal {diagonal:.3g} m) "
+                      "can be that far off: a corrupt sample?")
 
     def _fill_gaps(self, columns: dict[str, np.ndarray], known: set[str]) -> dict[str, np.ndarray]:
         # only reached without errors, so empty cells were accepted with allow_gaps=True
@@ -613,6 +795,47 @@ class _FileChecker:
 
 
 # --------------------------------------------------------------------------- dataset
+
+
+def _check_dataset_content(motion: dict[str, dict[str, bool]], zero: dict[str, dict[str, bool]],
+                           rig: Rig, report: ValidationReport) -> None:
+    """Refuse a dataset in which nothing moves (a cable robot's platform, or an axis in
+    every run): it holds no dynamics to analyse. Refuse a torque channel that is 0 in
+    every sample of every run: the regression ``u = I q'' + ...`` then has only the
+    zero solution, so no parameter of that channel is identifiable (and no cable robot
+    holds its platform without torque). A static run or a zero-torque run beside others
+    is a warning: a user may record a hold, or a run with a motor off, on purpose."""
+    if not motion:
+        return
+    for channel in (f"u{i}" for i in range(1, rig.n + 1)):
+        runs = [rel for rel, z in zero.items() if z.get(channel)]
+        everywhere = len(runs) == len(zero)
+        for rel in runs:
+            report.add(Problem(
+                rel, channel, FIRST_DATA_LINE, "torque (force) is 0 in every sample" + (
+                    " of every run: nothing can be identified for this channel (the "
+                    "regression's left side is 0); was the column exported?" if everywhere
+                    else "; the run is left out of the analysis"),
+                "error" if everywhere else "warning", "zero_torque"))
+    static_runs = [rel for rel, m in motion.items() if m and not any(m.values())]
+    cdpr = isinstance(rig, CdprRig)
+    what = ("the platform never moves: x, y, z and every cable length stay within their "
+            "noise" if cdpr else "no axis moves: every q stays within its noise")
+    severity: Severity = "error" if len(static_runs) == len(motion) else "warning"
+    advice = ("; a dataset needs motion to show dynamics (a static hold tells nothing "
+              "about inertia or friction)" if severity == "error"
+              else "; the run is left out of the analysis")
+    for rel in static_runs:
+        report.add(Problem(rel, "x" if cdpr else "q1", None, what + advice, severity,
+                           "no_motion"))
+    if cdpr or severity == "error":
+        return
+    for axis in range(1, rig.n + 1):
+        name = f"q{axis}"
+        if not any(m.get(name, True) for m in motion.values()):
+            report.add(Problem(next(iter(motion)), name, None, f"axis {name} never moves in "
+                               "any run: its parameters cannot be identified",
+                               "error", "no_motion"))
 
 
 def check_dataset(
@@ -649,10 +872,17 @@ def check_dataset(
         report.add(Problem(f"{TRAJ_DIR}/", None, None, "no trajectory .csv files",
                            "error", "no_trajectories"))
     indices: Counter[int] = Counter()
+    motion: dict[str, dict[str, bool]] = {}
+    zero: dict[str, dict[str, bool]] = {}
     for csv_path in csvs:
         rel = f"{TRAJ_DIR}/{csv_path.name}"
         match = NAME_RE.match(csv_path.name)
-        if match is None:
+        if csv_path.suffix != ".csv":
+            report.add(Problem(rel, None, None, f"file suffix {csv_path.suffix!r} must be "
+                               "'.csv' in lower case (rename the file to "
+                               f"{csv_path.stem}.csv)", "error", "file_suffix"))
+            match = None
+        elif match is None:
             report.add(Problem(rel, None, None, "bad file name: must be <index>_<family>.csv, "
                                "e.g. 000_flat_circle.csv", "error", "file_name"))
         else:
@@ -664,6 +894,9 @@ def check_dataset(
         data = checker.run()
         if data is not None and match is not None:
             columns[csv_path.stem] = data
+            motion[rel], zero[rel] = checker.moving, checker.zero
+    if rig is not None:
+        _check_dataset_content(motion, zero, rig, report)
     for index, count in indices.items():
         if count > 1:
             report.add(Problem(f"{TRAJ_DIR}/", None, None, f"index {index} is used by {count} "
@@ -703,3 +936,50 @@ def validate_dataset(
     """
     return check_dataset(path, min_samples=min_samples, allow_gaps=allow_gaps,
                          rate_tolerance=rate_tolerance)[0]
+
+
+# --------------------------------------------------------------------------- analysis needs
+
+
+def run_file(name: str) -> str:
+    """The file a run (or a time block of it, ``<run>@...``) was read from."""
+    return f"{TRAJ_DIR}/{name.split('@', 1)[0]}.csv"
+
+
+def check_run_lengths(runs: Sequence[Trajectory], needs: Mapping[str, int], rate_hz: float,
+                      command: str, why: str, root: str | Path | None = None) -> None:
+    """Refuse runs shorter than a command needs, before any analysis.
+
+    Parameters
+    ----------
+    runs : sequence of Trajectory
+        The runs (or time blocks) the command analyses.
+    needs : mapping of str to int
+        Fewest samples per run name (a run not in it needs nothing).
+    rate_hz : float
+        The rig's sample rate, for the message's seconds.
+    command : str
+        The command (``identify``, ``diagnose``), named in the message.
+    why : str
+        What the minimum is made of, in words.
+    root : str or Path, optional
+        The dataset, named in the message.
+
+    Raises
+    ------
+    DataValidationError
+        Naming each short run's file, column ``t``, its length and the minimum.
+    """
+    problems = []
+    for tr in runs:
+        need = int(needs.get(tr.name, 0))
+        if tr.n_samples < need:
+            label = f" ({tr.name})" if "@" in tr.name else ""
+            problems.append(Problem(
+                run_file(tr.name), "t", None,
+                f"run{label} has {tr.n_samples} samples ({tr.n_samples / rate_hz:.3g} s); "
+                f"`cdpr {command}` needs at least {need} samples ({need / rate_hz:.3g} s at "
+                f"{rate_hz:g} Hz) in this run: {why}; record a longer run",
+                "error", "too_few_samples"))
+    if problems:
+        raise DataValidationError(problems, root=root)

@@ -19,8 +19,9 @@ import numpy as np
 
 from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.data.rig import CdprRig
-from cdpr_pipeline.data.split import Split, heldout_split
+from cdpr_pipeline.data.split import HELDOUT_FRACTION, MIN_HELDOUT_S, Split, heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.data.validation import check_run_lengths
 from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
 from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
 from cdpr_pipeline.discovery.freeform import FreeFormSearch
@@ -63,7 +64,11 @@ from cdpr_pipeline.discovery.validity import (
     ljung_box_pvalue,
     split_blocks,
 )
-from cdpr_pipeline.identification.pipeline import min_block_samples
+from cdpr_pipeline.identification.pipeline import (
+    check_torque_labels,
+    min_block_samples,
+    trim_words,
+)
 from cdpr_pipeline.identification.regressors import RegressionSettings, resolve_settings
 from cdpr_pipeline.sim.effects import Effect, WinchParameterError
 from cdpr_pipeline.sim.plant import smooth_sign
@@ -120,6 +125,48 @@ def diagnosis_split(dataset: Dataset, settings: DiagnosisSettings | None = None)
                          default_families=HELDOUT_FAMILIES, unknown="raise",
                          min_samples=min_block_samples(regression, dataset.rig.sample_rate_hz),
                          source=str(dataset.root))
+
+
+def diagnosis_needs(dataset: Dataset, settings: DiagnosisSettings
+                    ) -> tuple[dict[str, int], str]:
+    """Fewest samples per run that :func:`diagnose` can use, and why.
+
+    ``settings.regression`` resolved. Every run needs the regression's
+    :func:`~cdpr_pipeline.identification.pipeline.min_block_samples`; a held-out run (or
+    the held-out block of a single run) also two bootstrap blocks of
+    ``settings.selection.block_s`` after the filter trims (the second may be half a
+    block, as :func:`~cdpr_pipeline.discovery.validity.split_blocks` keeps it): with
+    one, every candidate's held-out gain interval is unbounded and no cause could ever
+    be named.
+    """
+    regression = settings.regression
+    rate = dataset.rig.sample_rate_hz
+    block = min_block_samples(regression, rate)
+    trim = int(round(regression.filter.trim_s * rate))
+    # split_blocks keeps a tail of half a block: two blocks take 1.5 block lengths of
+    # rows, plus a row's worth of samples for the rounding of the block length
+    held_need = (2 * trim + int(np.ceil(1.5 * settings.selection.block_s * rate))
+                 + max(1, int(regression.decimate)))
+    why = (trim_words(regression, rate) + f"; held-out data also needs, after the trims, "
+           f"two {settings.selection.block_s:g} s bootstrap blocks (selection.block_s; the "
+           "second may be half a block)")
+    runs = dataset.trajectories
+    if len(runs) == 1:
+        # the single run's last block is held out (heldout_split): the shortest run
+        # whose held-out block and training block are both long enough
+        n = held_need + block
+        while n < 100 * (held_need + block):
+            n_held = max(int(round(HELDOUT_FRACTION * n)),
+                         min(int(round(MIN_HELDOUT_S * rate)), n // 2), block)
+            if n_held >= held_need and n - n_held >= block:
+                break
+            n += 1
+        return {runs[0].name: n}, why + (f" (the last {HELDOUT_FRACTION:.0%} of the one run "
+                                         "is held out, at least half of it if that is shorter "
+                                         f"than {MIN_HELDOUT_S:g} s)")
+    held = set(heldout_split(runs, settings.heldout, default_families=HELDOUT_FAMILIES,
+                             unknown="raise", source=str(dataset.root)).heldout)
+    return {tr.name: max(block, held_need) if tr.name in held else block for tr in runs}, why
 
 
 def split_runs(trajectories: Sequence[Trajectory], heldout: Sequence[str] | None = None
@@ -496,6 +543,10 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     # filter, decimation and Coulomb law chosen once, from the whole dataset and its rig
     settings = dataclasses.replace(settings, regression=resolve_settings(
         settings.regression, dataset.trajectories, dataset.rig))
+    needs, why = diagnosis_needs(dataset, settings)
+    check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "diagnose",
+                      why, dataset.root)
+    check_torque_labels(dataset, settings.regression)
     clock: dict[str, float] = {}
     start = time.perf_counter()
     rig = dataset.rig

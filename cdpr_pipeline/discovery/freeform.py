@@ -29,6 +29,7 @@ a free-form part holds only what the vocabulary cannot say.
 from __future__ import annotations
 
 import ast
+import logging
 import operator
 import random
 from collections.abc import Callable, Sequence
@@ -43,6 +44,8 @@ from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.evolution import MaxTree, deap_random
 from cdpr_pipeline.sim.effects import SymbolicWinchTorque
 from cdpr_pipeline.sim.expressions import FUNCTIONS, evaluate, to_infix
+
+log = logging.getLogger(__name__)
 
 #: the most free-form terms per winch (spec: short, readable expressions)
 MAX_TERMS_PER_CHANNEL = 3
@@ -316,6 +319,9 @@ class L0Regression:
         Largest absolute cosine between a term and one already selected: near-duplicate
         terms would enter as a difference with large opposite coefficients, a fragile
         numerical derivative nobody can read.
+    max_steps : int
+        Most forward steps (each adds a term; a backward pass may drop others): the
+        search's iteration cap. Every step must lower the exact criterion.
 
     Examples
     --------
@@ -330,6 +336,7 @@ class L0Regression:
     max_terms: int = 6
     penalty: float | None = None
     max_overlap: float = 0.95
+    max_steps: int = 200
     support_: list[int] = field(default_factory=list)
     coef_: np.ndarray = field(default_factory=lambda: np.zeros(0))
     _cost: np.ndarray = field(default_factory=lambda: np.zeros(0), init=False, repr=False)
@@ -363,7 +370,14 @@ class L0Regression:
         norms = np.sqrt(np.where(norms2 > 0, norms2, 1.0))
         support: list[int] = []
         best = self._criterion(X, y, support)
-        while True:
+        # each step lowers the exact criterion, so no support comes back; the step cap
+        # bounds the work whatever the numbers (a corrupt sample can make the one-product
+        # score disagree with the exact criterion)
+        for step in range(self.max_steps + 1):
+            if step == self.max_steps:
+                log.warning("sparse regression stopped after max_steps=%d forward steps "
+                            "with %d terms", self.max_steps, len(support))
+                break
             # the residual orthogonal to the support, and each column's part orthogonal
             # to it
             if support:
@@ -392,7 +406,10 @@ class L0Regression:
             j = int(np.argmin(crit))
             if crit[j] >= best:
                 break
-            support, best = support + [j], self._criterion(X, y, support + [j])
+            exact = self._criterion(X, y, support + [j])
+            if not exact < best:
+                break
+            support, best = support + [j], exact
             # backward pass: drop terms a later one made redundant
             improved = True
             while improved and len(support) > 1:

@@ -12,13 +12,17 @@ from typing import Any
 import numpy as np
 import yaml
 
+from cdpr_pipeline.data.errors import DataValidationError, Problem
 from cdpr_pipeline.data.io import Dataset
-from cdpr_pipeline.data.rig import WINCH_KEYS
+from cdpr_pipeline.data.rig import WINCH_KEYS, CdprRig
 from cdpr_pipeline.data.split import Split, heldout_split
+from cdpr_pipeline.data.validation import check_run_lengths, run_file
 from cdpr_pipeline.identification.identifiers import Estimate, fit_metrics
 from cdpr_pipeline.identification.regressors import (
+    TRIM_PERIODS,
     RegressionSettings,
     WinchRegression,
+    build_regression,
     dataset_regression,
     resolve_settings,
 )
@@ -35,6 +39,116 @@ def min_block_samples(settings: RegressionSettings, sample_rate_hz: float) -> in
     regression rows."""
     trim = int(round(settings.filter.trim_s * sample_rate_hz))
     return 2 * trim + MIN_BLOCK_ROWS * max(1, int(settings.decimate))
+
+
+def trim_words(settings: RegressionSettings, rate_hz: float) -> str:
+    """What a block of :func:`min_block_samples` is made of, in words (for messages)."""
+    trim = int(round(settings.filter.trim_s * rate_hz))
+    return (f"the derivative filter's edge trims ({trim} samples at each end: "
+            f"{TRIM_PERIODS:g} periods of its {settings.filter.cutoff_hz:.3g} Hz cut-off) and "
+            f"{MIN_BLOCK_ROWS} regression rows after decimation by {settings.decimate}")
+
+
+def identification_needs(dataset: Dataset, settings: RegressionSettings
+                         ) -> tuple[dict[str, int], str]:
+    """Fewest samples per run that :func:`identify_dataset` can use, and why.
+
+    Every run needs :func:`min_block_samples` (``settings`` resolved); a single run twice
+    that, since its last block is held out (:func:`identification_split`).
+    """
+    rate = dataset.rig.sample_rate_hz
+    block = min_block_samples(settings, rate)
+    single = len(dataset.trajectories) == 1
+    why = trim_words(settings, rate) + (
+        ", for a fitted and a held-out block of the one run" if single else "")
+    return {tr.name: block * (2 if single else 1) for tr in dataset.trajectories}, why
+
+
+def check_reversals(reg: WinchRegression, dataset: Dataset, runs: Sequence[str]) -> None:
+    """Refuse a fit whose velocity never reverses on a channel.
+
+    The Coulomb column ``sign(q')`` is then the constant column of the offset ``d`` (up
+    to its sign), so the two are not identifiable apart and least squares splits the
+    sum between them arbitrarily. Fewer than :data:`MIN_BLOCK_ROWS` rows moving either
+    way count as no reversal.
+
+    Raises
+    ------
+    DataValidationError
+        Naming the first fitted run's file and the position column of each channel.
+    """
+    problems = []
+    column = "l" if isinstance(dataset.rig, CdprRig) else "q"
+    for i in range(reg.n):
+        b = reg.phi[:, i, 1]
+        up, down = int(np.sum(b > 0)), int(np.sum(b < 0))
+        if min(up, down) < MIN_BLOCK_ROWS:
+            problems.append(Problem(
+                run_file(runs[0]), f"{column}{i + 1}", None,
+                f"in the fitted runs ({', '.join(runs)}) channel {i + 1} moves one way in "
+                f"{up} regression rows and the other way in {down}: with fewer than "
+                f"{MIN_BLOCK_ROWS} either way, Coulomb friction and the offset are one "
+                "column of the regression and cannot be identified apart; record motion "
+                "in both directions", "error", "no_reversal"))
+    if problems:
+        raise DataValidationError(problems, root=dataset.root)
+
+
+#: a pair of torque columns is taken for swapped in a run when exchanging them lowers the
+#: stated model's torque error (sum of squares) by this factor or more ...
+SWAP_FACTOR = 10.0
+#: ... and the model then fits that run within this relative error (%), the threshold
+#: above which the diagnosis calls a stated model unusable
+SWAP_FIT_PCT = 100.0
+
+
+def check_torque_labels(dataset: Dataset, settings: RegressionSettings) -> None:
+    """Refuse a run whose torque columns look exchanged (``u1`` recorded as ``u2``).
+
+    Per run, the stated (nominal) model's torque residual with the columns as labelled
+    is compared with the residual after exchanging each pair: the regression's target
+    ``U* = u - r t`` takes the tension from the platform's motion, not from ``u``, so a
+    mislabelled pair shows as a large error that the exchange removes. A pair is
+    refused when the exchange lowers the sum of squares :data:`SWAP_FACTOR`-fold and
+    the model then fits the run within :data:`SWAP_FIT_PCT` percent.
+
+    Raises
+    ------
+    DataValidationError
+        Naming the run's file and the first column of each exchanged pair.
+    """
+    rig = dataset.rig
+    if rig.n < 2:
+        return
+    theta = (rig.winch_nominal if isinstance(rig, CdprRig) else rig.nominal).as_matrix()
+    found: list[tuple[str, int, int, float, float]] = []
+    for tr in dataset.trajectories:
+        reg = build_regression(tr, rig, settings)
+        labelled = float(np.sum((reg.target - reg.predict(theta)) ** 2))
+        for a in range(rig.n):
+            for b in range(a + 1, rig.n):
+                order = list(range(rig.n))
+                order[a], order[b] = b, a
+                # rebuilt, not permuted: U* = u - r t is not linear in the columns of u
+                alt = build_regression(replace(tr, torques=tr.torques[:, order]), rig,
+                                       settings)
+                swapped = float(np.sum((alt.target - alt.predict(theta)) ** 2))
+                fit_pct = 100 * np.sqrt(swapped / max(float(np.sum(alt.target ** 2)), 1e-300))
+                if labelled >= SWAP_FACTOR * swapped and fit_pct <= SWAP_FIT_PCT:
+                    found.append((tr.name, a + 1, b + 1, labelled / max(swapped, 1e-300),
+                                  fit_pct))
+    if not found:
+        return
+    everywhere = len({name for name, *_ in found}) == len(dataset.trajectories) > 1
+    advice = ("in every run: check the column names, or the order of anchors_m and the "
+              "winch lists in rig.yaml" if everywhere or len(dataset.trajectories) == 1
+              else "check the columns of this file")
+    raise DataValidationError([Problem(
+        run_file(name), f"u{a}", None,
+        f"u{a} and u{b} look exchanged: with them swapped, the stated model's torque "
+        f"error in this run drops {ratio:.3g}-fold (sum of squares; {pct:.2g} % left); "
+        + advice, "error", "swapped_torques") for name, a, b, ratio, pct in found],
+        root=dataset.root)
 
 
 def identification_split(dataset: Dataset, holdout: Sequence[str] | None = None,
@@ -135,6 +249,10 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
     # filter, decimation and Coulomb law chosen once from the whole dataset, so the fit
     # and the held-out runs see the same regression
     settings = resolve_settings(settings, dataset.trajectories, dataset.rig)
+    needs, why = identification_needs(dataset, settings)
+    check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "identify",
+                      why, dataset.root)
+    check_torque_labels(dataset, settings)
     data_split = identification_split(dataset, holdout, runs, settings)
     fit_names, held_names = list(data_split.train), list(data_split.heldout)
     fit_reg = dataset_regression(data_split.trajectories("train", dataset), dataset.rig,
@@ -142,6 +260,7 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
     parts = [fit_reg] + [dataset_regression(d, d.rig, settings) for d in extra]
     if extra:
         fit_reg = WinchRegression.concatenate(parts)
+    check_reversals(fit_reg, dataset, fit_names)
     # a redundant cable robot's internal forces: fitted per row and taken out first
     fit_reg = fit_reg.without_internal_forces()
     est = identifier.fit(lowpass_regression(fit_reg, split))

@@ -289,11 +289,13 @@ def test_time_gap_is_error_unless_allowed(cdpr_dir: Path) -> None:
     assert relaxed.ok
     [warning] = relaxed.warnings
     assert (warning.kind, warning.file, warning.column, warning.row) == ("gap", F, "t", 30)
-    data = load_dataset(cdpr_dir, allow_gaps=True)
+    data = load_dataset(cdpr_dir, allow_gaps=True, min_samples=20)
     assert data.warnings == relaxed.warnings
-    t = data.select(["001_spiral"])[0].t
-    assert t.size == 95  # rows are kept as recorded, the gap stays visible in t
-    assert np.isclose(t[28] - t[27], 0.06)
+    # the run is cut at the gap into two evenly sampled runs of the same family
+    parts = [tr for tr in data if tr.family == "spiral"]
+    assert [tr.n_samples for tr in parts] == [28, 67]
+    assert all(np.allclose(np.diff(tr.t), 0.01) for tr in parts)
+    assert np.isclose(parts[1].t[0] - parts[0].t[-1], 0.06)
 
 
 def test_empty_cell_is_filled_only_when_allowed(cdpr_dir: Path) -> None:
