@@ -8,6 +8,7 @@ whose work is a plain function in :mod:`cdpr_pipeline.stages`; ``params``, ``sta
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import sys
 
 #: subcommand -> module with a Hydra ``main`` (or ``module:function``)
@@ -67,7 +68,16 @@ def main(argv: list[str] | None = None) -> None:
     entry = getattr(importlib.import_module(module_name), func or "main")
     # Hydra reads its overrides from sys.argv; present the rest as the app's own argv
     sys.argv = [f"cdpr {sub}", *argv[1:]]
-    entry()
+    # a process that re-runs this command (Lightning's DDP launcher runs `python -m
+    # <__main__.__spec__.name> <sys.argv[1:]>`) must run the subcommand's module
+    main_module = sys.modules["__main__"]
+    spec = main_module.__spec__
+    if not func:
+        main_module.__spec__ = importlib.util.find_spec(module_name)
+    try:
+        entry()
+    finally:
+        main_module.__spec__ = spec
 
 
 if __name__ == "__main__":
