@@ -29,7 +29,7 @@ from cdpr_pipeline.models.datamodule import TrajectoryDataModule
 from cdpr_pipeline.models.evaluation import evaluate, plot_predictions
 from cdpr_pipeline.models.forecast import Forecaster
 from cdpr_pipeline.models.module import ForecastModule, TimeToBest
-from cdpr_pipeline.tracking import flatten_params, log_metrics, make_logger, tracking_uri
+from cdpr_pipeline.tracking import flatten_params, log_metrics, make_logger, mlflow_client
 
 log = logging.getLogger(__name__)
 
@@ -116,10 +116,8 @@ def train(cfg: DictConfig) -> TrainResult:
             return _train(cfg)
         except BaseException:
             if os.environ.get(DDP_RUN_ENV):
-                from mlflow.tracking import MlflowClient
-
-                MlflowClient(tracking_uri(cfg.tracking.uri)).set_terminated(
-                    os.environ[DDP_RUN_ENV], "FAILED")
+                mlflow_client(cfg.tracking.uri).set_terminated(os.environ[DDP_RUN_ENV],
+                                                               "FAILED")
             raise
 
 

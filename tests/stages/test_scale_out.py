@@ -72,3 +72,35 @@ def test_a_ddp_rank_that_fails_alone_fails_the_run(small_lab, tmp_path):
     assert "Invalid weight_decay value: -1" in done.stdout + done.stderr
     assert [r.info.status for r in _runs(uri, "ddp")] == ["FAILED"]
     assert not (out / "forecaster.pt").exists()
+
+
+#: a sweep of four jobs that train the references (closed-form fits: the sweep's machinery
+#: is under test, not the training)
+SWEEP = ["model=constant_velocity,arx", "seed=0,1", "quiet=true", "evaluation.max_train_runs=2",
+         "evaluation.onestep_stride=5", "data.test_fraction=0.34"]
+
+
+@pytest.mark.parametrize("launcher", [["hydra/launcher=joblib", "hydra.launcher.n_jobs=4"],
+                                      ["hydra/launcher=submitit_local"]],
+                         ids=["joblib", "submitit_local"])
+def test_a_sweep_on_a_fresh_store_logs_every_job(launcher, small_lab, tmp_path):
+    """Jobs started together on a store that does not exist yet: each creates it (MLflow
+    migrates a new SQLite store step by step) and the experiment; once two did so at once
+    and a job died on ``duplicate column name``. submitit_local is the plugin that sends
+    the same jobs to SLURM (hydra/launcher=submitit_slurm)."""
+    store = tmp_path / "mlflow.db"
+    uri = f"sqlite:///{store}"
+    sweep = tmp_path / "sweep"
+    assert not store.exists()
+    done = _cdpr("train", "-m", *SWEEP, f"data.path={small_lab}", f"tracking.uri={uri}",
+                 "tracking.experiment=sweep", f"hydra.sweep.dir={sweep}", *launcher,
+                 cwd=tmp_path)
+    assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
+    runs = _runs(uri, "sweep")
+    assert sorted((r.data.tags["model"], r.data.params["seed"], r.info.status) for r in runs) \
+        == [(m, s, "FINISHED") for m in ("arx", "constant_velocity") for s in ("0", "1")]
+    assert sorted(p.name for p in sweep.iterdir() if p.is_dir() and p.name.isdigit()) \
+        == ["0", "1", "2", "3"]
+    assert all((sweep / job / "metrics.json").is_file() for job in ("0", "1", "2", "3"))
+    if "submitit" in launcher[0]:
+        assert (sweep / ".submitit").is_dir()     # the jobs went through submitit
