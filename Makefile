@@ -49,11 +49,14 @@ test: $(STAMP)
 	$(BIN)/python -m pytest $(XDIST) $(PYTEST_ARGS)
 
 ## test-pipeline: the end-to-end pipeline tests (cdpr repro profile=tiny in scratch copies):
-## on the virtual lab, then ingesting the shipped foreign rig and the shipped EMPS data
-## (the two files side by side, one process each; each repro's wall time is printed)
+## on the virtual lab (with a DVC push/clone/pull round trip), then ingesting the shipped
+## foreign rig and the shipped EMPS data; and scaling out: DDP on 2 CPU processes, joblib
+## and submitit_local sweeps (the files side by side, one process each; each repro's wall
+## time is printed)
 test-pipeline: $(STAMP)
 	$(BIN)/python -m pytest -m slow $(XDIST) tests/stages/test_pipeline_e2e.py \
-		tests/stages/test_pipeline_ingest_e2e.py --durations=3 $(PYTEST_ARGS)
+		tests/stages/test_pipeline_ingest_e2e.py tests/stages/test_scale_out.py \
+		--durations=3 $(PYTEST_ARGS)
 
 ## test-slow: every slow end-to-end test
 test-slow: $(STAMP)
