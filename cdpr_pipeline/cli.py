@@ -10,6 +10,7 @@ Errors print a message and exit non-zero (:mod:`cdpr_pipeline.errors`).
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import sys
 
 from cdpr_pipeline.cli_help import subcommand_help
@@ -115,7 +116,16 @@ def _dispatch(sub: str, argv: list[str]) -> None:
     entry = getattr(importlib.import_module(module_name), func or "main")
     # Hydra reads its overrides from sys.argv; present the rest as the app's own argv
     sys.argv = [f"cdpr {sub}", *argv[1:]]
-    entry()
+    # a process that re-runs this command (Lightning's DDP launcher runs `python -m
+    # <__main__.__spec__.name> <sys.argv[1:]>`) must run the subcommand's module
+    main_module = sys.modules["__main__"]
+    spec = main_module.__spec__
+    if not func:
+        main_module.__spec__ = importlib.util.find_spec(module_name)
+    try:
+        entry()
+    finally:
+        main_module.__spec__ = spec
 
 
 if __name__ == "__main__":

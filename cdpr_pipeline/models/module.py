@@ -52,13 +52,14 @@ class ForecastModule(L.LightningModule):
             x, y = batch
             batch = (x + self.hparams.input_noise * torch.randn_like(x) * self.noise_mask, y)
         loss = self._loss(batch)
+        # sync_dist: under DDP the epoch's mean over every process's batches
         self.log("train/loss", loss, on_step=False, on_epoch=True, prog_bar=True,
-                 batch_size=batch[0].shape[0])
+                 batch_size=batch[0].shape[0], sync_dist=True)
         return loss
 
     def validation_step(self, batch, batch_idx: int) -> None:
         self.log("val/loss", self._loss(batch), on_step=False, on_epoch=True, prog_bar=True,
-                 batch_size=batch[0].shape[0])
+                 batch_size=batch[0].shape[0], sync_dist=True)
 
     def configure_optimizers(self):
         opt = self.hparams.optimizer(params=self.parameters())

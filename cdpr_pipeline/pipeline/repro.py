@@ -21,7 +21,7 @@ from cdpr_pipeline.tracking import (
     flatten_params,
     log_metrics,
     log_params_once,
-    tracking_uri,
+    mlflow_client,
 )
 
 log = logging.getLogger(__name__)
@@ -67,9 +67,7 @@ def repro(cfg: DictConfig) -> int:
     if not dvc_args and up_to_date(env):
         log.info("the pipeline is up to date: nothing to reproduce")
         return 0
-    from mlflow.tracking import MlflowClient
-
-    client = MlflowClient(tracking_uri(cfg.tracking_uri))
+    client = mlflow_client(cfg.tracking_uri)
     exp = experiment_id(client, str(cfg.experiment))
     parent = client.create_run(exp, run_name=f"pipeline-{cfg.profile.name}", tags={
         "cdpr_task": "pipeline", "profile": str(cfg.profile.name),

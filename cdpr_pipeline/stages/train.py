@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +20,7 @@ import numpy as np
 import torch
 import yaml
 from hydra.utils import instantiate
+from lightning.fabric.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.command import hydra_command
@@ -26,9 +28,13 @@ from cdpr_pipeline.models.datamodule import TrajectoryDataModule
 from cdpr_pipeline.models.evaluation import evaluate, plot_predictions
 from cdpr_pipeline.models.forecast import Forecaster
 from cdpr_pipeline.models.module import ForecastModule, TimeToBest
-from cdpr_pipeline.tracking import flatten_params, log_metrics, make_logger
+from cdpr_pipeline.tracking import flatten_params, log_metrics, make_logger, mlflow_client
 
 log = logging.getLogger(__name__)
+
+#: the MLflow run of a training, for the further DDP processes Lightning starts (they
+#: inherit the environment); see :func:`train`
+DDP_RUN_ENV = "CDPR_TRAIN_RUN_ID"
 
 
 @dataclass
@@ -100,7 +106,18 @@ def train(cfg: DictConfig) -> TrainResult:
     NumPy's global generators)."""
     with torch.random.fork_rng():
         torch.manual_seed(int(cfg.seed))
-        return _train(cfg)
+        if not rank_zero_only.rank:
+            return _train(cfg)
+        # a further process of a DDP training (Lightning re-ran this command with its rank
+        # in the environment): rank 0 holds the MLflow run. If this process fails,
+        # Lightning kills rank 0 with SIGKILL, which no handler sees: mark the run here
+        try:
+            return _train(cfg)
+        except BaseException:
+            if os.environ.get(DDP_RUN_ENV):
+                mlflow_client(cfg.tracking.uri).set_terminated(os.environ[DDP_RUN_ENV],
+                                                               "FAILED")
+            raise
 
 
 def _train(cfg: DictConfig) -> TrainResult:
@@ -118,11 +135,16 @@ def _train(cfg: DictConfig) -> TrainResult:
                          lightning=True)
     logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
     client, run_id = logger.experiment, logger.run_id
+    previous_env = os.environ.get(DDP_RUN_ENV)
+    if not rank_zero_only.rank:
+        os.environ[DDP_RUN_ENV] = run_id
     try:
         start = time.perf_counter()
         best = None
         if getattr(net, "trainable", True):
             summary, best = _train_network(cfg, net, dm, logger, out_dir)
+            if rank_zero_only.rank:   # rank 0 alone scores, writes out_dir and logs
+                return TrainResult(previous_env or "", {}, out_dir / "forecaster.pt", out_dir)
         else:
             val_loss = _fit_closed_form(net, dm, int(cfg.model.get("fit_windows", 65536)),
                                         int(cfg.seed))
@@ -163,6 +185,12 @@ def _train(cfg: DictConfig) -> TrainResult:
     except BaseException:
         client.set_terminated(run_id, "FAILED")
         raise
+    finally:
+        if not rank_zero_only.rank:
+            if previous_env is None:
+                os.environ.pop(DDP_RUN_ENV, None)
+            else:
+                os.environ[DDP_RUN_ENV] = previous_env
     log.info("%s: one-step test RMSE %.3e m, 1 s free-run RMSE %.3e m (run %s)", name,
              metrics.get("onestep/test/all/overall/rmse", float("nan")),
              metrics.get("freerun_1s/test/all/overall/rmse", float("nan")), run_id)
@@ -172,3 +200,7 @@ def _train(cfg: DictConfig) -> TrainResult:
 @hydra_command("train")
 def main(cfg: DictConfig) -> None:
     train(cfg)
+
+
+if __name__ == "__main__":   # what a DDP process that Lightning starts runs (cli.py)
+    main()

@@ -10,10 +10,11 @@ from cdpr_pipeline.tracking.mlflow import (
     log_metrics,
     log_params_once,
     make_logger,
+    mlflow_client,
     stage_run,
     tracking_uri,
 )
 
 __all__ = ["DEFAULT_TRACKING_URI", "PARENT_RUN_ENV", "experiment_id", "finished_or_failed",
            "flatten_params", "latest_runs", "log_metrics", "log_params_once", "make_logger",
-           "stage_run", "tracking_uri"]
+           "mlflow_client", "stage_run", "tracking_uri"]

@@ -12,6 +12,7 @@ into that stage run instead of opening its own.
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
@@ -38,6 +39,33 @@ def tracking_uri(configured: str | None = None) -> str:
     if uri:
         return uri
     return f"sqlite:///{Path(DEFAULT_TRACKING_URI[len('sqlite:///'):]).resolve()}"
+
+
+def mlflow_client(uri: str | None = None):
+    """An :class:`~mlflow.tracking.MlflowClient` on the resolved URI (:func:`tracking_uri`),
+    its store created first if it is a new local SQLite file (:func:`_create_store`)."""
+    from mlflow.tracking import MlflowClient
+
+    resolved = tracking_uri(uri)
+    _create_store(resolved)
+    return MlflowClient(resolved)
+
+
+@functools.cache
+def _create_store(uri: str) -> None:
+    """Open a local SQLite store once per process, under a file lock beside it
+    (``<store>.lock``): MLflow creates a new store's schema by migrating it step by step,
+    and two processes doing so at once (the jobs of a sweep on a fresh store) break each
+    other's migration (``duplicate column name``). Other stores are left to MLflow."""
+    prefix = "sqlite:///"
+    path = Path(uri[len(prefix):]) if uri.startswith(prefix) else None
+    if path is None or str(path) == ":memory:" or not path.parent.is_dir():
+        return
+    from filelock import FileLock
+    from mlflow.tracking import MlflowClient
+
+    with FileLock(f"{path}.lock"):
+        MlflowClient(uri).search_experiments(max_results=1)
 
 
 def artifact_location(uri: str) -> str | None:
@@ -90,10 +118,8 @@ def make_logger(experiment: str, run_name: str, uri: str | None = None,
     """
     stage_run_id = _STAGE_RUN.get()
     resolved = tracking_uri(uri)
+    client = mlflow_client(resolved)
     if not lightning:
-        from mlflow.tracking import MlflowClient
-
-        client = MlflowClient(resolved)
         if stage_run_id is not None:
             _STAGE_RUN.set(None)
             run_id = stage_run_id
@@ -112,6 +138,8 @@ def make_logger(experiment: str, run_name: str, uri: str | None = None,
         for key, value in (tags or {}).items():
             logger.experiment.set_tag(stage_run_id, key, value)
         return logger
+    # created here, where two jobs creating it at once are handled (experiment_id)
+    experiment_id(client, experiment)
     return MLFlowLogger(experiment_name=experiment, run_name=run_name,
                         tracking_uri=resolved, tags=dict(tags or {}), log_model=False,
                         artifact_location=artifact_location(resolved))
@@ -119,11 +147,20 @@ def make_logger(experiment: str, run_name: str, uri: str | None = None,
 
 def experiment_id(client, name: str) -> str:
     """The id of experiment ``name``, created if missing."""
+    from mlflow.exceptions import MlflowException
+
     found = client.get_experiment_by_name(name)
     if found is not None:
         return found.experiment_id
-    return client.create_experiment(name, artifact_location=artifact_location(
-        client.tracking_uri))
+    try:
+        return client.create_experiment(name, artifact_location=artifact_location(
+            client.tracking_uri))
+    except MlflowException:
+        # another process (a job of the same sweep) created it in between
+        found = client.get_experiment_by_name(name)
+        if found is None:
+            raise
+        return found.experiment_id
 
 
 @contextmanager
@@ -134,9 +171,7 @@ def stage_run(name: str, experiment: str, uri: str | None = None,
     Nested under ``$CDPR_MLFLOW_PARENT_RUN_ID`` (in the parent's experiment) when set,
     else a top-level run in ``experiment``. The run ends FINISHED, or FAILED if the block
     raises. :func:`make_logger` called inside the block writes into this run."""
-    from mlflow.tracking import MlflowClient
-
-    client = MlflowClient(tracking_uri(uri))
+    client = mlflow_client(uri)
     parent = os.environ.get(PARENT_RUN_ENV)
     all_tags = {"cdpr_stage": name, **(tags or {})}
     if parent:
@@ -189,7 +224,7 @@ def latest_runs(experiment: str, uri: str | None = None, task: str = "train",
     (optionally only runs on one dataset digest), newest first."""
     import mlflow
 
-    client_uri = tracking_uri(uri)
+    client_uri = mlflow_client(uri).tracking_uri
     mlflow.set_tracking_uri(client_uri)
     filt = [f"tags.cdpr_task = '{task}'", "attributes.status = 'FINISHED'"]
     if data_digest:

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import mlflow
@@ -35,6 +37,36 @@ def test_committed_params_file_is_generated_from_conf(default_params):
     committed = yaml.safe_load((PROJECT_ROOT / PARAMS_FILE).read_text())
     assert committed == json.loads(json.dumps(default_params)), \
         "params.yaml is stale: run `cdpr params` and commit it"
+
+
+def test_committed_dvc_lock_matches_the_code_and_params(tmp_path):
+    """`dvc status` on the committed dvc.yaml, dvc.lock, params.yaml and code: no stage
+    has a changed command, param or code dependency. (What a stage reads from another
+    stage, and every output, is missing in a checkout: those are not staleness.)"""
+    for name in ("dvc.yaml", "dvc.lock", "params.yaml", ".dvcignore"):
+        shutil.copy(PROJECT_ROOT / name, tmp_path / name)
+    shutil.copytree(PROJECT_ROOT / "cdpr_pipeline", tmp_path / "cdpr_pipeline",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    subprocess.run([sys.executable, "-m", "dvc", "init", "--no-scm", "-q"], cwd=tmp_path,
+                   check=True)
+    status = json.loads(subprocess.run(
+        [sys.executable, "-m", "dvc", "status", "--json"], cwd=tmp_path, check=True,
+        capture_output=True, text=True).stdout)
+    lock = yaml.safe_load((PROJECT_ROOT / "dvc.lock").read_text())["stages"]
+    produced = {o["path"] for stage in lock.values() for o in stage.get("outs", [])}
+    stale: dict[str, list] = {}
+    for stage, entries in status.items():
+        for entry in entries:
+            if isinstance(entry, dict) and set(entry) == {"changed outs"}:
+                continue
+            if isinstance(entry, dict) and set(entry) == {"changed deps"}:
+                stale[stage] = [path for path, state in entry["changed deps"].items()
+                                if not (path in produced and state == "deleted")]
+            else:
+                stale[stage] = [entry]
+    stale = {stage: what for stage, what in stale.items() if what}
+    assert not stale, f"dvc.lock is stale: run `make lock` and commit it ({stale})"
+    assert set(lock) == set(status)      # every stage has run
 
 
 def test_every_dvc_stage_runs_its_own_section_and_writes_fixed_paths(default_params):

@@ -1,7 +1,9 @@
 """`cdpr repro` end to end (slow, ~10 minutes on 2 cores): the whole dvc.yaml on the tiny
 profile in a scratch copy of the project. The diagnosis must name the effect hidden in
 the pipeline's dataset; every stage is a finished MLflow run nested under one parent; a
-second repro does nothing; changing one param reruns only what depends on it."""
+second repro does nothing; changing one param reruns only what depends on it; and a
+second clone reuses every result through a DVC remote (push, clone, pull: nothing to run).
+The project is a git repository, as a user's clone is."""
 
 from __future__ import annotations
 
@@ -21,10 +23,19 @@ from cdpr_pipeline.config import PROJECT_ROOT
 
 pytestmark = pytest.mark.slow
 
+#: who commits in the scratch repositories
+GIT_USER = {"GIT_AUTHOR_NAME": "cdpr test", "GIT_AUTHOR_EMAIL": "cdpr@test.invalid",
+            "GIT_COMMITTER_NAME": "cdpr test", "GIT_COMMITTER_EMAIL": "cdpr@test.invalid"}
+
 
 def _cdpr(cwd: Path, *args: str, env: dict) -> subprocess.CompletedProcess:
     return subprocess.run([str(Path(sys.executable).parent / "cdpr"), *args], cwd=cwd, env=env,
                           text=True, capture_output=True, check=False)
+
+
+def _git(cwd: Path, *args: str, env: dict) -> str:
+    return subprocess.run(["git", *args], cwd=cwd, env=env, text=True, capture_output=True,
+                          check=True).stdout
 
 
 def _dvc(cwd: Path, *args: str, env: dict) -> str:
@@ -36,16 +47,25 @@ def _dvc(cwd: Path, *args: str, env: dict) -> str:
 @pytest.fixture(scope="module")
 def project(tmp_path_factory):
     root = tmp_path_factory.mktemp("project")
-    shutil.copy(PROJECT_ROOT / "dvc.yaml", root)
+    for name in ("dvc.yaml", ".gitignore", "data/.gitignore"):
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(PROJECT_ROOT / name, root / name)
     shutil.copytree(PROJECT_ROOT / "cdpr_pipeline", root / "cdpr_pipeline",
                     ignore=shutil.ignore_patterns("__pycache__"))
     env = dict(os.environ, MLFLOW_TRACKING_URI=f"sqlite:///{root / 'mlflow.db'}",
                PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}",
                # one thread per stage process: its networks are small, and threads waiting
                # on each other on busy cores are several times slower
-               OMP_NUM_THREADS="1")
+               OMP_NUM_THREADS="1", **GIT_USER)
     env.pop("CDPR_MLFLOW_PARENT_RUN_ID", None)
-    _dvc(root, "init", "--no-scm", "-q", env=env)
+    _git(root, "init", "-q", env=env)
+    _dvc(root, "init", "-q", env=env)
+    shutil.copy(PROJECT_ROOT / ".dvcignore", root)
+    # Python's bytecode beside the code, as an editable install leaves it (.dvcignore)
+    (root / "cdpr_pipeline/sim/__pycache__").mkdir()
+    (root / "cdpr_pipeline/sim/__pycache__/plant.cpython-311.pyc").write_bytes(b"\0")
+    _git(root, "add", "-A", env=env)
+    _git(root, "commit", "-q", "-m", "the project", env=env)
     start = time.perf_counter()
     first = _cdpr(root, "repro", "profile=tiny", env=env)
     assert first.returncode == 0, first.stdout[-3000:] + first.stderr[-5000:]
@@ -127,3 +147,42 @@ def test_one_changed_param_reruns_only_what_depends_on_it(lab):
     # the virtual runs changed, so the identification that reads them reran, and the
     # report, which lists every stage as ran or skipped; nothing else
     assert set(children) == {"virtual", "identify_virtual", "report"}
+
+
+def test_a_second_clone_pulls_every_result_and_has_nothing_to_run(lab, tmp_path):
+    """The README's sharing: `dvc push` to a remote (a folder here), the code and
+    dvc.lock through git, then on a fresh clone `dvc pull`: every stage up to date, every
+    output there, byte for byte, and `cdpr repro` has nothing to run."""
+    root, env = lab
+    assert json.loads(_dvc(root, "status", "--json", env=env)) == {}
+    _dvc(root, "remote", "add", "-d", "store", str(tmp_path / "remote"), env=env)
+    _git(root, "add", "params.yaml", "dvc.lock", ".dvc/config", env=env)
+    _git(root, "commit", "-q", "-m", "a pipeline run", env=env)
+    # the rest of the run is ignored by git: in DVC's cache, or logs and the MLflow store
+    assert _git(root, "status", "--porcelain", env=env) == ""
+    _dvc(root, "push", "-q", env=env)
+
+    clone = tmp_path / "clone"
+    _git(tmp_path, "clone", "-q", str(root), str(clone), env=env)
+    clone_env = dict(env, MLFLOW_TRACKING_URI=f"sqlite:///{tmp_path / 'clone.db'}")
+    assert not (clone / "results").exists()
+    _dvc(clone, "pull", "-q", env=clone_env)
+    assert json.loads(_dvc(clone, "status", "--json", env=clone_env)) == {}
+    dry = _dvc(clone, "repro", "--dry", env=clone_env)
+    assert "Running stage" not in dry, dry
+    lock = yaml.safe_load((clone / "dvc.lock").read_text())["stages"]
+    outs = {o["path"] for stage in lock.values() for o in stage.get("outs", [])}
+    assert len(outs) > 50
+    for path in sorted(outs):
+        ours, theirs = root / path, clone / path
+        files = sorted(p.relative_to(ours) for p in ours.rglob("*") if p.is_file()) \
+            if ours.is_dir() else [Path()]
+        for name in files:
+            assert (theirs / name).read_bytes() == (ours / name).read_bytes(), path
+    virtual_model = yaml.safe_load((clone / "params.yaml").read_text())[
+        "pipeline"]["virtual_model"]
+    again = _cdpr(clone, "repro", "profile=tiny", f"virtual_model={virtual_model}",
+                  env=clone_env)
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert "up to date" in again.stdout + again.stderr
+    assert _git(clone, "status", "--porcelain", env=clone_env) == ""
