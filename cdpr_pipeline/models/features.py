@@ -129,21 +129,23 @@ class FeatureLayout:
     def input_groups(self) -> list[list[int]]:
         """Input columns that share one scale (see ``shared_units``): the desired and the
         measured position together (the same coordinate, so the scaled tracking error
-        is still their difference), the tracking errors, lengths, torques and
-        accelerations per quantity; time alone. The increments ``d_*`` take the
+        is still their difference), the tracking errors, lengths and torques per
+        quantity; time alone. The increments ``d_*`` and accelerations ``a_*`` take the
         target's scale (:meth:`Standardizer.fit`)."""
         nd, n = self.n_desired, self.n_position
         st = self.state_slice.start
-        acc = self.n_inputs - n
         per_axis = [[1 + i, st + i] if nd else [st + i] for i in range(n)]
         errors = [[1 + nd + i] for i in range(nd)]
-        accel = [[acc + i] for i in range(n)]
         rest = [[st + i for i in g] for g in self.state_groups if g[0] >= n]
         if self.shared_units:
             per_axis = [sum(per_axis, [])]
             errors = [sum(errors, [])] if errors else []
-            accel = [sum(accel, [])]
-        return [[0], *per_axis, *errors, *rest, *accel]
+        return [[0], *per_axis, *errors, *rest]
+
+    @property
+    def accel_slice(self) -> slice:
+        """Input columns holding ``p(k) - 2 p(k-1) + p(k-2)``."""
+        return slice(self.n_inputs - self.n_position, self.n_inputs)
 
     @property
     def measured_mask(self) -> list[bool]:
@@ -235,7 +237,10 @@ class Standardizer:
     """Affine scaling of inputs and targets, fitted on training runs only.
 
     The increment inputs share the target's scaling, so that the increment one step
-    earlier and the predicted increment are in the same units.
+    earlier and the predicted increment are in the same units. So does the acceleration,
+    the difference of two position increments: on its own scale, an error of a predicted
+    increment fed back in a free run entered it magnified by the ratio of the two spreads
+    (200 at EMPS's 1 kHz, where every network's 1 s free run went to NaN).
 
     Each column is centred on its own mean, but columns of one quantity in one unit
     (``FeatureLayout.input_groups``) share one scale, the root mean square of their
@@ -260,6 +265,7 @@ class Standardizer:
         t_mean, t_std = targs.mean(axis=0), _safe_std(targs, layout.state_groups)
         in_mean[layout.delta_slice] = t_mean
         in_std[layout.delta_slice] = t_std
+        in_std[layout.accel_slice] = t_std[:layout.n_position]
         return cls(in_mean, in_std, t_mean, t_std)
 
     def inputs(self, x: np.ndarray) -> np.ndarray:

@@ -63,6 +63,10 @@ def test_scaling_uses_training_runs_only_and_shares_increment_scale():
         np.testing.assert_allclose(sc.input_std[pair], np.sqrt(np.mean(std[pair] ** 2)))
     np.testing.assert_allclose(sc.input_mean[LAYOUT.delta_slice], sc.target_mean)
     np.testing.assert_allclose(sc.input_std[LAYOUT.delta_slice], sc.target_std)
+    # the acceleration is a difference of two position increments: their scale, so a
+    # fed-back increment error enters it at the size it has in the increment
+    np.testing.assert_allclose(sc.input_std[LAYOUT.accel_slice], sc.target_std[:3])
+    assert LAYOUT.input_names[LAYOUT.accel_slice] == ["a_x", "a_y", "a_z"]
     # the third run plays no part
     runs[2].state[:] += 100.0
     again = Standardizer.fit(runs[:2], LAYOUT)
