@@ -46,6 +46,11 @@ class FeatureLayout:
         Whether the desired position is an input.
     sample_rate_hz : float
         Nominal sample rate of the data.
+    shared_units : bool
+        Whether the position channels share one unit, and so do the lengths and the
+        torques (a cable robot: x, y, z in m, every cable in m, every winch in N m); the
+        scaling then gives each such quantity one scale (:meth:`Standardizer.fit`).
+        Drive axes may mix units (m and rad), so each channel keeps its own.
     """
 
     position_names: tuple[str, ...]
@@ -53,13 +58,15 @@ class FeatureLayout:
     n_torques: int
     has_desired: bool
     sample_rate_hz: float
+    shared_units: bool = False
 
     @classmethod
     def for_rig(cls, rig: Rig, has_desired: bool = True) -> FeatureLayout:
         """Layout for a rig; ``has_desired=False`` when the runs carry no desired path
         (optional for ``axes`` data)."""
         if isinstance(rig, CdprRig):
-            return cls(("x", "y", "z"), rig.n, rig.n, has_desired, float(rig.sample_rate_hz))
+            return cls(("x", "y", "z"), rig.n, rig.n, has_desired, float(rig.sample_rate_hz),
+                       shared_units=True)
         names = tuple(rig.axes)
         return cls(names, 0, rig.n, has_desired, float(rig.sample_rate_hz))
 
@@ -107,6 +114,38 @@ class FeatureLayout:
         error = [f"e_{p}" for p in self.position_names] if self.has_desired else []
         return (["t", *desired, *error, *self.state_names,
                  *(f"d_{s}" for s in self.state_names), *(f"a_{p}" for p in self.position_names)])
+
+    @property
+    def state_groups(self) -> list[list[int]]:
+        """State columns that share one scale: per quantity (position, lengths, torques)
+        when ``shared_units``, else each column on its own."""
+        n, nl, nt = self.n_position, self.n_lengths, self.n_torques
+        if not self.shared_units:
+            return [[i] for i in range(self.n_state)]
+        return [g for g in (list(range(n)), list(range(n, n + nl)),
+                            list(range(n + nl, n + nl + nt))) if g]
+
+    @property
+    def input_groups(self) -> list[list[int]]:
+        """Input columns that share one scale (see ``shared_units``): the desired and the
+        measured position together (the same coordinate, so the scaled tracking error
+        is still their difference), the tracking errors, lengths and torques per
+        quantity; time alone. The increments ``d_*`` and accelerations ``a_*`` take the
+        target's scale (:meth:`Standardizer.fit`)."""
+        nd, n = self.n_desired, self.n_position
+        st = self.state_slice.start
+        per_axis = [[1 + i, st + i] if nd else [st + i] for i in range(n)]
+        errors = [[1 + nd + i] for i in range(nd)]
+        rest = [[st + i for i in g] for g in self.state_groups if g[0] >= n]
+        if self.shared_units:
+            per_axis = [sum(per_axis, [])]
+            errors = [sum(errors, [])] if errors else []
+        return [[0], *per_axis, *errors, *rest]
+
+    @property
+    def accel_slice(self) -> slice:
+        """Input columns holding ``p(k) - 2 p(k-1) + p(k-2)``."""
+        return slice(self.n_inputs - self.n_position, self.n_inputs)
 
     @property
     def measured_mask(self) -> list[bool]:
@@ -198,7 +237,17 @@ class Standardizer:
     """Affine scaling of inputs and targets, fitted on training runs only.
 
     The increment inputs share the target's scaling, so that the increment one step
-    earlier and the predicted increment are in the same units.
+    earlier and the predicted increment are in the same units. So does the acceleration,
+    the difference of two position increments: on its own scale, an error of a predicted
+    increment fed back in a free run entered it magnified by the ratio of the two spreads
+    (200 at EMPS's 1 kHz, where every network's 1 s free run went to NaN).
+
+    Each column is centred on its own mean, but columns of one quantity in one unit
+    (``FeatureLayout.input_groups``) share one scale, the root mean square of their
+    standard deviations. Per-column scales would divide a coordinate that barely moves
+    in training by its noise: a rig recorded on one flat circle has a z standard
+    deviation of 0.1 mm, so a virtual run 6 cm higher read 600 standard deviations off
+    and every free run of the networks left the workspace.
     """
 
     input_mean: np.ndarray
@@ -212,10 +261,11 @@ class Standardizer:
             raise ValueError("cannot fit the scaling on zero training runs")
         feats = np.concatenate([run_features(r, layout)[2:] for r in runs])
         targs = np.concatenate([run_targets(r)[:-1] for r in runs])
-        in_mean, in_std = feats.mean(axis=0), _safe_std(feats)
-        t_mean, t_std = targs.mean(axis=0), _safe_std(targs)
+        in_mean, in_std = feats.mean(axis=0), _safe_std(feats, layout.input_groups)
+        t_mean, t_std = targs.mean(axis=0), _safe_std(targs, layout.state_groups)
         in_mean[layout.delta_slice] = t_mean
         in_std[layout.delta_slice] = t_std
+        in_std[layout.accel_slice] = t_std[:layout.n_position]
         return cls(in_mean, in_std, t_mean, t_std)
 
     def inputs(self, x: np.ndarray) -> np.ndarray:
@@ -236,7 +286,12 @@ class Standardizer:
         return cls(**{k: np.asarray(v, float) for k, v in d.items()})
 
 
-def _safe_std(a: np.ndarray) -> np.ndarray:
-    # a constant column (e.g. a flat desired z) must not blow up the scaling
+def _safe_std(a: np.ndarray, groups: list[list[int]]) -> np.ndarray:
+    """Standard deviations per column, one per group of columns in ``groups`` (the root
+    mean square of theirs); a column in no group keeps its own."""
     std = a.std(axis=0)
-    return np.where(std > 1e-12 * np.maximum(1.0, np.abs(a.mean(axis=0))), std, 1.0)
+    mean = a.mean(axis=0)
+    for g in groups:
+        std[g] = np.sqrt(np.mean(std[g] ** 2))
+    # a constant column (e.g. a flat desired z) must not blow up the scaling
+    return np.where(std > 1e-12 * np.maximum(1.0, np.abs(mean)), std, 1.0)

@@ -137,7 +137,8 @@ class Forecaster:
         blob = torch.load(Path(path), map_location=map_location, weights_only=True)
         d = blob["layout"]
         layout = FeatureLayout(tuple(d["position_names"]), d["n_lengths"], d["n_torques"],
-                               d["has_desired"], d["sample_rate_hz"])
+                               d["has_desired"], d["sample_rate_hz"],
+                               d.get("shared_units", False))   # absent before it existed
         if not blob.get("net_config"):
             raise ValueError(f"{path}: no net_config saved; cannot rebuild the network")
         net = instantiate(blob["net_config"])(layout=layout)

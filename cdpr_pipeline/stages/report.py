@@ -5,7 +5,9 @@ comparison, every identification, the reconstruction, the diagnosis) and writes
 ``report.html`` (tables and figures, self-contained), ``report.md`` and ``summary.json``
 (flat figures for ``dvc metrics show`` and MLflow). A missing input is named in the error.
 It also lists every stage of the pipeline (``stages``) as ran or skipped, with the reason;
-the section of a skipped stage says so instead of its table.
+the section of a skipped stage says so instead of its table. The virtual runs get a line:
+which predictor drove them and why (a fallback when the configured one's free runs left
+the workspace), or why they were skipped.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.rig import WINCH_KEYS
 from cdpr_pipeline.errors import InputError
 from cdpr_pipeline.pipeline.skip import skipped_reason
+from cdpr_pipeline.stages.virtual import RECORD as VIRTUAL_RECORD
 from cdpr_pipeline.tables import to_markdown
 from cdpr_pipeline.tracking import finished_or_failed, log_metrics, make_logger
 
@@ -111,6 +114,22 @@ def _output(path: Path, what: str) -> tuple[dict | None, str | None]:
     return (None, reason) if reason is not None else (_read_json(path, what), None)
 
 
+def virtual_note(virtual_dir: str | Path | None) -> str | None:
+    """One line on the virtual runs: how many, which predictor drove them and why
+    (``virtual.json`` of ``cdpr virtual``), or why the stage was skipped; ``None`` when
+    the pipeline has no virtual stage or it left no record."""
+    if virtual_dir is None:
+        return None
+    reason = skipped_reason(virtual_dir)
+    if reason is not None:
+        return f"skipped: {reason}"
+    record = Path(virtual_dir) / VIRTUAL_RECORD
+    if not record.is_file():
+        return None
+    v = _read_json(record, "virtual runs' record")
+    return f"{v['runs']} runs driven by {v['why']}"
+
+
 def build_report(cfg: DictConfig) -> dict:
     """Gather the pipeline's results into ``cfg.out_dir``; returns ``summary.json``."""
     out = Path(cfg.out_dir)
@@ -136,6 +155,7 @@ def build_report(cfg: DictConfig) -> dict:
     reconstruction, reconstruct_skipped = _output(
         Path(cfg.reconstruct) / "reconstruction.json", "reconstruction")
     diagnosis, diagnose_skipped = _output(Path(cfg.diagnose) / "diagnosis.json", "diagnosis")
+    virtual = virtual_note((cfg.get("stages") or {}).get("virtual"))
 
     summary: dict[str, float | str] = {}
     if dataset is not None:
@@ -162,6 +182,7 @@ def build_report(cfg: DictConfig) -> dict:
            if dataset is not None else f"**Dataset**: skipped: {dataset_skipped}\n"),
           (f"**Diagnosis**: {diagnosis['summary']}\n" if diagnosis is not None
            else f"**Diagnosis**: skipped: {diagnose_skipped}\n"),
+          f"**Virtual runs**: {virtual}\n" if virtual else "",
           f"**Stages**: {ran} ran, {summary['stages_skipped']} skipped (see the end).\n",
           "## Trajectory predictors (test runs)\n",
           summary_md if compare_skipped is None else _skipped_note(compare_skipped),
@@ -189,6 +210,7 @@ def build_report(cfg: DictConfig) -> dict:
          f"(full diagnosis: <code>{html.escape(str(diag_link))}</code>)</p>"
          if diagnosis is not None
          else f"<p><b>Diagnosis</b>: skipped: {html.escape(diagnose_skipped)}</p>"),
+        f"<p><b>Virtual runs</b>: {html.escape(virtual)}</p>" if virtual else "",
         _section("Trajectory predictors (Tables I-II, test runs)",
                  pd.DataFrame(comparison).T.to_html(float_format=lambda v: f"{v:.3g}")
                  + _image(compare_dir / "comparison.png")

@@ -7,13 +7,24 @@ families. Drive axes (``kind: axes``): along pieces of the runs' own recorded re
 (``qd`` columns) of the runs identification fits on (``holdout`` names the others).
 Data without a desired trajectory has nothing to drive the predictor along: the stage
 raises :class:`~cdpr_pipeline.pipeline.skip.StageNotApplicable`.
+
+A free run that leaves the range (a cable robot's frame, drive axes' recorded range
+widened by half) has diverged and is dropped. When fewer than ``min_in_range`` of the
+forecaster's free runs stay in range, the stage tries the predictors in ``fallback_dirs``
+(output directories of ``cdpr train``), best first by their held-out 1 s free-run RMSE
+(``metrics.json``), and keeps the first that does; failing that, the one that keeps the
+most runs. ``virtual.json`` beside the runs says which predictor drove them and why. When
+no predictor keeps a single run in range, the stage is not applicable (the pipeline skips
+it with that reason).
 """
 
 from __future__ import annotations
 
+import json
 import logging
+import math
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from hydra.utils import instantiate
@@ -37,6 +48,39 @@ from cdpr_pipeline.pipeline.skip import StageNotApplicable
 
 log = logging.getLogger(__name__)
 
+#: what ``cdpr virtual`` writes beside the runs: which predictor drove them, and why
+RECORD = "virtual.json"
+#: the metric that ranks fallback predictors (``cdpr train``'s metrics.json): the held-out
+#: 1 s free-run position RMSE, the closest of its scores to what a virtual run is
+RANK_METRIC = "freerun_1s/test/all/overall/rmse"
+
+
+@dataclass
+class Rollout:
+    """One predictor's virtual runs and which of them stayed in range.
+
+    Attributes
+    ----------
+    name : str
+        The predictor (its directory's name).
+    path : str
+        Its ``forecaster.pt``.
+    runs, valid : list of Trajectory
+        Every virtual run, and those that stayed in range.
+    seconds : float
+        Time spent rolling out.
+    """
+
+    name: str
+    path: str
+    runs: list[Trajectory]
+    valid: list[Trajectory]
+    seconds: float
+
+    @property
+    def in_range(self) -> str:
+        return f"{len(self.valid)} of {len(self.runs)}"
+
 
 def _axes_runs(cfg: DictConfig, fc: Forecaster, rig: AxesRig
                ) -> tuple[list[Trajectory], list[Trajectory]]:
@@ -55,19 +99,10 @@ def _axes_runs(cfg: DictConfig, fc: Forecaster, rig: AxesRig
     return runs, list(data.trajectories)
 
 
-def virtual(cfg: DictConfig) -> Path:
-    """Generate and write the virtual dataset; returns its directory.
-
-    Raises
-    ------
-    StageNotApplicable
-        If the predictor was trained without a desired trajectory (the runs have no
-        ``xd``/``qd`` columns), or the rig is of a kind without virtual runs.
-    """
-    if not cfg.forecaster:
-        raise ConfigError("forecaster=PATH (a forecaster.pt written by `cdpr train`) is required")
-    rig = read_rig(Path(cfg.data.path) / "rig.yaml")
-    fc = Forecaster.load(cfg.forecaster)
+def _rollout(cfg: DictConfig, rig: CdprRig | AxesRig, path: str | Path) -> Rollout:
+    """Roll the forecaster at ``path`` out along the stage's desired trajectories (the
+    same ones for every predictor: they depend on ``seed`` only)."""
+    fc = Forecaster.load(path)
     if not fc.layout.has_desired:
         raise StageNotApplicable(
             f"kind {rig.kind}: the runs have no desired trajectory (columns "
@@ -82,28 +117,116 @@ def virtual(cfg: DictConfig) -> Path:
             centre_m=None if traj.centre_m is None else list(traj.centre_m),
             ranges=instantiate(traj.ranges))
         bounds = None
-    elif isinstance(rig, AxesRig):
+    else:
         runs, recorded = _axes_runs(cfg, fc, rig)
         bounds = position_bounds(recorded)
-    else:
+    valid = [r for r in runs if physically_valid(r, rig, bounds=bounds)]
+    return Rollout(Path(path).parent.name, str(path), runs, valid,
+                   time.perf_counter() - start)
+
+
+def _free_run_rmse(train_dir: str | Path) -> float:
+    """A fallback's held-out 1 s free-run RMSE from its ``metrics.json``; infinite when
+    missing or not finite (a diverged free run scores NaN)."""
+    path = Path(train_dir) / "metrics.json"
+    if not path.is_file():
+        return math.inf
+    value = json.loads(path.read_text()).get(RANK_METRIC)
+    return float(value) if value is not None and math.isfinite(value) else math.inf
+
+
+def choose_rollout(cfg: DictConfig, rig: CdprRig | AxesRig) -> tuple[Rollout, list[Rollout],
+                                                                       str]:
+    """The predictor whose virtual runs are written (see the module docstring).
+
+    Returns
+    -------
+    chosen : Rollout
+    tried : list of Rollout
+        Every predictor rolled out, the configured one first.
+    why : str
+        One line: which predictor and why.
+
+    Raises
+    ------
+    StageNotApplicable
+        If no predictor keeps a single free run in range (or the runs have no desired
+        trajectory).
+    """
+    need = float(cfg.get("min_in_range", 0.5))
+
+    def enough(r: Rollout) -> bool:
+        return bool(r.runs) and len(r.valid) >= need * len(r.runs)
+
+    first = _rollout(cfg, rig, cfg.forecaster)
+    tried = [first]
+    if enough(first):
+        return first, tried, (f"{first.name}, the configured predictor: {first.in_range} "
+                              "free runs stayed in range")
+    fallbacks = sorted((str(d) for d in (cfg.get("fallback_dirs") or [])
+                        if Path(d).resolve() != Path(cfg.forecaster).resolve().parent),
+                       key=_free_run_rmse)        # sorted() is stable: ties keep their order
+    chosen = None
+    for d in fallbacks:
+        r = _rollout(cfg, rig, Path(d) / "forecaster.pt")
+        tried.append(r)
+        log.info("virtual runs of %s (held-out 1 s free-run RMSE %.3g): %s in range",
+                 r.name, _free_run_rmse(d), r.in_range)
+        if enough(r):
+            chosen = r
+            break
+    if chosen is None:
+        # max() keeps the first of equals: the configured one, then the better ranked
+        chosen = max(tried, key=lambda r: len(r.valid))
+    counts = ", ".join(f"{r.name} {r.in_range}" for r in tried)
+    if not chosen.valid:
+        where = "workspace" if isinstance(rig, CdprRig) else "recorded range widened by half"
+        raise StageNotApplicable(f"every free run of every predictor left the {where} "
+                                 f"(runs in range: {counts}); no virtual run to write")
+    if chosen is first:
+        return first, tried, (f"{first.name}, the configured predictor, the best of those "
+                              f"tried (runs in range: {counts})")
+    return chosen, tried, (f"{chosen.name} instead of the configured {first.name}, whose "
+                           f"free runs left the range (runs in range: {counts})")
+
+
+def virtual(cfg: DictConfig) -> Path:
+    """Generate and write the virtual dataset; returns its directory.
+
+    Raises
+    ------
+    StageNotApplicable
+        If the predictor was trained without a desired trajectory (the runs have no
+        ``xd``/``qd`` columns), the rig is of a kind without virtual runs, or no
+        predictor keeps a free run in range.
+    """
+    if not cfg.forecaster:
+        raise ConfigError("forecaster=PATH (a forecaster.pt written by `cdpr train`) is required")
+    rig = read_rig(Path(cfg.data.path) / "rig.yaml")
+    if not isinstance(rig, (CdprRig, AxesRig)):
         raise StageNotApplicable(f"kind {getattr(rig, 'kind', type(rig).__name__)}: "
                                  "no virtual runs for this kind")
-    elapsed = time.perf_counter() - start
-    valid = [r for r in runs if physically_valid(r, rig, bounds=bounds)]
-    where = "workspace" if bounds is None else "recorded range widened by half of it"
-    if len(valid) < len(runs):
-        dropped = sorted(set(r.name for r in runs) - set(r.name for r in valid))
+    chosen, tried, why = choose_rollout(cfg, rig)
+    runs, valid = chosen.runs, chosen.valid
+    where = "workspace" if isinstance(rig, CdprRig) else "recorded range widened by half of it"
+    dropped = sorted(set(r.name for r in runs) - set(r.name for r in valid))
+    if dropped:
         if not cfg.drop_diverged:
-            raise ValueError(f"{len(dropped)} virtual runs left the {where} (diverged free "
-                             f"runs): {dropped}; drop_diverged=true keeps the others")
+            raise ConfigError(f"{len(dropped)} virtual runs of {chosen.name} left the {where} "
+                             f"(diverged free runs): {dropped}; drop_diverged=true keeps the "
+                             "others")
         log.warning("dropped %d of %d virtual runs whose free run left the %s: %s",
                     len(dropped), len(runs), where, dropped)
-    if not valid:
-        raise ValueError("every virtual run diverged; nothing to write")
+    log.info("virtual runs driven by %s", why)
     # renumber so file names stay <index>_<family>
     valid = [replace(r, name=f"{i:03d}_{r.family}") for i, r in enumerate(valid)]
     out = write_virtual_dataset(cfg.out_dir, rig, valid, overwrite=bool(cfg.overwrite))
-    log.info("%d virtual runs in %.1f s -> %s", len(valid), elapsed, out)
+    record = {"predictor": chosen.name, "forecaster": chosen.path,
+              "configured": tried[0].name, "fallback": chosen is not tried[0],
+              "why": why, "runs": len(valid), "dropped": dropped,
+              "in_range": {r.name: {"kept": len(r.valid), "of": len(r.runs)} for r in tried}}
+    (out / RECORD).write_text(json.dumps(record, indent=1) + "\n")
+    log.info("%d virtual runs in %.1f s -> %s", len(valid), sum(r.seconds for r in tried), out)
     return out
 
 
