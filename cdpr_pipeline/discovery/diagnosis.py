@@ -21,6 +21,7 @@ from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.split import Split, heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.discovery.bands import power_band_hz
 from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
 from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
 from cdpr_pipeline.discovery.freeform import FreeFormSearch
@@ -658,9 +659,10 @@ def unexplained_residual(res: Residuals, held: list[RunSignals], nominal: Model,
     ``settings.unexplained_min_error_pct`` of its measured signal's RMS. None when no
     column is.
 
-    Each column's band is the wavelet band holding most of the energy of its full-rate
-    residual (no filter, no decimation) on the longest held-out run: an error above the
-    band the regression analyses still shows there."""
+    Each column's band holds 80 % of the power above the noise floor of its full-rate
+    residual (no decimation) on the longest held-out run
+    (:func:`~cdpr_pipeline.discovery.bands.power_band_hz`): an error above the band the
+    regression analyses still shows there."""
     r = res.stacked(channel)
     measured = measured_rows(held, channel)
     total = float(np.sum(r ** 2)) or 1.0
@@ -677,9 +679,9 @@ def unexplained_residual(res: Residuals, held: list[RunSignals], nominal: Model,
             continue
         if full is None:
             full = _full_rate_residual(nominal, longest, channel)
-        top = max(_bands(full[:, i], longest.fs, settings.wavelet), key=lambda b: b.share)
         columns.append(UnexplainedColumn(name, rel, float(np.sum(r[:, i] ** 2)) / total,
-                                         (top.lo_hz, top.hi_hz), tuple(failed)))
+                                         power_band_hz(full[:, i], longest.fs),
+                                         tuple(failed)))
     if not columns:
         return None
     found = Unexplained(channel, tuple(columns), threshold, alpha)
