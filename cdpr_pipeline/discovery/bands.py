@@ -10,8 +10,12 @@ the analysed band to it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from scipy.signal import welch
+
+from cdpr_pipeline.discovery.signals import RunSignals
 
 #: the top share of the band (below Nyquist) whose median power is the white noise floor:
 #: motion and model errors have no power there
@@ -52,3 +56,22 @@ def share_above(x: np.ndarray, fs: float, f_hz: float) -> float:
     f, p = excess_power(x, fs)
     total = p.sum()
     return float(p[f > f_hz].sum() / total) if total > 0 else 0.0
+
+
+def row_noise(signals: Sequence[RunSignals], channel: str = "torque") -> np.ndarray:
+    """Per column, the RMS the measurement noise of ``channel`` has on the statistics
+    rows: the white noise level of the recorded signal (median absolute deviation of its
+    finest Haar details, Donoho's estimator: smooth motion has no power at a quarter of
+    the sample rate and above) times the rows' gain for white noise (unit white noise
+    sent through the runs' own filter and decimation, a fixed seed). What a correct
+    model's residual is made of, up to the filter and tension artefacts the tests see."""
+    rng = np.random.default_rng(0)
+    details, gains = [], []
+    for s in signals:
+        x = s.torque if channel == "torque" else s.lengths
+        half = len(x) // 2
+        details.append((x[1:2 * half:2] - x[0:2 * half:2]) / np.sqrt(2.0))
+        gains.append(s.rows(rng.standard_normal(x.shape)))
+    d = np.concatenate(details)
+    sigma = np.median(np.abs(d - np.median(d, axis=0)), axis=0) / 0.6745
+    return sigma * np.concatenate(gains).std(axis=0)

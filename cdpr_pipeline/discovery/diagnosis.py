@@ -21,7 +21,7 @@ from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.split import Split, heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.discovery.bands import power_band_hz
+from cdpr_pipeline.discovery.bands import power_band_hz, row_noise
 from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
 from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
 from cdpr_pipeline.discovery.freeform import FreeFormSearch
@@ -107,10 +107,16 @@ class DiagnosisSettings:
     #: every winch is re-identified before causes are named
     unusable_error_pct: float = 100.0
     #: a held-out torque column whose validity tests fail makes a diagnosis without
-    #: causes ``unexplained`` (not ``none``) only when its RMS error is at least this
-    #: share (%) of its measured signal's RMS: effect-free data leave 0.1-0.7 % whose
-    #: tests fail at hundreds of rows (filter and noise artefacts of no practical size)
-    unexplained_min_error_pct: float = 2.0
+    #: causes ``unexplained`` (not ``none``) only when its RMS error is material: at
+    #: least this many times the measurement noise the rows carry
+    #: (:func:`~cdpr_pipeline.discovery.bands.row_noise`). Effect-free data fail the
+    #: tests at hundreds of rows with errors of 0.5-5.6 times it (filter, tension and
+    #: noise artefacts: 12 independent datasets); a periodic torque above the analysed
+    #: band left 7-39 times it
+    unexplained_noise_ratio: float = 10.0
+    #: ... and at least this share (%) of its measured signal's RMS (what "material"
+    #: means where a recording carries no measurable noise)
+    unexplained_min_error_pct: float = 0.1
 
 
 def diagnosis_split(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Split:
@@ -633,7 +639,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     alpha = settings.selection.alpha / max(len(validity.before), 1)
     failing = [k for k, v in validity.before.items() if failed_tests(v, alpha)]
     sentence = summary_sentence(causes, nominal, gain, unusable, withdrawn, unexplained,
-                                failing, settings.unexplained_min_error_pct)
+                                failing, settings.unexplained_noise_ratio)
     plots["before_after"] = {"before": before_held.stacked(channel),
                              "after": after_held.stacked(channel), "channel": channel,
                              "t": np.concatenate([s.row_times() for s in held])}
@@ -656,6 +662,8 @@ def unexplained_residual(res: Residuals, held: list[RunSignals], nominal: Model,
     """The held-out columns of ``channel`` that the nominal model gets materially wrong:
     a validity test fails (one of the five correlation tests, or Ljung-Box whiteness at
     ``alpha`` over the columns, Bonferroni) and the column's RMS error is at least
+    ``settings.unexplained_noise_ratio`` times the measurement noise its rows carry
+    (:func:`~cdpr_pipeline.discovery.bands.row_noise`) and at least
     ``settings.unexplained_min_error_pct`` of its measured signal's RMS. None when no
     column is.
 
@@ -668,28 +676,31 @@ def unexplained_residual(res: Residuals, held: list[RunSignals], nominal: Model,
     total = float(np.sum(r ** 2)) or 1.0
     alpha = settings.selection.alpha / r.shape[1]
     threshold = settings.unexplained_min_error_pct
+    rms = np.sqrt(np.mean(r ** 2, axis=0))
+    noise_ratio = rms / np.maximum(row_noise(held, channel), 1e-300)
     longest = max(held, key=lambda s: s.t.size)
     full = None
     columns = []
     for i, name in enumerate(channel_names(channel, r.shape[1])):
         failed = failed_tests(validity[name], alpha)
-        rel = 100 * float(np.sqrt(np.mean(r[:, i] ** 2))
-                          / max(np.sqrt(np.mean(measured[:, i] ** 2)), 1e-300))
-        if not failed or rel < threshold:
+        rel = 100 * float(rms[i] / max(np.sqrt(np.mean(measured[:, i] ** 2)), 1e-300))
+        if not failed or rel < threshold or noise_ratio[i] < settings.unexplained_noise_ratio:
             continue
         if full is None:
             full = _full_rate_residual(nominal, longest, channel)
         columns.append(UnexplainedColumn(name, rel, float(np.sum(r[:, i] ** 2)) / total,
                                          power_band_hz(full[:, i], longest.fs),
-                                         tuple(failed)))
+                                         tuple(failed), float(noise_ratio[i])))
     if not columns:
         return None
-    found = Unexplained(channel, tuple(columns), threshold, alpha)
+    found = Unexplained(channel, tuple(columns), threshold, alpha,
+                        settings.unexplained_noise_ratio)
     log.warning("no cause found, but the held-out %s residual of %s fails the validity tests "
-                "(%s) with %s of the measured signal: verdict unexplained", channel,
-                ", ".join(c.channel for c in columns),
+                "(%s) with %s of the measured signal (%s times the noise): verdict "
+                "unexplained", channel, ", ".join(c.channel for c in columns),
                 ", ".join(sorted({t for c in columns for t in c.failed_tests})),
-                ", ".join(f"{c.relative_error_pct:.1f} %" for c in columns))
+                ", ".join(f"{c.relative_error_pct:.2g} %" for c in columns),
+                ", ".join(f"{c.noise_ratio:.0f}" for c in columns))
     return found
 
 
@@ -720,12 +731,12 @@ def _reidentify_if_unusable(nominal: Model, train: list[RunSignals], held: list[
 def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutGain,
                      unusable: Unusable | None = None,
                      withdrawn: Sequence[str] = (), unexplained: Unexplained | None = None,
-                     failing: Sequence[str] = (), threshold_pct: float = 2.0) -> str:
+                     failing: Sequence[str] = (), noise_ratio: float = 10.0) -> str:
     """The diagnosis in a few sentences. Without causes it says ``unexplained`` (where
     the residual sits, which tests failed) or ``none``; ``none`` claims the nominal model
     explains the data as well as anything tried only when no held-out column is
-    ``failing`` a validity test, and otherwise says those columns' errors stayed below
-    ``threshold_pct`` of their measured signals (what made them no ``unexplained``)."""
+    ``failing`` a validity test, and otherwise says those columns' errors stayed within
+    ``noise_ratio`` times the measurement noise (what made them no ``unexplained``)."""
     prefix = ""
     if unusable:
         prefix = (f"The stated model was unusable ({unusable.relative_error_pct:.0f} % "
@@ -737,8 +748,8 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
                    f"{'was' if len(withdrawn) == 1 else 'were'} withdrawn. ")
     if not causes and unexplained is not None:
         u = unexplained
-        where = ", ".join(f"{c.channel} ({c.relative_error_pct:.1f} % of its measured "
-                          f"signal)" for c in u.columns)
+        where = ", ".join(f"{c.channel} ({c.relative_error_pct:.2g} % of its measured "
+                          f"signal, {c.noise_ratio:.0f} x the noise)" for c in u.columns)
         band = u.band_hz
         return prefix + (
             f"The nominal model does not explain the held-out measurements, and no "
@@ -757,7 +768,7 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
         return prefix + (
             f"No candidate effect improves the held-out runs beyond chance (verdict: none). "
             f"The held-out residual of {', '.join(failing)} fails a validity test, but its "
-            f"size stays below {threshold_pct:g} % of the measured signal: the nominal "
+            f"size stays below {noise_ratio:g} times the measurement noise: the nominal "
             f"model is adequate to that precision.")
     top = causes[0]
     name = "an effect outside the vocabulary (unnamed)" if top.effect == "unnamed" \

@@ -167,14 +167,14 @@ def _unexplained_parts(d: Diagnosis) -> list[str]:
     u = d.unexplained
     if u is None:
         return []
-    rows = [[c.channel, c.relative_error_pct, c.share_of_error,
+    rows = [[c.channel, c.relative_error_pct, c.noise_ratio, c.share_of_error,
              "" if c.band_hz is None else f"{c.band_hz[0]:.3g}-{c.band_hz[1]:.3g}",
              ", ".join(c.failed_tests)] for c in u.columns]
     return ["<h2>Unexplained residual (held-out)</h2>",
             f"<p>The nominal model is inadequate on these columns (validity tests failed, "
-            f"error at least {u.threshold_pct:g} % of the measured signal) and no candidate "
+            f"error at least {u.noise_ratio:g} times the measurement noise) and no candidate "
             f"explains why.</p>",
-            _table(rows, ["channel", "error % of measured", "share of error",
+            _table(rows, ["channel", "error % of measured", "x noise", "share of error",
                           "band (Hz, full-rate residual)", "failed tests"])]
 
 

@@ -122,10 +122,12 @@ class UnexplainedColumn:
     share_of_error: float
     band_hz: tuple[float, float] | None
     failed_tests: tuple[str, ...]
+    #: its RMS error over the measurement noise its rows carry
+    noise_ratio: float = float("nan")
 
     def as_dict(self) -> dict[str, Any]:
         return {"channel": self.channel, "relative_error_pct": self.relative_error_pct,
-                "share_of_error": self.share_of_error,
+                "noise_ratio": self.noise_ratio, "share_of_error": self.share_of_error,
                 "band_hz": None if self.band_hz is None else list(self.band_hz),
                 "failed_tests": list(self.failed_tests)}
 
@@ -134,12 +136,14 @@ class UnexplainedColumn:
 class Unexplained:
     """Why a diagnosis without causes is ``unexplained`` rather than ``none``: the
     held-out residual of ``columns`` fails the validity tests and is material (at least
-    ``threshold_pct`` of the measured signal), and no candidate generalised."""
+    ``noise_ratio`` times the measurement noise and ``threshold_pct`` of the measured
+    signal), and no candidate generalised."""
 
     signal: str
     columns: tuple[UnexplainedColumn, ...]
     threshold_pct: float
     alpha: float
+    noise_ratio: float = float("nan")
 
     @property
     def share_of_error(self) -> float:
@@ -157,7 +161,8 @@ class Unexplained:
                 "share_of_error": self.share_of_error,
                 "band_hz": None if self.band_hz is None else list(self.band_hz),
                 "failed_tests": sorted({t for c in self.columns for t in c.failed_tests}),
-                "threshold_pct": self.threshold_pct, "alpha": self.alpha,
+                "threshold_pct": self.threshold_pct, "noise_ratio": self.noise_ratio,
+                "alpha": self.alpha,
                 "columns": [c.as_dict() for c in self.columns]}
 
 

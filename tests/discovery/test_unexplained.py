@@ -54,6 +54,7 @@ def test_what_nothing_tried_explains_is_unexplained_and_located(tmp_path, seed):
     assert u["failed_tests"] and u["band_hz"][1] >= u["band_hz"][0] >= 0.0
     for col in u["columns"]:
         assert col["relative_error_pct"] >= u["threshold_pct"]
+        assert col["noise_ratio"] >= u["noise_ratio"]
     summary = record["summary"]
     assert "unexplained" in summary and ADEQUATE not in summary
     assert all(c in summary for c in u["channels"])
@@ -63,6 +64,6 @@ def test_none_never_claims_adequacy_when_tests_failed():
     gain = HeldoutGain("torque", 1.0, 1.0, 0.0, (-0.1, 0.1), {})
     passing = summary_sentence([], None, gain)
     assert ADEQUATE in passing and "verdict: none" in passing
-    failing = summary_sentence([], None, gain, failing=["u2"], threshold_pct=2.0)
+    failing = summary_sentence([], None, gain, failing=["u2"], noise_ratio=10.0)
     assert ADEQUATE not in failing and "verdict: none" in failing
-    assert "u2" in failing and "2 %" in failing
+    assert "u2" in failing and "10 times the measurement noise" in failing
