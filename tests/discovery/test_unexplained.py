@@ -67,3 +67,38 @@ def test_none_never_claims_adequacy_when_tests_failed():
     failing = summary_sentence([], None, gain, failing=["u2"], noise_ratio=10.0)
     assert ADEQUATE not in failing and "verdict: none" in failing
     assert "u2" in failing and "10 times the measurement noise" in failing
+
+
+def test_a_periodic_torque_above_the_motion_band_is_never_none(tmp_path, seed):
+    """A torque periodic in a winch angle (the independent generator's, upper half of
+    its amplitude range) whose frequency at the typical winch speed is 2-10 times the
+    motion's bandwidth (as the pipeline measures it on the effect-free recording of the
+    same rig and references; the analysed band is 10 times it, so the wiggle's faster
+    passes lie above it): the issue's case got ``none``. It must get ``unnamed`` with a
+    held-out gain, or ``unexplained``, and never a vocabulary name."""
+    from cdpr_pipeline.identification.regressors import motion_bandwidth_hz
+    from tests.independent_sim import draw_effect
+
+    runs, duration = FAST["cdpr"]
+    quiet = foreign_case(tmp_path / "quiet", "cdpr", [], seed, n_runs=runs,
+                         duration_s=duration)
+    bandwidth = motion_bandwidth_hz(quiet.dataset.trajectories)
+
+    def draw(rig, rng):
+        eff = draw_effect("periodic_torque", rig, rng,
+                          frequency_hz=(2.0 * bandwidth, 10.0 * bandwidth))
+        idx = list(eff.channels)
+        amplitude = np.array(eff.params["amplitude"], float)
+        amplitude[idx] = rng.uniform(0.55, 0.8, len(idx)) * rig.coulomb[idx]
+        return type(eff)(eff.name, eff.channels, {**eff.params, "amplitude": amplitude})
+
+    case = foreign_case(tmp_path, "cdpr", [draw], quiet.seed, n_runs=runs,
+                        duration_s=duration)
+    record = case.diagnose()
+    found = {c["effect"] for c in record["causes"]}
+    text = f"motion bandwidth {bandwidth:.3g} Hz: {case.describe()}"
+    assert found <= {"unnamed"}, text
+    assert record["verdict"] in ("unnamed", "unexplained"), text
+    if record["verdict"] == "unnamed":
+        assert record["gain"]["ci95"][0] > 0, text
+    assert ADEQUATE not in record["summary"], text

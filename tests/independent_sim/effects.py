@@ -107,7 +107,8 @@ def _signed(rng: np.random.Generator, lo: float, hi: float, size: int) -> np.nda
 
 
 def draw_effect(name: str, rig: Any, rng: np.random.Generator,
-                channels: tuple[int, ...] | list[int] | None = None) -> Effect:
+                channels: tuple[int, ...] | list[int] | None = None,
+                frequency_hz: tuple[float, float] | None = None) -> Effect:
     """Draw one hidden effect at a random magnitude within its documented range.
 
     Parameters
@@ -121,6 +122,10 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
         Source of randomness.
     channels : sequence of int, optional
         Affected channels (0-based); drawn (one, some or all) when omitted.
+    frequency_hz : (float, float), optional
+        ``periodic_torque`` only: draw its frequency at the channel's typical speed
+        uniformly in this range instead of its wavenumber (cdpr: rounded to whole
+        periods per motor turn, at least one), e.g. to place it above the motion's band.
 
     Returns
     -------
@@ -200,7 +205,11 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
                   "b": per_channel(np.where(rotary, size * np.sin(phi), -stiffness * rest)),
                   "rotary": per_channel(rotary.astype(float))}
     elif name == "periodic_torque":
-        if rig.kind == "cdpr":
+        if frequency_hz is not None:
+            wavenumber = 2 * np.pi * rng.uniform(*frequency_hz, m) / speed[idx]
+            if rig.kind == "cdpr":   # whole periods per motor turn
+                wavenumber = np.maximum(1.0, np.round(wavenumber))
+        elif rig.kind == "cdpr":
             wavenumber = rng.integers(1, 5, m).astype(float)  # periods per motor turn
         else:
             wavenumber = 2 * np.pi / (rng.uniform(0.2, 0.5, m) * rig.amplitude[idx])
@@ -209,6 +218,8 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
                   "phase": per_channel(rng.uniform(0.0, 2 * np.pi, m))}
     else:  # pragma: no cover - guarded by EFFECT_KINDS above
         raise AssertionError(name)
+    if frequency_hz is not None and name != "periodic_torque":
+        raise ValueError(f"frequency_hz applies to periodic_torque, not {name!r}")
     return Effect(name, chans, params)
 
 
