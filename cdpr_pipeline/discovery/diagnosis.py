@@ -649,6 +649,19 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
                      tuple(extension), unusable, unexplained)
 
 
+def nominal_rate(signals: Sequence[RunSignals]) -> float:
+    """The sample rate of the runs."""
+    return float(np.median([s.fs for s in signals]))
+
+
+def analysed_band_hz(regression: RegressionSettings, fs: float) -> float:
+    """The band the statistics rows keep: the decimation's pass band ``0.4 fs / q``
+    (:func:`~cdpr_pipeline.identification.regressors.resolve_settings`), or the
+    derivative filter's cut-off without decimation."""
+    q = int(regression.decimate)
+    return 0.4 * fs / q if q > 1 else float(regression.filter.cutoff_hz)
+
+
 def failed_tests(v: ResidualValidity, alpha: float) -> list[str]:
     """Names of the validity tests a held-out column fails: the five correlation tests
     (each at its own level) and ``ljung_box`` when its p-value is below ``alpha``."""
@@ -667,10 +680,12 @@ def unexplained_residual(res: Residuals, held: list[RunSignals], nominal: Model,
     ``settings.unexplained_min_error_pct`` of its measured signal's RMS. None when no
     column is.
 
-    Each column's band holds 80 % of the power above the noise floor of its full-rate
-    residual (no decimation) on the longest held-out run
-    (:func:`~cdpr_pipeline.discovery.bands.power_band_hz`): an error above the band the
-    regression analyses still shows there."""
+    Each column's band holds 80 % of the power of its held-out residual rows above their
+    noise floor (:func:`~cdpr_pipeline.discovery.bands.power_band_hz`), within the band
+    the rows keep (:func:`analysed_band_hz`, also reported): an error above that band
+    leaves there only what its slower passes put in it. (The unfiltered full-rate
+    residual is no guide: above the derivative filter's cut-off it holds the recorded
+    torque the filtered model cannot follow.)"""
     r = res.stacked(channel)
     measured = measured_rows(held, channel)
     total = float(np.sum(r ** 2)) or 1.0
@@ -678,23 +693,23 @@ def unexplained_residual(res: Residuals, held: list[RunSignals], nominal: Model,
     threshold = settings.unexplained_min_error_pct
     rms = np.sqrt(np.mean(r ** 2, axis=0))
     noise_ratio = rms / np.maximum(row_noise(held, channel), 1e-300)
-    longest = max(held, key=lambda s: s.t.size)
-    full = None
+    # the rows' rate: their spectrum is the band the regression analysed
+    rate = len(r) / sum(float(s.row_times()[-1] - s.row_times()[0]) for s in held)
     columns = []
     for i, name in enumerate(channel_names(channel, r.shape[1])):
         failed = failed_tests(validity[name], alpha)
         rel = 100 * float(rms[i] / max(np.sqrt(np.mean(measured[:, i] ** 2)), 1e-300))
         if not failed or rel < threshold or noise_ratio[i] < settings.unexplained_noise_ratio:
             continue
-        if full is None:
-            full = _full_rate_residual(nominal, longest, channel)
-        columns.append(UnexplainedColumn(name, rel, float(np.sum(r[:, i] ** 2)) / total,
-                                         power_band_hz(full[:, i], longest.fs),
-                                         tuple(failed), float(noise_ratio[i])))
+        columns.append(UnexplainedColumn(
+            name, rel, float(np.sum(r[:, i] ** 2)) / total,
+            power_band_hz(np.concatenate([x[channel][:, i] for x in res.by_run]), rate),
+            tuple(failed), float(noise_ratio[i])))
     if not columns:
         return None
     found = Unexplained(channel, tuple(columns), threshold, alpha,
-                        settings.unexplained_noise_ratio)
+                        settings.unexplained_noise_ratio,
+                        analysed_band_hz(settings.regression, float(nominal_rate(held))))
     log.warning("no cause found, but the held-out %s residual of %s fails the validity tests "
                 "(%s) with %s of the measured signal (%s times the noise): verdict "
                 "unexplained", channel, ", ".join(c.channel for c in columns),
@@ -756,7 +771,8 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
             f"candidate effect improves them beyond chance (verdict: unexplained): the "
             f"held-out {u.signal} residual of {where} holds "
             f"{100 * u.share_of_error:.0f} % of the error"
-            + ("" if band is None else f", most of it at {band[0]:.3g}-{band[1]:.3g} Hz")
+            + ("" if band is None else f", most of it at {band[0]:.3g}-{band[1]:.3g} Hz of "
+               f"the 0-{u.analysed_hz:.3g} Hz the regression analyses")
             + f", and fails the validity tests "
             f"{', '.join(sorted({t for c in u.columns for t in c.failed_tests}))}.")
     if not causes:

@@ -144,6 +144,8 @@ class Unexplained:
     threshold_pct: float
     alpha: float
     noise_ratio: float = float("nan")
+    #: the band the statistics rows keep (the decimation's pass band), Hz
+    analysed_hz: float = float("nan")
 
     @property
     def share_of_error(self) -> float:
@@ -161,6 +163,7 @@ class Unexplained:
                 "share_of_error": self.share_of_error,
                 "band_hz": None if self.band_hz is None else list(self.band_hz),
                 "failed_tests": sorted({t for c in self.columns for t in c.failed_tests}),
+                "analysed_band_hz": [0.0, self.analysed_hz],
                 "threshold_pct": self.threshold_pct, "noise_ratio": self.noise_ratio,
                 "alpha": self.alpha,
                 "columns": [c.as_dict() for c in self.columns]}
