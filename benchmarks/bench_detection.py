@@ -138,9 +138,10 @@ def lab_special(args, settings, record) -> None:
         record("lab", "cdpr", "unexplained", 1.0, _special_grade(_lab(case), "unexplained"))
         quiet = lab_dataset(rig, [], seed)
         bandwidth = motion_bandwidth_hz(quiet.trajectories)
-        speed = np.sqrt(np.mean(np.concatenate(
-            [np.gradient(tr.lengths, tr.t, axis=0) for tr in quiet.trajectories]) ** 2)
-            / np.asarray(rig.drum_radius, float) ** 2)
+        # typical winch speed: RMS cable speed over the mean drum radius
+        speed = float(np.sqrt(np.mean(np.concatenate(
+            [np.gradient(tr.lengths, tr.t, axis=0) for tr in quiet.trajectories]) ** 2))
+            / np.mean(np.asarray(rig.drum_radius_m, float)))
         f = rng.uniform(2.0, 10.0) * bandwidth
         periods = max(1, int(round(2 * np.pi * f / speed)))
         above = CoggingTorque(cog.amplitude_nm, periods, cog.phase_rad, cog.cables)
