@@ -19,6 +19,19 @@ A hit needs the verdict among the hidden labels (``unnamed`` for an effect outsi
 vocabulary), every hidden label among the causes, and for an effect outside the
 vocabulary no vocabulary name at all.
 
+The cases issue 21 added (``--special``, on by default), per seed:
+
+* ``unexplained``: a position-periodic torque (lab: ``cogging_torque``; independent:
+  ``periodic_torque``) diagnosed with a vocabulary that cannot express it (cable
+  elasticity only) and the free-form search off: the verdict must be ``unexplained``;
+* ``periodic_above_band``: the same torque at a frequency, at the typical winch speed,
+  2-10 times the motion bandwidth the pipeline measures on the effect-free recording of
+  the same rig and references: a hit is ``unnamed``; ``unexplained`` is counted apart
+  (honest, but not named), ``none`` or a vocabulary name is a miss;
+* ``position_dependent_load`` (independent drive axes only, the lab has none): joint
+  types drawn per axis (rig.yaml ``joint_types``), rotary gravity or prismatic spring;
+  the plain vocabulary loop draws it on prismatic axes.
+
     python -m benchmarks.bench_detection --simulator both --seeds 3 --scales 1 \
         [--settings cli|fast] [--out results/detection.json]
 
@@ -63,7 +76,8 @@ def lab_cases(args, settings, record) -> None:
     cfg = compose_config("simulate", ["trajectory=diagnosis"])
     rig = rig_from_config(cfg.rig)
     counts, duration = dict(cfg.trajectory.counts), float(cfg.trajectory.duration_s)
-    names = args.effects or sorted(n for n, c in EFFECTS.items() if c.drawable)
+    names = args.effects or sorted(n for n, c in EFFECTS.items()
+                                   if c.drawable and "cdpr" in c.kinds)
     names = [n for n in names if n in EFFECTS]
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     for seed in seeds:
@@ -84,6 +98,53 @@ def lab_cases(args, settings, record) -> None:
 
 def _lab(case: dict) -> dict:
     return {**case, "misnamed": case["wrong_names"]}
+
+
+def _narrow(settings):
+    """``settings`` with a vocabulary that cannot express a winch torque (cable
+    elasticity only) and no free-form search: nothing tried explains a periodic torque."""
+    import dataclasses
+
+    return dataclasses.replace(settings, freeform=None, selection=dataclasses.replace(
+        settings.selection, effects=["cable_elasticity"]))
+
+
+def _special_grade(case: dict, expect: str) -> dict:
+    """``expect`` is the verdict a hit needs; a vocabulary name is always a miss."""
+    causes = set(case["causes"]) - {"none"}
+    wrong = sorted(causes - {"unnamed"})
+    return {**case, "truth": [expect], "hit": case["verdict"] == expect and not wrong,
+            "misnamed": wrong, "honest_unexplained": case["verdict"] == "unexplained"}
+
+
+def lab_special(args, settings, record) -> None:
+    """The lab's issue-21 cases: ``unexplained`` and ``periodic_above_band`` (cogging)."""
+    from lab_cases import lab_dataset
+
+    from cdpr_pipeline.identification.regressors import motion_bandwidth_hz
+    from cdpr_pipeline.sim.effects import CoggingTorque
+
+    cfg = compose_config("simulate", ["trajectory=diagnosis"])
+    rig = rig_from_config(cfg.rig)
+    counts, duration = dict(cfg.trajectory.counts), float(cfg.trajectory.duration_s)
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
+        rng = np.random.default_rng([seed, 21])
+        cog = CoggingTorque.sample(rng, rig.n)
+        case = run_case(rig, counts, duration, [cog], seed, _narrow(settings))
+        record("lab", "cdpr", "unexplained", 1.0, _special_grade(_lab(case), "unexplained"))
+        quiet = lab_dataset(rig, [], seed)
+        bandwidth = motion_bandwidth_hz(quiet.trajectories)
+        # typical winch speed: RMS cable speed over the mean drum radius
+        speed = float(np.sqrt(np.mean(np.concatenate(
+            [np.gradient(tr.lengths, tr.t, axis=0) for tr in quiet.trajectories]) ** 2))
+            / np.mean(np.asarray(rig.drum_radius_m, float)))
+        f = rng.uniform(2.0, 10.0) * bandwidth
+        periods = max(1, int(round(2 * np.pi * f / speed)))
+        above = CoggingTorque(cog.amplitude_nm, periods, cog.phase_rad, cog.cables)
+        case = run_case(rig, counts, duration, [above], seed, settings)
+        record("lab", "cdpr", "periodic_above_band", 1.0,
+               {**_special_grade(_lab(case), "unnamed"), "frequency_hz": f,
+                "motion_bandwidth_hz": bandwidth, "periods_per_rev": periods})
 
 
 def independent_cases(args, settings, record, tmp: Path) -> None:
@@ -110,6 +171,60 @@ def independent_cases(args, settings, record, tmp: Path) -> None:
                 shutil.rmtree(case.path, ignore_errors=True)
 
 
+def independent_special(args, settings, record, tmp: Path) -> None:
+    """The independent simulator's issue-21 cases (see the module docstring)."""
+    from foreign_cases import rng_for
+
+    from cdpr_pipeline.identification.regressors import motion_bandwidth_hz
+    from tests.independent_sim import draw_effect
+
+    def upper_half(eff, rig, rng):
+        idx = list(eff.channels)
+        amplitude = np.array(eff.params["amplitude"], float)
+        amplitude[idx] = rng.uniform(0.55, 0.8, len(idx)) * rig.coulomb[idx]
+        return type(eff)(eff.name, eff.channels, {**eff.params, "amplitude": amplitude})
+
+    def out(case, rec, expect, **extra):
+        graded = grade(rec, case.hidden)
+        found = sorted({c["effect"] for c in rec["causes"]}) or ["none"]
+        return {**_special_grade({**graded, "causes": found}, expect), "seed": case.seed,
+                "seconds": case.seconds, "rig": case.describe().split(", hidden")[0],
+                "effects": [e.to_dict() for e in case.truth.effects],
+                "summary": rec["summary"], **extra}
+
+    for k in range(args.seeds):
+        seed = args.first_seed + k
+        if "cdpr" in args.kinds:
+            case = foreign_case(tmp, "cdpr", [lambda rig, rng: upper_half(
+                draw_effect("periodic_torque", rig, rng), rig, rng)], seed)
+            record("independent", "cdpr", "unexplained", 1.0,
+                   out(case, case.diagnose(_narrow(settings)), "unexplained"))
+            quiet = foreign_case(tmp / "quiet", "cdpr", [], seed)
+            bandwidth = motion_bandwidth_hz(quiet.dataset.trajectories)
+            case = foreign_case(tmp, "cdpr", [lambda rig, rng, bw=bandwidth: upper_half(
+                draw_effect("periodic_torque", rig, rng, frequency_hz=(2 * bw, 10 * bw)),
+                rig, rng)], quiet.seed)
+            record("independent", "cdpr", "periodic_above_band", 1.0,
+                   out(case, case.diagnose(settings), "unnamed",
+                       motion_bandwidth_hz=bandwidth))
+        if "axes" in args.kinds:
+            rng = rng_for(seed)
+            n = int(rng.integers(1, 7))
+            types = [["prismatic", "rotary"][int(j)] for j in rng.integers(0, 2, n)]
+            case = foreign_case(tmp, "axes", ["position_dependent_load"], seed, n=n,
+                                rig_options={"joint_types": types})
+            rec = case.diagnose(settings)
+            res = {**grade(rec, case.hidden), "seed": case.seed, "seconds": case.seconds,
+                   "rig": case.describe().split(", hidden")[0], "joint_types": types,
+                   "effects": [e.to_dict() for e in case.truth.effects],
+                   "summary": rec["summary"]}
+            if rec["causes"] and rec["verdict"] == "position_dependent_load":
+                ok, why = parameters_ok(case, rec["causes"][0])
+                res.update(parameter_errors=parameter_errors(case, rec["causes"][0]),
+                           parameters_ok=ok, parameter_issue=why)
+            record("independent", "axes", "position_dependent_load(joint types)", 1.0, res)
+
+
 def summarise(cases: list[dict]) -> dict:
     out: dict = {}
     for sim in sorted({c["simulator"] for c in cases}):
@@ -130,7 +245,9 @@ def summarise(cases: list[dict]) -> dict:
                           "smallest_reliable_scale": min(reliable) if reliable else None,
                           "misnamed": float(np.mean([bool(c["misnamed"]) for c in full]))
                           if full else None,
-                          "parameters_ok": float(np.mean(params)) if params else None}
+                          "parameters_ok": float(np.mean(params)) if params else None,
+                          "unexplained": float(np.mean([c["verdict"] == "unexplained"
+                                                        for c in full])) if full else None}
         out[sim] = {"per_effect": table,
                     "detection_rate": float(np.mean([c["hit"] for c in mine
                                                      if c["effect"] != "none"
@@ -152,6 +269,11 @@ def main() -> None:
     parser.add_argument("--effects", nargs="*", default=None)
     parser.add_argument("--kinds", nargs="*", default=list(KINDS),
                         help="independent simulator: rig kinds")
+    parser.add_argument("--special", action=argparse.BooleanOptionalAction, default=True,
+                        help="the issue-21 cases: unexplained, periodic above the motion "
+                             "band, position-dependent load with joint types")
+    parser.add_argument("--only-special", action="store_true",
+                        help="run the issue-21 cases alone")
     add_settings_option(parser)
     parser.add_argument("--out", type=Path, default=Path("results/detection.json"))
     args = parser.parse_args()
@@ -171,10 +293,16 @@ def main() -> None:
               f"({case['seconds']:.1f} s){extra}", flush=True)
 
     if args.simulator in ("lab", "both"):
-        lab_cases(args, settings, record)
+        if not args.only_special:
+            lab_cases(args, settings, record)
+        if args.special or args.only_special:
+            lab_special(args, settings, record)
     if args.simulator in ("independent", "both"):
         with tempfile.TemporaryDirectory() as tmp:
-            independent_cases(args, settings, record, Path(tmp))
+            if not args.only_special:
+                independent_cases(args, settings, record, Path(tmp))
+            if args.special or args.only_special:
+                independent_special(args, settings, record, Path(tmp))
 
     summary = summarise(cases)
     results = {"benchmark": "detection rates of cdpr diagnose", "settings": args.settings,
@@ -187,15 +315,16 @@ def main() -> None:
     args.out.write_text(json.dumps(results, indent=1, default=str))
     for sim, s in summary.items():
         print(f"\n{sim} simulator: detection rate per effect (scale 1 unless stated)")
-        print(f"  {'effect':38s} {'detected':>10s} {'misnamed':>9s} {'params ok':>9s}  "
-              "by scale / smallest reliable")
+        print(f"  {'effect':38s} {'detected':>10s} {'misnamed':>9s} {'params ok':>9s} "
+              f"{'unexpl.':>8s}  by scale / smallest reliable")
         for key, t in s["per_effect"].items():
             rates = ", ".join(f"x{k:g}: {100 * v:.0f} %" for k, v in t["rate_by_scale"].items())
             r1 = t["rate_by_scale"].get(1.0)
             mis = "" if t["misnamed"] is None else f"{100 * t['misnamed']:.0f} %"
             par = "" if t["parameters_ok"] is None else f"{100 * t['parameters_ok']:.0f} %"
+            une = "" if t["unexplained"] is None else f"{100 * t['unexplained']:.0f} %"
             print(f"  {key:38s} {'' if r1 is None else f'{100 * r1:.0f} %':>10s} {mis:>9s} "
-                  f"{par:>9s}  {rates}; {t['smallest_reliable_scale']}")
+                  f"{par:>9s} {une:>8s}  {rates}; {t['smallest_reliable_scale']}")
         fa = s["false_alarm_rate"]
         print(f"  overall detection {100 * s['detection_rate']:.0f} %; false alarms "
               f"{'n/a' if fa is None else f'{100 * fa:.0f} %'} of {s['null_datasets']} "

@@ -14,6 +14,13 @@ import numpy as np
 
 FORMAT = "cdpr-measured/1"
 WINCH_KEYS = ("inertia", "viscous", "coulomb", "offset")
+#: what a drive axis is (rig.yaml's optional ``joint_types``, one per axis): a
+#: ``prismatic`` axis moves in m with forces in N, a ``rotary`` joint turns in rad with
+#: torques in N m. A position-dependent load has another form on each
+#: (``position_dependent_load``)
+JOINT_TYPES = ("prismatic", "rotary")
+#: the joint type of an axis rig.yaml does not state
+DEFAULT_JOINT_TYPE = "prismatic"
 
 
 def coulomb_law_dict(sharpness: float | None) -> str | dict[str, float]:
@@ -198,6 +205,31 @@ class AxesRig:
 
     def replace(self, **changes: Any) -> AxesRig:
         return replace(self, **changes)
+
+    @property
+    def joint_types(self) -> tuple[str, ...]:
+        """Per axis ``prismatic`` or ``rotary``: rig.yaml's optional top-level
+        ``joint_types`` list (kept in :attr:`extra`), :data:`DEFAULT_JOINT_TYPE` for
+        every axis when absent (a load linear in position is the first-order form of any
+        smooth one, so an unstated joint is read as prismatic).
+
+        Raises
+        ------
+        ValueError
+            Naming ``rig.yaml: joint_types`` and the entry, for a list of the wrong
+            length or an unknown type.
+        """
+        raw = self.extra.get("joint_types")
+        if raw is None:
+            return (DEFAULT_JOINT_TYPE,) * self.n
+        if not isinstance(raw, list | tuple) or len(raw) != self.n:
+            raise ValueError(f"rig.yaml: joint_types: must be a list with one of "
+                             f"{list(JOINT_TYPES)} per axis ({self.n} axes), got {raw!r}")
+        for i, value in enumerate(raw):
+            if value not in JOINT_TYPES:
+                raise ValueError(f"rig.yaml: joint_types[{i}] (axis {self.axes[i]}): must be "
+                                 f"one of {list(JOINT_TYPES)}, got {value!r}")
+        return tuple(str(v) for v in raw)
 
 
 Rig = CdprRig | AxesRig

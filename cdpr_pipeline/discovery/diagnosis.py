@@ -22,6 +22,7 @@ from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.split import HELDOUT_FRACTION, MIN_HELDOUT_S, Split, heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.data.validation import check_run_lengths
+from cdpr_pipeline.discovery.bands import power_band_hz, row_noise
 from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
 from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
 from cdpr_pipeline.discovery.freeform import FreeFormSearch
@@ -46,6 +47,8 @@ from cdpr_pipeline.discovery.results import (
     HeldoutGain,
     ModelMetrics,
     ResidualValidity,
+    Unexplained,
+    UnexplainedColumn,
     Unusable,
     ValidityComparison,
 )
@@ -108,6 +111,17 @@ class DiagnosisSettings:
     #: training relative torque error (%) above which the stated model is unusable and
     #: every winch is re-identified before causes are named
     unusable_error_pct: float = 100.0
+    #: a held-out torque column whose validity tests fail makes a diagnosis without
+    #: causes ``unexplained`` (not ``none``) only when its RMS error is material: at
+    #: least this many times the measurement noise the rows carry
+    #: (:func:`~cdpr_pipeline.discovery.bands.row_noise`). Effect-free data fail the
+    #: tests at hundreds of rows with errors of 0.5-5.6 times it (filter, tension and
+    #: noise artefacts: 12 independent datasets); a periodic torque above the analysed
+    #: band left 7-39 times it
+    unexplained_noise_ratio: float = 10.0
+    #: ... and at least this share (%) of its measured signal's RMS (what "material"
+    #: means where a recording carries no measurable noise)
+    unexplained_min_error_pct: float = 0.1
 
 
 def diagnosis_split(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Split:
@@ -206,10 +220,15 @@ class Diagnosis:
     extension: tuple[Effect, ...] = ()
     #: set when the stated model was grossly wrong and re-identified first
     unusable: Unusable | None = None
+    #: set when no cause was found although the held-out residual fails the validity
+    #: tests with a material size (verdict ``unexplained``)
+    unexplained: Unexplained | None = None
 
     @property
     def verdict(self) -> str:
-        return self.causes[0].effect if self.causes else "none"
+        if self.causes:
+            return self.causes[0].effect
+        return "unexplained" if self.unexplained is not None else "none"
 
     @property
     def effects(self) -> list[Effect]:
@@ -227,6 +246,7 @@ class Diagnosis:
             "causes": [cause_record(c, self.nominal, self.causes) for c in self.causes],
             "verdict": self.verdict,
             "summary": self.sentence,
+            "unexplained": self.unexplained.as_dict() if self.unexplained else None,
             "extended_model": extended_model_file,
             "extended": {"metrics": self.extended_metrics.as_dict()},
             "gain": self.gain.as_dict(),
@@ -638,6 +658,10 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         channel, _validity(before_held, held, channel, settings.max_lag, noise),
         _validity(after_held, held, channel, settings.max_lag, noise))
     extended_metrics = model_metrics(extended, nominal, train, held)
+    # no cause, yet the held-out residual fails the tests with a material size: the
+    # nominal model is inadequate and nothing tried says why (spec: `unexplained`)
+    unexplained = None if causes else unexplained_residual(
+        before_held, held, nominal, validity.before, settings)
     clock["validity"] = time.perf_counter() - t0
 
     closed = ClosedLoopComparison(False)
@@ -663,14 +687,87 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         clock["black box"] = time.perf_counter() - t0
     clock["total"] = time.perf_counter() - start
 
-    sentence = summary_sentence(causes, nominal, gain, unusable, withdrawn)
+    alpha = settings.selection.alpha / max(len(validity.before), 1)
+    failing = [k for k, v in validity.before.items() if failed_tests(v, alpha)]
+    sentence = summary_sentence(causes, nominal, gain, unusable, withdrawn, unexplained,
+                                failing, settings.unexplained_noise_ratio)
     plots["before_after"] = {"before": before_held.stacked(channel),
                              "after": after_held.stacked(channel), "channel": channel,
                              "t": np.concatenate([s.row_times() for s in held])}
     return Diagnosis(str(dataset.root), rig, tuple(train_names), tuple(held_names), nominal,
                      extended, tuple(causes), selection.steps, tuple(found), nominal_metrics,
                      extended_metrics, gain, validity, closed, blackbox, sentence, clock, plots,
-                     tuple(extension), unusable)
+                     tuple(extension), unusable, unexplained)
+
+
+def nominal_rate(signals: Sequence[RunSignals]) -> float:
+    """The sample rate of the runs."""
+    return float(np.median([s.fs for s in signals]))
+
+
+def analysed_band_hz(regression: RegressionSettings, fs: float) -> float:
+    """The band the statistics rows keep: the decimation's pass band ``0.4 fs / q``
+    (:func:`~cdpr_pipeline.identification.regressors.resolve_settings`), or the
+    derivative filter's cut-off without decimation."""
+    q = int(regression.decimate)
+    return 0.4 * fs / q if q > 1 else float(regression.filter.cutoff_hz)
+
+
+def failed_tests(v: ResidualValidity, alpha: float) -> list[str]:
+    """Names of the validity tests a held-out column fails: the five correlation tests
+    (each at its own level) and ``ljung_box`` when its p-value is below ``alpha``."""
+    failed = [k for k, t in v.tests.tests.items() if not t.passed]
+    return failed + (["ljung_box"] if v.ljung_box_pvalue < alpha else [])
+
+
+def unexplained_residual(res: Residuals, held: list[RunSignals], nominal: Model,
+                         validity: dict[str, ResidualValidity], settings: DiagnosisSettings,
+                         channel: str = "torque") -> Unexplained | None:
+    """The held-out columns of ``channel`` that the nominal model gets materially wrong:
+    a validity test fails (one of the five correlation tests, or Ljung-Box whiteness at
+    ``alpha`` over the columns, Bonferroni) and the column's RMS error is at least
+    ``settings.unexplained_noise_ratio`` times the measurement noise its rows carry
+    (:func:`~cdpr_pipeline.discovery.bands.row_noise`) and at least
+    ``settings.unexplained_min_error_pct`` of its measured signal's RMS. None when no
+    column is.
+
+    Each column's band holds 80 % of the power of its held-out residual rows above their
+    noise floor (:func:`~cdpr_pipeline.discovery.bands.power_band_hz`), within the band
+    the rows keep (:func:`analysed_band_hz`, also reported): an error above that band
+    leaves there only what its slower passes put in it. (The unfiltered full-rate
+    residual is no guide: above the derivative filter's cut-off it holds the recorded
+    torque the filtered model cannot follow.)"""
+    r = res.stacked(channel)
+    measured = measured_rows(held, channel)
+    total = float(np.sum(r ** 2)) or 1.0
+    alpha = settings.selection.alpha / r.shape[1]
+    threshold = settings.unexplained_min_error_pct
+    rms = np.sqrt(np.mean(r ** 2, axis=0))
+    noise_ratio = rms / np.maximum(row_noise(held, channel), 1e-300)
+    # the rows' rate: their spectrum is the band the regression analysed
+    rate = len(r) / sum(float(s.row_times()[-1] - s.row_times()[0]) for s in held)
+    columns = []
+    for i, name in enumerate(channel_names(channel, r.shape[1])):
+        failed = failed_tests(validity[name], alpha)
+        rel = 100 * float(rms[i] / max(np.sqrt(np.mean(measured[:, i] ** 2)), 1e-300))
+        if not failed or rel < threshold or noise_ratio[i] < settings.unexplained_noise_ratio:
+            continue
+        columns.append(UnexplainedColumn(
+            name, rel, float(np.sum(r[:, i] ** 2)) / total,
+            power_band_hz(np.concatenate([x[channel][:, i] for x in res.by_run]), rate),
+            tuple(failed), float(noise_ratio[i])))
+    if not columns:
+        return None
+    found = Unexplained(channel, tuple(columns), threshold, alpha,
+                        settings.unexplained_noise_ratio,
+                        analysed_band_hz(settings.regression, float(nominal_rate(held))))
+    log.warning("no cause found, but the held-out %s residual of %s fails the validity tests "
+                "(%s) with %s of the measured signal (%s times the noise): verdict "
+                "unexplained", channel, ", ".join(c.channel for c in columns),
+                ", ".join(sorted({t for c in columns for t in c.failed_tests})),
+                ", ".join(f"{c.relative_error_pct:.2g} %" for c in columns),
+                ", ".join(f"{c.noise_ratio:.0f}" for c in columns))
+    return found
 
 
 def _reidentify_if_unusable(nominal: Model, train: list[RunSignals], held: list[RunSignals],
@@ -699,7 +796,13 @@ def _reidentify_if_unusable(nominal: Model, train: list[RunSignals], held: list[
 
 def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutGain,
                      unusable: Unusable | None = None,
-                     withdrawn: Sequence[str] = ()) -> str:
+                     withdrawn: Sequence[str] = (), unexplained: Unexplained | None = None,
+                     failing: Sequence[str] = (), noise_ratio: float = 10.0) -> str:
+    """The diagnosis in a few sentences. Without causes it says ``unexplained`` (where
+    the residual sits, which tests failed) or ``none``; ``none`` claims the nominal model
+    explains the data as well as anything tried only when no held-out column is
+    ``failing`` a validity test, and otherwise says those columns' errors stayed within
+    ``noise_ratio`` times the measurement noise (what made them no ``unexplained``)."""
     prefix = ""
     if unusable:
         prefix = (f"The stated model was unusable ({unusable.relative_error_pct:.0f} % "
@@ -709,10 +812,31 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
         prefix += (f"Never worse: {', '.join(withdrawn)} did not improve the held-out runs "
                    f"(with 95 % confidence, or beyond the other causes) and "
                    f"{'was' if len(withdrawn) == 1 else 'were'} withdrawn. ")
+    if not causes and unexplained is not None:
+        u = unexplained
+        where = ", ".join(f"{c.channel} ({c.relative_error_pct:.2g} % of its measured "
+                          f"signal, {c.noise_ratio:.0f} x the noise)" for c in u.columns)
+        band = u.band_hz
+        return prefix + (
+            f"The nominal model does not explain the held-out measurements, and no "
+            f"candidate effect improves them beyond chance (verdict: unexplained): the "
+            f"held-out {u.signal} residual of {where} holds "
+            f"{100 * u.share_of_error:.0f} % of the error"
+            + ("" if band is None else f", most of it at {band[0]:.3g}-{band[1]:.3g} Hz of "
+               f"the 0-{u.analysed_hz:.3g} Hz the regression analyses")
+            + f", and fails the validity tests "
+            f"{', '.join(sorted({t for c in u.columns for t in c.failed_tests}))}.")
     if not causes:
-        return prefix + ("The nominal model explains the measurements as well as anything "
-                         "tried: no candidate effect improves the held-out runs beyond "
-                         "chance (verdict: none).")
+        if not failing:
+            return prefix + ("The nominal model explains the measurements as well as "
+                             "anything tried: no candidate effect improves the held-out runs "
+                             "beyond chance, and the held-out residuals pass the validity "
+                             "tests (verdict: none).")
+        return prefix + (
+            f"No candidate effect improves the held-out runs beyond chance (verdict: none). "
+            f"The held-out residual of {', '.join(failing)} fails a validity test, but its "
+            f"size stays below {noise_ratio:g} times the measurement noise: the nominal "
+            f"model is adequate to that precision.")
     top = causes[0]
     name = "an effect outside the vocabulary (unnamed)" if top.effect == "unnamed" \
         else top.effect.replace("_", " ")

@@ -162,6 +162,22 @@ def _table(rows: list[list[Any]], header: list[str]) -> str:
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
+def _unexplained_parts(d: Diagnosis) -> list[str]:
+    """Where an ``unexplained`` residual sits: one row per held-out column."""
+    u = d.unexplained
+    if u is None:
+        return []
+    rows = [[c.channel, c.relative_error_pct, c.noise_ratio, c.share_of_error,
+             "" if c.band_hz is None else f"{c.band_hz[0]:.3g}-{c.band_hz[1]:.3g}",
+             ", ".join(c.failed_tests)] for c in u.columns]
+    return ["<h2>Unexplained residual (held-out)</h2>",
+            f"<p>The nominal model is inadequate on these columns (validity tests failed, "
+            f"error at least {u.noise_ratio:g} times the measurement noise) and no candidate "
+            f"explains why.</p>",
+            _table(rows, ["channel", "error % of measured", "x noise", "share of error",
+                          "band (Hz, full-rate residual)", "failed tests"])]
+
+
 def render(d: Diagnosis) -> str:
     """The whole page as a string."""
     causes = [cause_record(c, d.nominal, d.causes) for c in d.causes]
@@ -196,6 +212,7 @@ def render(d: Diagnosis) -> str:
         _table(cause_rows, ["effect", "fitted", "channels", "p (LR test)", "BIC drop",
                             "held-out RMSE drop %"]) if cause_rows else
         "<p>No candidate explains the discrepancy better than chance on held-out runs.</p>",
+        *_unexplained_parts(d),
         "<h2>Residual against the variable that explains it</h2>", _explaining_plot(d),
         "<h2>Gain on held-out runs</h2>",
         f"<p>{html.escape(g.signal)} RMSE {g.before:.4g} &rarr; {g.after:.4g} "

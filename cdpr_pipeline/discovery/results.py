@@ -112,6 +112,64 @@ class Unusable:
 
 
 @dataclass(frozen=True)
+class UnexplainedColumn:
+    """One held-out column the nominal model gets materially wrong and no cause explains:
+    its error relative to its measured signal, its share of the held-out error, the band
+    holding most of its full-rate residual energy and the validity tests it failed."""
+
+    channel: str
+    relative_error_pct: float
+    share_of_error: float
+    band_hz: tuple[float, float] | None
+    failed_tests: tuple[str, ...]
+    #: its RMS error over the measurement noise its rows carry
+    noise_ratio: float = float("nan")
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"channel": self.channel, "relative_error_pct": self.relative_error_pct,
+                "noise_ratio": self.noise_ratio, "share_of_error": self.share_of_error,
+                "band_hz": None if self.band_hz is None else list(self.band_hz),
+                "failed_tests": list(self.failed_tests)}
+
+
+@dataclass(frozen=True)
+class Unexplained:
+    """Why a diagnosis without causes is ``unexplained`` rather than ``none``: the
+    held-out residual of ``columns`` fails the validity tests and is material (at least
+    ``noise_ratio`` times the measurement noise and ``threshold_pct`` of the measured
+    signal), and no candidate generalised."""
+
+    signal: str
+    columns: tuple[UnexplainedColumn, ...]
+    threshold_pct: float
+    alpha: float
+    noise_ratio: float = float("nan")
+    #: the band the statistics rows keep (the decimation's pass band), Hz
+    analysed_hz: float = float("nan")
+
+    @property
+    def share_of_error(self) -> float:
+        """The columns' share of the held-out residual energy of ``signal``."""
+        return float(sum(c.share_of_error for c in self.columns))
+
+    @property
+    def band_hz(self) -> tuple[float, float] | None:
+        """The band of the column with the largest share of the error."""
+        top = max(self.columns, key=lambda c: c.share_of_error)
+        return top.band_hz
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"signal": self.signal, "channels": [c.channel for c in self.columns],
+                "share_of_error": self.share_of_error,
+                "band_hz": None if self.band_hz is None else list(self.band_hz),
+                "failed_tests": sorted({t for c in self.columns for t in c.failed_tests}),
+                "analysed_band_hz": [0.0, self.analysed_hz],
+                "threshold_pct": self.threshold_pct, "noise_ratio": self.noise_ratio,
+                "alpha": self.alpha,
+                "columns": [c.as_dict() for c in self.columns]}
+
+
+@dataclass(frozen=True)
 class Band:
     """Share of a residual's energy in one wavelet band."""
 

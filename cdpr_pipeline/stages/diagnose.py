@@ -53,6 +53,8 @@ def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
         wavelet=WaveletSplit("db4", int(disc.wavelet_level)),
         correlation_threshold=float(disc.correlation_threshold),
         unusable_error_pct=float(disc.unusable_error_pct),
+        unexplained_noise_ratio=float(disc.unexplained_noise_ratio),
+        unexplained_min_error_pct=float(disc.unexplained_min_error_pct),
     )
 
 

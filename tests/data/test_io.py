@@ -311,3 +311,19 @@ def test_coulomb_law_is_read_and_written_back(cdpr_dir, tmp_path, law, sharpness
     assert data.rig.coulomb_sharpness == sharpness
     copy = write_dataset(tmp_path / "copy", data.rig, data.trajectories)
     assert load_dataset(copy).rig.coulomb_sharpness == sharpness
+
+
+def test_axes_joint_types_default_prismatic_and_bad_entries_named():
+    """rig.yaml's optional ``joint_types`` (one per axis) says which axes are rotary; an
+    unstated one is prismatic, a wrong one is named with its axis."""
+    from cdpr_pipeline.data.rig import AxesRig, WinchParams
+
+    nominal = WinchParams([1.0, 1.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0])
+    rig = AxesRig(100.0, ("q1", "q2"), nominal)
+    assert rig.joint_types == ("prismatic", "prismatic")
+    assert rig.replace(extra={"joint_types": ["rotary", "prismatic"]}).joint_types == (
+        "rotary", "prismatic")
+    with pytest.raises(ValueError, match=r"joint_types\[1\] \(axis q2\).*'helical'"):
+        _ = rig.replace(extra={"joint_types": ["rotary", "helical"]}).joint_types
+    with pytest.raises(ValueError, match="one of .* per axis"):
+        _ = rig.replace(extra={"joint_types": ["rotary"]}).joint_types

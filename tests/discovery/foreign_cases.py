@@ -245,6 +245,9 @@ TOLERANCE = {
     "drum_radius_error": {"relative": 0.3},
     "cable_elasticity": {"ea_n": 0.3},
     "anchor_offset": {"offset_m": 0.35},
+    # the fitted load against the true one over the axis's stroke, relative to its size
+    # (the rotary amplitude, or the spring's k times the amplitude)
+    "position_dependent_load": {"load": 0.15},
 }
 
 
@@ -324,6 +327,25 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
                 missing.append(f"cable {c}")
                 continue
             errors[f"ea_n[{c}]"] = _rel(fitted[c - 1], float(eff.params["ea_n"][c - 1]))
+    elif name == "position_dependent_load":
+        from cdpr_pipeline.sim.effects import per_winch
+        n = rig.n
+        a, b = per_winch(p["a"], p.get("cables"), n), per_winch(p["b"], p.get("cables"), n)
+        named = set(p.get("cables") or range(1, n + 1))
+        for c in chans:
+            if c not in named:
+                missing.append(f"axis {c}")
+                continue
+            i = c - 1
+            q = np.linspace(-1.0, 1.0, 201) * rig.amplitude[i]
+            ta, tb = eff.params["a"][i], eff.params["b"][i]
+            if eff.params["rotary"][i] > 0:
+                true = ta * np.sin(q) + tb * np.cos(q)
+                fit = a[i] * np.sin(q) + b[i] * np.cos(q)
+                size = np.hypot(ta, tb)
+            else:
+                true, fit, size = ta * q + tb, a[i] * q + b[i], abs(ta) * rig.amplitude[i]
+            errors[f"load[{c}]"] = float(np.abs(fit - true).max() / size)
     elif name == "anchor_offset":
         c = int(p["cable"])
         if c not in chans:

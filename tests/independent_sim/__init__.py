@@ -56,6 +56,11 @@ periodic_torque               both   extra ``A sin(k angle + phi)``, ``A`` in 0.
                                      motor angle, 0 at the workspace centre); axes:
                                      ``k = 2 pi / lambda``, ``lambda`` in 0.2..0.5 amplitude
                                      (outside the pipeline's vocabulary)
+position_dependent_load       axes   rotary joint: ``a sin q + b cos q = A sin(q + phi)``, ``A``
+                                     in 0.3..0.8 of the typical torque, ``|cos phi| >= 0.5``;
+                                     prismatic axis: ``k (q - q0)``, ``k A`` in 0.3..0.8 of the
+                                     typical force, ``q0`` within the stroke (``random_axes_rig``
+                                     ``joint_types=``; rotary joints swing 0.2..1 rad)
 ============================  =====  ==========================================================
 
 Sensors: mocap noise 1e-4 m (cdpr), torque measurement noise 0.5 % of the static

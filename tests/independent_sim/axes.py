@@ -59,6 +59,9 @@ class AxesRigSpec:
     damping_ratio: float = 0.8
     torque_noise: np.ndarray | None = None
     quantum: np.ndarray | None = None
+    #: per axis ``prismatic`` or ``rotary`` (rig.yaml's ``joint_types``); None: not
+    #: stated, every axis prismatic
+    joint_types: tuple[str, ...] | None = None
 
     kind = "axes"
 
@@ -74,6 +77,17 @@ class AxesRigSpec:
             object.__setattr__(self, "quantum", 1e-5 * self.amplitude)
         object.__setattr__(self, "torque_noise", _per_axis(self.torque_noise, n))
         object.__setattr__(self, "quantum", _per_axis(self.quantum, n))
+        if self.joint_types is not None:
+            types = tuple(str(j) for j in self.joint_types)
+            if len(types) != n or not set(types) <= {"prismatic", "rotary"}:
+                raise ValueError(f"joint_types {types}: one of prismatic/rotary per axis ({n})")
+            object.__setattr__(self, "joint_types", types)
+
+    @property
+    def rotary(self) -> np.ndarray:
+        """(n,) True for a rotary joint."""
+        types = self.joint_types or ("prismatic",) * self.n
+        return np.array([j == "rotary" for j in types])
 
     @property
     def n(self) -> int:
@@ -124,6 +138,7 @@ class AxesRigSpec:
                            "kd": kd.tolist(), "feedforward": "nominal",
                            "rate_hz": float(self.rate_hz)},
             "generator": "tests.independent_sim",
+            **({"joint_types": list(self.joint_types)} if self.joint_types else {}),
         }
 
     def describe(self) -> dict[str, Any]:
@@ -136,7 +151,7 @@ class AxesRigSpec:
 
 def random_axes_rig(seed: int, n_axes: int | None = None, rate_hz: float | None = None,
                     inertia: Any = None, viscous: Any = None, coulomb: Any = None,
-                    ) -> AxesRigSpec:
+                    joint_types: Any = None) -> AxesRigSpec:
     """Draw random drive axes.
 
     Parameters
@@ -151,12 +166,16 @@ def random_axes_rig(seed: int, n_axes: int | None = None, rate_hz: float | None 
         Nominal values (one or per axis). Drawn when omitted: inertia log-uniform in
         1e-3..1e2; viscous ``I / T`` with ``T`` log-uniform in 0.02..2 s (at most 1e4);
         Coulomb 0.2-0.6 times the typical inertial plus viscous torque of the reference.
+    joint_types : sequence of str, optional
+        ``prismatic`` or ``rotary`` per axis, written to rig.yaml as ``joint_types``;
+        omitted: not stated (every axis prismatic), the same rig as before.
 
     Returns
     -------
     AxesRigSpec
-        Amplitude 0.02-0.1 (m or rad), bandwidth 2-8 Hz (at most rate/30), reference
-        frequency 0.15-0.35 of the bandwidth, offset within +-0.2 F_c.
+        Amplitude 0.02-0.1 m (prismatic) or 0.2-1.0 rad (rotary: a joint swings further),
+        bandwidth 2-8 Hz (at most rate/30), reference frequency 0.15-0.35 of the
+        bandwidth, offset within +-0.2 F_c.
     """
     rng = np.random.default_rng([int(seed), 0xA7E5])
     n = int(n_axes) if n_axes is not None else int(rng.integers(1, 7))
@@ -168,6 +187,9 @@ def random_axes_rig(seed: int, n_axes: int | None = None, rate_hz: float | None 
     visc = (_per_axis(viscous, n) if viscous is not None
             else np.minimum(inertia_v / np.exp(rng.uniform(np.log(0.02), np.log(2.0), n)), 1e4))
     amplitude = rng.uniform(0.02, 0.1, n)
+    if joint_types is not None:
+        # the same draws, rotary joints ten times further (no other stream changes)
+        amplitude = np.where([j == "rotary" for j in joint_types], 10.0, 1.0) * amplitude
     bandwidth = np.minimum(rng.uniform(2.0, 8.0, n), rate / 30.0)
     ref_hz = rng.uniform(0.15, 0.35, n) * bandwidth
     omega = 2 * np.pi * ref_hz
@@ -176,7 +198,8 @@ def random_axes_rig(seed: int, n_axes: int | None = None, rate_hz: float | None 
     return AxesRigSpec(seed=int(seed), rate_hz=rate, inertia=inertia_v, viscous=visc,
                        coulomb=fc, offset=rng.uniform(-0.2, 0.2, n) * fc, amplitude=amplitude,
                        ref_hz=ref_hz, bandwidth_hz=bandwidth,
-                       damping_ratio=float(rng.uniform(0.7, 1.0)))
+                       damping_ratio=float(rng.uniform(0.7, 1.0)),
+                       joint_types=None if joint_types is None else tuple(joint_types))
 
 
 # --------------------------------------------------------------------------- references
@@ -278,6 +301,8 @@ class AxesPlant:
         if mdl._quad:
             slope = slope + mdl.quad_coefficient * np.abs(v)
         push = tau - mdl.offset
+        if mdl._load:
+            push = push - mdl.load(q)
         if mdl._periodic:
             push = push - mdl.periodic_amplitude * np.sin(mdl.periodic_wavenumber * q
                                                           + mdl.periodic_phase)

@@ -26,6 +26,7 @@ EFFECT_KINDS: dict[str, tuple[str, ...]] = {
     "actuator_lag": ("cdpr", "axes"),
     "quadratic_drag": ("cdpr", "axes"),
     "periodic_torque": ("cdpr", "axes"),
+    "position_dependent_load": ("axes",),
 }
 
 #: the two effects outside the pipeline's vocabulary (its diagnosis should say `unnamed`)
@@ -106,7 +107,8 @@ def _signed(rng: np.random.Generator, lo: float, hi: float, size: int) -> np.nda
 
 
 def draw_effect(name: str, rig: Any, rng: np.random.Generator,
-                channels: tuple[int, ...] | list[int] | None = None) -> Effect:
+                channels: tuple[int, ...] | list[int] | None = None,
+                frequency_hz: tuple[float, float] | None = None) -> Effect:
     """Draw one hidden effect at a random magnitude within its documented range.
 
     Parameters
@@ -120,6 +122,10 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
         Source of randomness.
     channels : sequence of int, optional
         Affected channels (0-based); drawn (one, some or all) when omitted.
+    frequency_hz : (float, float), optional
+        ``periodic_torque`` only: draw its frequency at the channel's typical speed
+        uniformly in this range instead of its wavenumber (cdpr: rounded to whole
+        periods per motor turn, at least one), e.g. to place it above the motion's band.
 
     Returns
     -------
@@ -185,8 +191,25 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
         params = {"time_constant_s": per_channel(lag)}
     elif name == "quadratic_drag":
         params = {"coefficient": per_channel(rng.uniform(0.3, 0.8, m) * fv[idx] / speed[idx])}
+    elif name == "position_dependent_load":
+        # rotary: A sin(q + phi) = a sin q + b cos q with A the size and |cos phi| >= 0.5
+        # (the load changes across the joint's zero; at its extremum there, over a short
+        # swing, it is a constant like the offset d); prismatic: a spring k (q - q0) with
+        # k A the size and its rest position q0 within the stroke
+        size = rng.uniform(0.3, 0.8, m) * rig.typical_torque[idx]
+        phi = rng.uniform(-np.pi / 3, np.pi / 3, m) + np.pi * rng.integers(0, 2, m)
+        rest = rng.uniform(-1.0, 1.0, m) * rig.amplitude[idx]
+        rotary = rig.rotary[idx]
+        stiffness = size / rig.amplitude[idx]
+        params = {"a": per_channel(np.where(rotary, size * np.cos(phi), stiffness)),
+                  "b": per_channel(np.where(rotary, size * np.sin(phi), -stiffness * rest)),
+                  "rotary": per_channel(rotary.astype(float))}
     elif name == "periodic_torque":
-        if rig.kind == "cdpr":
+        if frequency_hz is not None:
+            wavenumber = 2 * np.pi * rng.uniform(*frequency_hz, m) / speed[idx]
+            if rig.kind == "cdpr":   # whole periods per motor turn
+                wavenumber = np.maximum(1.0, np.round(wavenumber))
+        elif rig.kind == "cdpr":
             wavenumber = rng.integers(1, 5, m).astype(float)  # periods per motor turn
         else:
             wavenumber = 2 * np.pi / (rng.uniform(0.2, 0.5, m) * rig.amplitude[idx])
@@ -195,6 +218,8 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
                   "phase": per_channel(rng.uniform(0.0, 2 * np.pi, m))}
     else:  # pragma: no cover - guarded by EFFECT_KINDS above
         raise AssertionError(name)
+    if frequency_hz is not None and name != "periodic_torque":
+        raise ValueError(f"frequency_hz applies to periodic_torque, not {name!r}")
     return Effect(name, chans, params)
 
 
@@ -219,6 +244,9 @@ class TrueModel:
     periodic_wavenumber: np.ndarray
     periodic_phase: np.ndarray
     lag_s: np.ndarray
+    load_a: np.ndarray | None = None
+    load_b: np.ndarray | None = None
+    load_rotary: np.ndarray | None = None
     mass: float | None = None
     anchors: np.ndarray | None = None
     radius: np.ndarray | None = None
@@ -234,6 +262,8 @@ class TrueModel:
         self._asym = bool(np.any(self.asym_coefficient))
         self._quad = bool(np.any(self.quad_coefficient))
         self._periodic = bool(np.any(self.periodic_amplitude))
+        self._load = self.load_a is not None and bool(np.any(self.load_a) or
+                                                      np.any(self.load_b))
         self._ws = np.where(self.stribeck_delta > 0, self.stribeck_speed, 1.0)
 
     def friction_level(self, w: np.ndarray) -> np.ndarray:
@@ -255,7 +285,17 @@ class TrueModel:
         if self._periodic:
             out = out + self.periodic_amplitude * np.sin(
                 self.periodic_wavenumber * angle + self.periodic_phase)
+        if self._load:
+            out = out + self.load(angle)
         return out
+
+    def load(self, q: np.ndarray) -> np.ndarray:
+        """The position-dependent load: ``a sin q + b cos q`` on a rotary joint,
+        ``a q + b`` on a prismatic axis (zero without one)."""
+        if not self._load:
+            return np.zeros_like(np.asarray(q, float))
+        return np.where(self.load_rotary > 0, self.load_a * np.sin(q) + self.load_b * np.cos(q),
+                        self.load_a * q + self.load_b)
 
     def extra_torque(self, w: np.ndarray, angle: np.ndarray) -> np.ndarray:
         """Torque of the hidden friction-side effects alone (at ``w != 0``), i.e. the true
@@ -291,6 +331,9 @@ def true_model(rig: Any, effects: list[Effect]) -> TrueModel:
         periodic_phase=zeros.copy(), lag_s=zeros.copy())
     if rig.kind == "cdpr":
         model.mass, model.anchors, model.radius = rig.mass, rig.anchors.copy(), rig.radius.copy()
+    else:
+        model.load_a, model.load_b = zeros.copy(), zeros.copy()
+        model.load_rotary = rig.rotary.astype(float)
     for eff in effects:
         if rig.kind not in EFFECT_KINDS[eff.name]:
             raise ValueError(f"effect {eff.name!r} does not apply to kind {rig.kind!r}")
@@ -318,6 +361,12 @@ def true_model(rig: Any, effects: list[Effect]) -> TrueModel:
             model.lag_s = model.lag_s + p["time_constant_s"]
         elif eff.name == "quadratic_drag":
             model.quad_coefficient = model.quad_coefficient + p["coefficient"]
+        elif eff.name == "position_dependent_load":
+            if np.any(p["rotary"][on] != model.load_rotary[on]):
+                raise ValueError("position_dependent_load drawn for other joint types than "
+                                 "the rig's")
+            model.load_a = model.load_a + p["a"]
+            model.load_b = model.load_b + p["b"]
         elif eff.name == "periodic_torque":
             model.periodic_amplitude = np.where(on, p["amplitude"], model.periodic_amplitude)
             model.periodic_wavenumber = np.where(on, p["wavenumber"],

@@ -466,6 +466,37 @@ def test_axes_effect_identity():
     assert np.all(np.abs(st["friction"]) <= level + 1e-12)
 
 
+def test_axes_position_dependent_load_identity(tmp_path):
+    """A rotary joint's gravity ``a sin q + b cos q`` and a prismatic axis's spring
+    ``a q + b``: ``tau = I a + F_v v_damp + phi + d + load(q)`` on the true states, the
+    drawn sizes within their documented ranges, the joint types in rig.yaml."""
+    from . import simulate_axes_runs
+
+    rig = random_axes_rig(8, n_axes=2, rate_hz=1000, joint_types=["rotary", "prismatic"])
+    assert 0.2 <= rig.amplitude[0] <= 1.0 and 0.02 <= rig.amplitude[1] <= 0.1
+    eff = draw_effect("position_dependent_load", rig, np.random.default_rng(4), channels=[0, 1])
+    a, b = eff.params["a"], eff.params["b"]
+    size = np.array([np.hypot(a[0], b[0]), a[1] * rig.amplitude[1]])
+    assert np.all((size >= 0.3 * rig.typical_torque) & (size <= 0.8 * rig.typical_torque))
+    assert abs(a[0]) >= 0.5 * size[0] - 1e-12             # |cos phi| >= 0.5
+    assert abs(b[1]) <= a[1] * rig.amplitude[1] + 1e-12    # rest position within the stroke
+    _, runs, settings = simulate_axes_runs(rig, [eff], ["mixed"], 4.0, seed=0, noise=False)
+    model = true_model(rig, [eff])
+    st = runs[0].states
+    q = st["q"]
+    load = np.column_stack([a[0] * np.sin(q[:, 0]) + b[0] * np.cos(q[:, 0]),
+                            a[1] * q[:, 1] + b[1]])
+    res = st["tau"] - (model.inertia * st["a"] + model.viscous * st["v_damp"] + st["friction"]
+                       + model.offset + load)
+    assert settings["substeps"] == 1
+    assert np.abs(res).max() < 1e-9 * np.abs(st["tau"]).max()
+    assert np.ptp(load, axis=0).min() > 0.1 * rig.typical_torque.min()   # it shows
+    simulate_axes_dataset(tmp_path / "ax", rig, [eff], n_runs=1, duration_s=2.0, seed=1)
+    assert yaml.safe_load((tmp_path / "ax" / "rig.yaml").read_text())["joint_types"] == [
+        "rotary", "prismatic"]
+    assert load_dataset(tmp_path / "ax").rig.joint_types == ("rotary", "prismatic")
+
+
 @pytest.mark.parametrize("rate", [100.0, 250.0, 2000.0])
 def test_axes_sample_intervals_follow_continuous_physics(rate):
     """Over every sample interval the recorded torque is held and the continuous momentum
