@@ -85,3 +85,18 @@ def test_contributions_are_shapley_shares(quiet_lab):
     assert both[1] == pytest.approx(0.5 * (alone_b + together - alone_a), abs=1e-9)
     # adding effects the data do not hold makes the model worse: negative shares
     assert np.all(both < 0)
+
+
+def test_cable_damping_is_not_reported_unless_fitted(paper_rig, nominal_plant):
+    """The stretch candidates fit EA only (their length residual is quasi-static): the
+    damping of a diagnosed stretch is left unknown (null in diagnosis.json), not the
+    class default reported as if found, and the extended model keeps the plant's own."""
+    from cdpr_pipeline.discovery.candidates import DataScale, candidates_for
+
+    scale = DataScale(1.0, paper_rig.n, "cdpr")
+    for cand in candidates_for(paper_rig, scale, ["cable_elasticity"], False):
+        x = np.full(cand.n_params, 1e-5)
+        (effect,) = cand.build(x)
+        assert effect.params()["damping_time_s"] is None, cand.label
+        damped = nominal_plant.replace(cable_damping_time=0.015)
+        assert effect.apply(damped).cable_damping_time == 0.015, cand.label
