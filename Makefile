@@ -50,6 +50,7 @@ test-slow: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_simulator.py
 	$(BIN)/python benchmarks/bench_diagnose.py
+	$(BIN)/python benchmarks/bench_emps.py
 
 ## bench-detection: detection and false-alarm rates of `cdpr diagnose` and the smallest
 ## magnitude of each hidden effect it detects reliably (about an hour on 2 cores)
