@@ -60,7 +60,8 @@ def test_mass_error_and_lag_are_ranked_by_heldout_contribution(paper_rig, seed):
     case = (f"seed {seed}: {mass}, {lag}; true contributions mass "
             f"{100 * truth[0]:.1f} %, lag {100 * truth[1]:.1f} %: {d.sentence}")
     names = [c["effect"] for c in record["causes"]]
-    assert names == expected, case
+    # (a further, smaller cause may be named beside them: the detection suite's matter)
+    assert [n for n in names if n in expected] == expected, case
     assert record["verdict"] == expected[0], case
     shares = [c["evidence"]["heldout_contribution_pct"] for c in record["causes"]]
     assert shares == sorted(shares, reverse=True), case
