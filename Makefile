@@ -73,6 +73,7 @@ bench: $(STAMP)
 	$(BIN)/python -m benchmarks.bench_simulator
 	$(BIN)/python benchmarks/bench_diagnose.py
 	$(BIN)/python -m benchmarks.bench_foreign_diagnose
+	$(BIN)/python -m benchmarks.bench_emps
 
 ## bench-null: how often each of the diagnosis's tests fires on effect-free data
 ## (24 datasets, both simulators; several minutes)

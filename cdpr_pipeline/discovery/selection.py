@@ -145,6 +145,10 @@ class Judgement:
     fit: Fit | None = None
     candidate: Candidate | None = None
     freeform: FreeFormResult | None = None
+    #: its share of the final model's held-out gain, in shares of the nominal model's
+    #: held-out error summed over channels (set by the diagnosis when it ranks causes:
+    #: :func:`~cdpr_pipeline.discovery.diagnosis.heldout_contributions`)
+    contribution: float | None = None
 
     def failed(self, reason: str) -> Judgement:
         """The same judgement, not passed, for ``reason``."""
@@ -156,7 +160,9 @@ class Judgement:
                     1 - np.sqrt(max(1 - self.heldout_gain, 0.0))),
                 "heldout_sse_drop_pct": 100 * self.heldout_gain,
                 "heldout_sse_drop_ci95_pct": [100 * self.ci[0], 100 * self.ci[1]],
-                "signal": self.channel, "variant": self.label}
+                "signal": self.channel, "variant": self.label,
+                **({} if self.contribution is None else
+                   {"heldout_contribution_pct": 100 * self.contribution})}
 
 
 def fit_weights(base: Residuals, scales: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

@@ -345,7 +345,7 @@ def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
     """Prepare one measured run. ``nominal`` (``cdpr``) gives the encoder zero and radius
     that turn lengths into winch angles."""
     filt = settings.filter
-    torque = _held_torque(np.asarray(traj.torques, float), settings.zero_order_hold)
+    torque = _held_torque(np.asarray(traj.torques, float), settings.hold)
     if isinstance(rig, CdprRig):
         if nominal is None:
             nominal = Plant.from_rig(rig)

@@ -125,6 +125,14 @@ class RegressionSettings:
         :func:`winch_regression`); ``"auto"``: when rig.yaml states a digital controller
         (``controller.rate_hz``), whose commands are held over its period, and for a
         cable robot (the spec's ``u`` is the commanded torque).
+    hold_fraction : float or "auto"
+        With ``zero_order_hold``, the share of a sample period each recorded torque is
+        held for (``(0, 1]``): a controller faster than the recording holds the sampled
+        command for one control period only, and the commands between samples are not
+        recorded; the torque acting around ``t_k`` is then the command of
+        ``t_k - hold_fraction T / 2`` (:func:`_held_torque`). ``"auto"``: the controller
+        period over the sample period, at most 1, when rig.yaml states a controller
+        rate; 1 otherwise (the command held until the next sample).
     encoder_rest : bool, sequence of bool or "auto"
         Per channel, whether its recorded position resolves standstill (an encoder whose
         count stays unchanged at rest), so that a hard-sign Coulomb law can tell stops
@@ -140,6 +148,7 @@ class RegressionSettings:
     sign_sharpness: float | str | None = RIG
     zero_order_hold: bool | str = True
     encoder_rest: bool | tuple[bool, ...] | str = AUTO
+    hold_fraction: float | str = AUTO
 
     def __post_init__(self) -> None:
         # a list from a yaml file becomes a tuple (the settings stay hashable)
@@ -152,7 +161,15 @@ class RegressionSettings:
         """Whether nothing is left to choose from the data."""
         return not any(isinstance(v, str) for v in (
             self.filter.cutoff_hz, self.filter.trim_s, self.decimate, self.sign_sharpness,
-            self.zero_order_hold, self.encoder_rest))
+            self.zero_order_hold, self.encoder_rest, self.hold_fraction))
+
+    @property
+    def hold(self) -> float:
+        """The share of a sample period the recorded torque is held for (0: read as
+        sampled); a fraction still ``"auto"`` counts as the whole sample."""
+        if not self.zero_order_hold:
+            return 0.0
+        return 1.0 if isinstance(self.hold_fraction, str) else float(self.hold_fraction)
 
     def rest_channels(self, position: np.ndarray) -> np.ndarray:
         """``(n,)``: which channels of a run with ``position`` (N, n) resolve standstill
@@ -366,10 +383,10 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
         log.info("Coulomb law: %s (as rig.yaml states)",
                  "hard sign" if law is None else f"tanh({law:g} w)")
     hold = settings.zero_order_hold
+    rate = (rig.controller.rate_hz if isinstance(rig, CdprRig) and rig.controller
+            else (rig.controller or {}).get("rate_hz") if isinstance(rig, AxesRig)
+            else None)
     if hold == AUTO:
-        rate = (rig.controller.rate_hz if isinstance(rig, CdprRig) and rig.controller
-                else (rig.controller or {}).get("rate_hz") if isinstance(rig, AxesRig)
-                else None)
         # the spec defines a cable robot's u as the commanded torque, which a digital
         # drive holds until the next command; an axis's u is the force applied
         commanded = isinstance(rig, CdprRig)
@@ -378,6 +395,16 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
                  if rate is not None else "held over the sample (a cable robot's u is the "
                  "commanded torque)" if commanded
                  else "taken as sampled (rig.yaml states no controller rate)")
+    fraction = settings.hold_fraction
+    if fraction == AUTO:
+        fraction = min(1.0, fs / float(rate)) if rate else 1.0
+        if hold is True and fraction < 1.0:
+            log.info("each recorded torque held for %.3g of a sample: the controller "
+                     "(%g Hz) is faster than the recording (%g Hz), whose torque around a "
+                     "sample is the command of %.3g ms before it", fraction, rate, fs,
+                     500 * fraction / fs)
+    if not isinstance(fraction, str) and not 0.0 < float(fraction) <= 1.0:
+        raise ValueError(f"regression.hold_fraction: {fraction!r} is not in (0, 1]")
     rest = settings.encoder_rest
     if rest == AUTO:
         seen = [_shows_standstill(np.asarray(_recorded_position(tr), float))
@@ -387,12 +414,14 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
             f"{i + 1}: {'yes' if r else 'no'}" for i, r in enumerate(np.atleast_1d(rest))))
     for name, value in (("filter.cutoff_hz", cutoff), ("filter.trim_s", trim),
                         ("decimate", q), ("sign_sharpness", law),
-                        ("zero_order_hold", hold), ("encoder_rest", rest)):
+                        ("zero_order_hold", hold), ("encoder_rest", rest),
+                        ("hold_fraction", fraction)):
         if isinstance(value, str):
             raise ValueError(f"regression.{name}: unknown setting {value!r} "
                              f"(a value, or {AUTO!r}/{RIG!r} where documented)")
     return RegressionSettings(replace(filt, cutoff_hz=float(cutoff), trim_s=float(trim)),
-                              int(q), None if law is None else float(law), bool(hold), rest)
+                              int(q), None if law is None else float(law), bool(hold), rest,
+                              float(fraction))
 
 
 def _recorded_position(traj: Trajectory) -> np.ndarray:
@@ -402,14 +431,23 @@ def _recorded_position(traj: Trajectory) -> np.ndarray:
     return np.asarray(q, float).reshape(len(traj.t), -1)
 
 
-def _held_torque(torques: np.ndarray, zero_order_hold: bool) -> np.ndarray:
-    # a torque recorded at t_k acts until t_k+1: the triangle of half-width T around t_k
-    # that the second difference averages the acceleration with (_second_difference)
-    # sees samples k-1 and k for half each, exactly (without it a half-sample lag)
-    if not zero_order_hold:
+def _held_torque(torques: np.ndarray, hold: float) -> np.ndarray:
+    """The torque acting around each sample, from recorded commands each held for
+    ``hold`` of a sample period (:attr:`RegressionSettings.hold`; 0: as sampled).
+
+    A torque recorded at ``t_k`` and held until ``t_k+1`` (``hold`` 1): the triangle of
+    half-width ``T`` around ``t_k`` that the second difference averages the acceleration
+    with (:func:`_second_difference`) sees samples ``k-1`` and ``k`` for half each,
+    exactly (read as sampled instead, a half-sample lag every candidate would have to
+    explain). Held for a share ``f`` only (a faster controller whose commands between
+    samples are not recorded), the torque acting around ``t_k`` is the command of
+    ``t_k - f T / 2``: samples ``k-1`` and ``k`` weighted ``f / 2`` and ``1 - f / 2``.
+    """
+    hold = float(hold)
+    if hold <= 0.0:
         return torques
     held = torques.copy()
-    held[1:] = 0.5 * (torques[1:] + torques[:-1])
+    held[1:] = (1.0 - 0.5 * hold) * torques[1:] + 0.5 * hold * torques[:-1]
     return held
 
 
@@ -515,7 +553,7 @@ def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
     fs = 1.0 / step
     filt = settings.filter
     _, b, a = filt.compact_derivatives(position, t)
-    torque = _held_torque(torque, settings.zero_order_hold)
+    torque = _held_torque(torque, settings.hold)
     if settings.sign_sharpness is not None:       # a smooth law: friction known everywhere
         c, one = smooth_sign(b, settings.sign_sharpness), np.ones_like(b)
         target, c = filt.smooth(torque, fs) - smooth_load, filt.smooth(c, fs)

@@ -342,11 +342,13 @@ def _cdpr_openloop(model: Plant, pieces: list[_Piece], settings: PhysicsSettings
 # ---------------------------------------------------------------------- axes: inverse
 def _axes_inverse(model: Model, piece: _Piece, settings: PhysicsSettings) -> np.ndarray:
     """``u`` at the valid samples by inverse dynamics of the smooth measured motion. With
-    a zero-order hold, ``u(k)`` acts over ``[t_k, t_k+1]``: it is predicted by the inverse
-    dynamics at the interval's middle (the mean of both ends)."""
+    a zero-order hold, ``u(k)`` acts over ``[t_k, t_k + f T]`` (``f`` the hold's share of
+    a sample, 1: until the next sample): it is predicted by the inverse dynamics at the
+    interval's middle (both ends weighted ``1 - f/2`` and ``f/2``)."""
     u = predict(model, model, piece.signals)["torque"]
-    if settings.regression.zero_order_hold:
-        u = np.concatenate([0.5 * (u[:-1] + u[1:]), u[-1:]])
+    hold = settings.regression.hold
+    if hold > 0:
+        u = np.concatenate([(1 - 0.5 * hold) * u[:-1] + 0.5 * hold * u[1:], u[-1:]])
     return u[piece.valid]
 
 

@@ -570,7 +570,14 @@ class CableElasticity(Effect):
     """Cables stretch under tension: axial stiffness ``EA`` (N) with Kelvin-Voigt
     damping; encoder length minus geometric length is ``-t l / EA``. ``ea_n`` is one
     value (every cable in ``cables``) or one per cable in ``cables`` (see
-    :func:`per_winch`); cables not listed stay rigid."""
+    :func:`per_winch`); cables not listed stay rigid.
+
+    ``damping_time_s`` None: not known, the plant keeps its own (what the diagnosis
+    fits: its length residual is the quasi-static stretch, which does not determine the
+    damping; measured on independent-generator cables with 2-3.4 ms of true loss time
+    constant, the residual's sum of squares moves by under 4 % between no damping and
+    twice the truth, so a fitted value would be noise and a default would be reported
+    as if it were found)."""
 
     name: ClassVar[str] = "cable_elasticity"
     expression: ClassVar[str] = "dl = -t l / (EA + t)"
@@ -579,13 +586,15 @@ class CableElasticity(Effect):
     log_uniform: ClassVar[frozenset[str]] = frozenset({"ea_n"})
 
     ea_n: float | list[float] = 2.0e4
-    damping_time_s: float = 2e-3
+    damping_time_s: float | None = 2e-3
     cables: list[int] | None = None
 
     def apply(self, plant):
+        damping = plant.cable_damping_time if self.damping_time_s is None \
+            else float(self.damping_time_s)
         return plant.replace(cable_stiffness=per_winch(self.ea_n, self.cables, plant.n,
                                                        fill=np.inf),
-                             cable_damping_time=float(self.damping_time_s))
+                             cable_damping_time=damping)
 
     def scaled(self, s):
         return type(self)(_map(self.ea_n, lambda v: v / s), self.damping_time_s, self.cables)
@@ -598,13 +607,15 @@ class CableElasticity(Effect):
         n = scale.n
 
         def make(compliance: Any, cables: list[int] | None) -> list[Effect]:
-            """One EA for every cable (``cables`` None, a number), or one per cable."""
+            """One EA for every cable (``cables`` None, a number), or one per cable; the
+            damping is not fitted (class docstring): left unknown, not reported."""
             if cables is None:
-                return [cls(ea_n=1.0 / float(compliance))] if compliance > 0 else []
+                return [cls(ea_n=1.0 / float(compliance), damping_time_s=None)] \
+                    if compliance > 0 else []
             c = np.asarray(compliance, float)
             keep = [k for k, v in zip(cables, c, strict=True) if v > 0]
-            return [cls(ea_n=[1.0 / float(v) for v in c if v > 0], cables=keep)] \
-                if keep else []
+            return [cls(ea_n=[1.0 / float(v) for v in c if v > 0], damping_time_s=None,
+                        cables=keep)] if keep else []
 
         length = frozenset({"length"})
         one = [_candidate(cls.name, f"{cls.name}[cable {c}]",

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .effects import Effect, TrueModel, true_model
+from .effects import Effect, TrueModel, lag_response, true_model
 from .writer import FORMAT, RunTruth, Truth, write_simulated
 
 AXES_FAMILIES = ("multisine", "moves", "mixed")
@@ -364,7 +364,7 @@ def simulate_axes_runs(rig: AxesRigSpec, effects: list[Effect], families: list[s
 
     substeps = int(np.ceil(SUB_RATE_HZ / rig.rate_hz - 1e-9))
     h = 1.0 / (rig.rate_hz * substeps)
-    lag_gain = np.where(model.lag_s > 0, -np.expm1(-h / np.maximum(model.lag_s, 1e-300)), 1.0)
+    decay, mean_keep = lag_response(model.lag_s, h)
     has_lag = bool(np.any(model.lag_s > 0))
     kp, kd = rig.gains()
     alpha = np.exp(-2 * np.pi * rig.velocity_filter_hz() / rig.rate_hz)
@@ -386,13 +386,16 @@ def simulate_axes_runs(rig: AxesRigSpec, effects: list[Effect], families: list[s
         rec["q"][:, i], rec["v"][:, i], rec["u_cmd"][:, i], rec["q_enc"][:, i] = q, v, u, q_enc
         for s in range(substeps):
             if has_lag:
-                tau = tau + (u - tau) * lag_gain
+                # the exact lag of the held command: its mean over the sub-step acts,
+                # its end value starts the next one
+                applied = u + (tau - u) * mean_keep
+                tau = u + (tau - u) * decay
             else:
-                tau = u
-            q_new, v_new, phi = plant.step(q, v, tau, h)
+                applied = tau = u
+            q_new, v_new, phi = plant.step(q, v, applied, h)
             if s == 0:
                 rec["a"][:, i] = (v_new - v) / h
-                rec["tau"][:, i], rec["friction"][:, i] = tau, phi
+                rec["tau"][:, i], rec["friction"][:, i] = applied, phi
                 # the speed the damping terms acted at during this sub-step
                 rec["v_damp"][:, i] = plant.last_theta * v_new + (1 - plant.last_theta) * v
             q, v = q_new, v_new

@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from .effects import Effect, TrueModel, draw_effect, true_model
+from .effects import Effect, TrueModel, draw_effect, lag_response, true_model
 from .writer import FORMAT, RunTruth, Truth, write_simulated
 
 #: trajectory families (the part of the file name after the index)
@@ -664,7 +664,7 @@ def simulate_runs(rig: RigSpec, effects: list[Effect], families: list[str], dura
         max_step = min(1.0 / SUB_RATE_HZ, plant.max_step)
     substeps = int(np.ceil(1.0 / (rig.rate_hz * max_step) - 1e-9))
     h = 1.0 / (rig.rate_hz * substeps)
-    lag_gain = np.where(model.lag_s > 0, -np.expm1(-h / np.maximum(model.lag_s, 1e-300)), 1.0)
+    decay, mean_keep = lag_response(model.lag_s, h)
 
     kp, kd = rig.gains()
     alpha = np.exp(-2 * np.pi * rig.velocity_filter_hz() / rig.rate_hz)
@@ -697,8 +697,11 @@ def simulate_runs(rig: RigSpec, effects: list[Effect], families: list[str], dura
         rec_l[:, i], rec_u[:, i] = l_enc, u
         low = np.full(b, np.inf)
         for s in range(substeps):
-            tau = tau + (u - tau) * lag_gain
-            state, info, t_low = plant.step(state, tau, h, record=s == 0)
+            # the exact lag of the held command: its mean over the sub-step acts, its
+            # end value starts the next one
+            applied = u + (tau - u) * mean_keep
+            tau = u + (tau - u) * decay
+            state, info, t_low = plant.step(state, applied, h, record=s == 0)
             low = np.minimum(low, t_low)
             if info is not None:
                 for key, value in info.items():

@@ -380,3 +380,17 @@ def true_model(rig: Any, effects: list[Effect]) -> TrueModel:
         if np.any(getattr(model, key) < 0) or np.any(model.inertia <= 0):
             raise ValueError(f"true {key} must stay positive: {getattr(model, key)}")
     return model
+
+
+def lag_response(lag_s: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact first-order lag ``T tau' = u - tau`` over a sub-step ``h`` of a held
+    command ``u``: ``tau_end = u + (tau_0 - u) decay`` and the mean torque acting over the
+    sub-step ``u + (tau_0 - u) mean_keep``. A step that applied ``tau_end`` throughout
+    would lead the lag by ``h / 2`` (0.5 ms at 1 ms sub-steps: a 3 ms lag acting as
+    2.5 ms). Channels without lag (``T = 0``) pass the command: both factors 0."""
+    lag = np.asarray(lag_s, float)
+    on = lag > 0
+    safe = np.where(on, lag, 1.0)
+    decay = np.where(on, np.exp(-h / safe), 0.0)
+    mean_keep = np.where(on, -(safe / h) * np.expm1(-h / safe), 0.0)
+    return decay, mean_keep
