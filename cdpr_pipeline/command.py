@@ -119,6 +119,11 @@ def run_staged(func: Callable[[DictConfig], T], cfg: DictConfig, *, nested: bool
         work = Path(out_dir + ".partial")
         work = work / Path(out_dir).name if nested else work
         return func(_config(tree, out_dir, str(work)))
+    here = Path.cwd().resolve()
+    if Path(out_dir).resolve() in (here, *here.parents):
+        # the whole directory is replaced when the command ends
+        raise ConfigError(f"out_dir={out_dir} is the working directory or holds it; "
+                          "name a directory of the command's own")
     if nested and tree.get("overwrite") is False and Path(out_dir).exists():
         raise UserError(f"out_dir={out_dir} exists; overwrite=true replaces it")
     with staged_output(Path(out_dir), _digest(tree), nested=nested, carry=carry) as work:

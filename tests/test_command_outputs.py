@@ -193,3 +193,13 @@ def test_simulate_replaces_the_dataset_and_its_truth_beside_it(tmp_path):
         assert truth["seed"] == seed and truth["dataset"] == "lab"
     assert sorted(p.name for p in out.parent.iterdir()) == ["lab", "lab.truth.yaml"]
     assert sorted(p.name for p in out.iterdir()) == ["rig.yaml", "trajectories"]
+
+
+@pytest.mark.parametrize("out_dir", [".", "..", "/"])
+def test_an_out_dir_holding_the_working_directory_is_refused(tmp_path, capsys, out_dir):
+    (tmp_path / "keep.txt").write_text("mine")
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["wavelet", f"data.path={FOREIGN}", f"out_dir={out_dir}"])
+    assert exc.value.code == EXIT_USER_ERROR
+    assert "is the working directory or holds it" in capsys.readouterr().err
+    assert (tmp_path / "keep.txt").read_text() == "mine"

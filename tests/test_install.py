@@ -21,7 +21,7 @@ pytestmark = pytest.mark.skipif(not (PROJECT_ROOT / "setup.py").exists(),
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory) -> Path:
     """The wheel, built from this checkout (no network: the running setuptools)."""
-    pytest.importorskip("setuptools", minversion="70.1")   # builds wheels on its own
+    pytest.importorskip("setuptools", minversion="77")   # wheels on its own, SPDX license
     out = tmp_path_factory.mktemp("wheel")
     build = tmp_path_factory.mktemp("build")
     # a copy of the sources keeps build/ and *.egg-info out of the checkout

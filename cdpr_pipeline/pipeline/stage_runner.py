@@ -23,14 +23,7 @@ from typing import Any
 from hydra.utils import get_method
 from omegaconf import OmegaConf
 
-from cdpr_pipeline.outputs import (
-    commit_output,
-    empty_dir,
-    output_lock,
-    partial_dir,
-    rebase_paths,
-    repoint_text_outputs,
-)
+from cdpr_pipeline.outputs import empty_dir, rebase_paths, staged_output
 from cdpr_pipeline.pipeline.inputs import (
     SkippedInputs,
     blame,
@@ -90,8 +83,8 @@ def run_stage(key: str, params_file: str | Path = PARAMS_FILE) -> Any:
                             .encode()).hexdigest()[:16]
     tracking = config.get("tracking") or {}
     experiment = tracking.get("experiment") or "cdpr-pipeline"
-    with output_lock(out_dir):
-        partial = partial_dir(out_dir, digest)
+    # the lock, the partial directory and the swap when the block ends (cdpr_pipeline.outputs)
+    with staged_output(out_dir, digest) as partial:
         checked = (check_skipped_inputs(config, declared)
                    if section.get("on_skipped_input", "skip") == "skip"
                    else SkippedInputs(config))
@@ -121,8 +114,6 @@ def run_stage(key: str, params_file: str | Path = PARAMS_FILE) -> Any:
                 empty_dir(partial)
                 write_skip_markers(partial, list(section.get("outputs") or []), reason, key)
                 log_skipped(client, run_id, reason, partial)
-        commit_output(partial, out_dir)
-        repoint_text_outputs(out_dir, str(partial), str(out_dir))
     if reason is not None:
         log.info("stage %s skipped: %s", key, reason)
         return Skipped(reason)
