@@ -605,7 +605,15 @@ def blackbox_share(nominal: Model, extended: Model, train: list[RunSignals],
 
 # ---------------------------------------------------------------------- the whole
 def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Diagnosis:
-    """Diagnose a ``cdpr-measured/1`` dataset against its nominal model."""
+    """Diagnose a ``cdpr-measured/1`` dataset against its nominal model.
+
+    Raises
+    ------
+    DataValidationError
+        Before any analysis, for a run shorter than :func:`diagnosis_needs` or torque
+        columns that look exchanged
+        (:func:`~cdpr_pipeline.identification.pipeline.check_torque_labels`).
+    """
     settings = settings or DiagnosisSettings()
     # filter, decimation and Coulomb law chosen once, from the whole dataset and its rig
     settings = dataclasses.replace(settings, regression=resolve_settings(

@@ -245,6 +245,13 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
     of the same rig) are added, whole, to the fit. Fit and held-out runs come from
     :func:`identification_split` (``holdout``, ``runs``); with a single run they are
     time blocks of it.
+
+    Raises
+    ------
+    DataValidationError
+        Before any fit, for a run shorter than :func:`identification_needs`, torque
+        columns that look exchanged (:func:`check_torque_labels`), or a channel whose
+        velocity never reverses in the fit (:func:`check_reversals`).
     """
     # filter, decimation and Coulomb law chosen once from the whole dataset, so the fit
     # and the held-out runs see the same regression
