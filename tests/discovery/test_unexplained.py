@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 from foreign_cases import FAST, foreign_case, foreign_settings
 
 from cdpr_pipeline.discovery.diagnosis import summary_sentence
@@ -69,6 +70,7 @@ def test_none_never_claims_adequacy_when_tests_failed():
     assert "u2" in failing and "10 times the measurement noise" in failing
 
 
+@pytest.mark.slow
 def test_a_periodic_torque_above_the_motion_band_is_never_none(tmp_path, seed):
     """A torque periodic in a winch angle (the independent generator's, upper half of
     its amplitude range) whose frequency at the typical winch speed is 2-10 times the
