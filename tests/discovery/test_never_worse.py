@@ -63,7 +63,10 @@ def test_a_cause_is_kept_for_what_it_adds_on_any_channel(paper_rig, monkeypatch)
     data, drawn = _drum_and_payload(paper_rig, monkeypatch)
     d = diagnose(data, fast_settings())
     case = f"{drawn}: {d.sentence}"
-    assert [c.effect for c in d.causes] == ["drum_radius_error", "payload_mass_error"], case
+    # both kept; their order is by held-out contribution (test_ranking): measured on seed
+    # 367035291, payload 109 % and drum 87 % of a channel's nominal error
+    assert sorted(c.effect for c in d.causes) == ["drum_radius_error",
+                                                  "payload_mass_error"], case
     assert d.gain.withdrawn == (), case
 
 
