@@ -34,7 +34,8 @@ def validate(cfg: DictConfig) -> ValidationReport:
             found = exc.problems
         for problem in found:
             report.add(problem)
-            (log.error if problem.severity == "error" else log.warning)("%s", problem)
+            if problem.severity != "error":   # errors: raised with the rest, printed once
+                log.warning("%s", problem)
     if report.ok:
         log.info("%s: valid cdpr-measured/1 dataset (%d warnings)", cfg.data.path,
                  len(report.warnings))
