@@ -27,7 +27,6 @@ from cdpr_pipeline.models.features import (
     run_features,
 )
 
-
 #: windows per network call up to which a free run uses one CPU thread
 SMALL_BATCH = 64
 
