@@ -9,6 +9,7 @@ reacts. Same simulator as the virtual lab.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 
 import numpy as np
@@ -17,8 +18,10 @@ from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.sim.plant import Plant
 from cdpr_pipeline.sim.sensors import Sensors
-from cdpr_pipeline.sim.simulator import BatchSimulator
+from cdpr_pipeline.sim.simulator import BatchSimulator, auto_substeps, implicit_friction
 from cdpr_pipeline.sim.trajectories import SampledDesired
+
+log = logging.getLogger(__name__)
 
 _EXACT = Sensors(mocap_noise_m=0.0, encoder_counts_per_rev=0, torque_noise_nm=0.0)
 
@@ -38,17 +41,25 @@ def can_resimulate(rig, trajectories: Sequence[Trajectory]) -> str | None:
 
 
 def resimulate(model: Plant, nominal: Plant, rig: CdprRig,
-               trajectories: Sequence[Trajectory], settle_s: float = 1.0
-               ) -> dict[str, dict[str, np.ndarray]]:
+               trajectories: Sequence[Trajectory], settle_s: float = 1.0,
+               label: str = "model") -> dict[str, dict[str, np.ndarray]]:
     """Simulated ``position`` (N, 3) and ``torque`` (N, n) of every run, keyed by name.
 
-    Runs of equal length are simulated as one batch.
+    Runs of equal length are simulated as one batch. A model that needs more than
+    :data:`~cdpr_pipeline.sim.simulator.MAX_SUBSTEPS` sub-steps per control tick raises
+    :class:`~cdpr_pipeline.sim.simulator.SimulationCostError` before simulating.
     """
     sim = BatchSimulator(model, nominal, rig.controller, _EXACT, rig.sample_rate_hz,
                          settle_s=settle_s)
+    dt = 1.0 / rig.controller.rate_hz
+    substeps = auto_substeps(model, dt)
     groups: dict[int, list[Trajectory]] = {}
     for tr in trajectories:
         groups.setdefault(tr.n_samples, []).append(tr)
+    log.info("closed loop: re-simulating the %s on %d runs (%d batch%s, %d sub-step%s per "
+             "control tick, %s)", label, len(trajectories), len(groups),
+             "" if len(groups) == 1 else "es", substeps, "" if substeps == 1 else "s",
+             "friction implicit (ROS2)" if implicit_friction(model) else "RK4")
     out: dict[str, dict[str, np.ndarray]] = {}
     rng = np.random.default_rng(0)           # exact sensors draw nothing
     for runs in groups.values():

@@ -635,6 +635,8 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     held = [by_name[n] for n in held_names]
     nominal = nominal_model(rig, settings.regression.sign_sharpness)
     clock["signals"] = time.perf_counter() - start
+    log.info("signals: %d runs (%d training, %d held out) in %.1f s; judging candidates",
+             len(signals), len(train), len(held), clock["signals"])
 
     t0 = time.perf_counter()
     # a stated model that is grossly wrong is re-identified first: effects are judged
@@ -646,6 +648,9 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     causes = ([first] if first else []) + list(selection.causes)
     clock["candidates"] = time.perf_counter() - t0 - selection.seconds_freeform
     clock["free-form"] = selection.seconds_freeform
+    log.info("causes: candidates %.1f s, free-form %.1f s; checking that the causes hold on "
+             "the held-out runs (never worse, validity)", clock["candidates"],
+             clock["free-form"])
 
     t0 = time.perf_counter()
 
@@ -721,6 +726,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     unexplained = None if causes else unexplained_residual(
         before_held, held, nominal, validity.before, settings)
     clock["validity"] = time.perf_counter() - t0
+    log.info("never worse and validity: %.1f s", clock["validity"])
 
     closed = ClosedLoopComparison(False)
     why_not = can_resimulate(rig, trajectories) if settings.closed_loop else "disabled"
@@ -735,14 +741,18 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
                                                           held_names, bool(causes))
         found += rows
         clock["closed loop"] = time.perf_counter() - t0
+        log.info("closed loop: %.1f s", clock["closed loop"])
     else:
         closed = ClosedLoopComparison(False, why_not)
 
     blackbox = None
     if settings.blackbox is not None and settings.blackbox.net_factory is not None:
         t0 = time.perf_counter()
+        log.info("black box: training a sequence network on the nominal %s residual "
+                 "(%d epochs)", channel, settings.blackbox.epochs)
         blackbox = blackbox_share(nominal, extended, train, held, channel, settings.blackbox)
         clock["black box"] = time.perf_counter() - t0
+        log.info("black box: %.1f s", clock["black box"])
     clock["total"] = time.perf_counter() - start
 
     alpha = settings.selection.alpha / max(len(validity.before), 1)
@@ -914,12 +924,12 @@ def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names,
                  ) -> tuple[ClosedLoopComparison, list[Discrepancy], dict[str, Any]]:
     """Both models re-simulated in closed loop: the comparison, one discrepancy row per
     column of the nominal model's errors, and the data of the report's figure."""
-    sim_nom = resimulate(nominal, nominal, rig, trajectories)
+    sim_nom = resimulate(nominal, nominal, rig, trajectories, label="nominal model")
     err_nom = closed_loop_errors(trajectories, sim_nom)
     err_ext = err_nom
     if extended_differs:
-        err_ext = closed_loop_errors(trajectories, resimulate(extended, nominal, rig,
-                                                              trajectories))
+        err_ext = closed_loop_errors(trajectories, resimulate(
+            extended, nominal, rig, trajectories, label="extended model"))
     rows, errors = [], {}
     for sig_name in ("position", "torque"):
         allb = np.concatenate([err_nom[n][sig_name] for n in err_nom])

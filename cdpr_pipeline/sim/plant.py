@@ -233,7 +233,7 @@ class Plant:
             return k
         return np.where(np.isfinite(k), k, RIGID_AMONG_ELASTIC * finite.max())
 
-    @property
+    @cached_property    # read on every derivative call (frozen: computed once)
     def lagged(self) -> bool:
         """Whether any drive has a lag (the state then holds every drive's drum torque;
         a drive without one takes its command directly)."""
@@ -252,11 +252,11 @@ class Plant:
         lagged = self.lags > 0.0
         return u_drum if lagged.all() else np.where(lagged, u_drum, u_cmd)
 
-    @property
+    @cached_property    # read on every derivative call (frozen: computed once)
     def gravity_vector(self) -> np.ndarray:
         return np.array([0.0, 0.0, -self.gravity])
 
-    @property
+    @cached_property    # read on every derivative call (frozen: computed once)
     def home_lengths(self) -> np.ndarray:
         return cable_geometry(self.anchors, self.home)[0]
 

@@ -100,3 +100,42 @@ def test_free_run_checks_its_window():
     fc = _forecaster(ConstantVelocity(LAYOUT), [run])
     with pytest.raises(ValueError, match="start 3"):
         fc.free_run([run], [3], 5)
+
+
+class _ThreadProbe(torch.nn.Module):
+    """Constant velocity that records the intra-op thread count of every call."""
+
+    causal = True
+
+    def __init__(self, layout):
+        super().__init__()
+        self.inner = ConstantVelocity(layout)
+        self.threads: list[int] = []
+
+    def forward(self, x):
+        self.threads.append(torch.get_num_threads())
+        return self.inner(x)
+
+
+def test_free_run_of_a_few_windows_runs_on_one_thread_and_restores_the_count():
+    """A free run is one call per sample on a few windows: run on one thread (threads
+    spinning on tiny kernels made cdpr train's evaluation take minutes), the process's
+    thread count restored after; large batches keep the count."""
+    from cdpr_pipeline.models.forecast import SMALL_BATCH
+
+    runs = [_linear_run(seed=i) for i in range(3)]
+    probe = _ThreadProbe(LAYOUT)
+    fc = _forecaster(probe, runs)
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        rolled = fc.free_run(runs, [9, 30, 50], horizon=5)
+        assert probe.threads == [1] * 5
+        assert torch.get_num_threads() == 2
+        np.testing.assert_allclose(rolled[0], runs[0].state[10:15], atol=1e-6)
+        probe.threads.clear()
+        many = SMALL_BATCH + 1
+        fc.free_run([runs[0]] * many, [9] * many, horizon=2)
+        assert probe.threads == [2, 2]
+    finally:
+        torch.set_num_threads(before)

@@ -1,0 +1,83 @@
+"""What the closed-loop simulator's sub-steps cost and buy: an actuator lag advanced by
+its exact solution, a hard Coulomb sign stepped implicitly, and a cap with a message."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cdpr_pipeline.sim.effects import ActuatorLag, CableElasticity
+from cdpr_pipeline.sim.sensors import Sensors
+from cdpr_pipeline.sim.simulator import (
+    HARD_SIGN_SUBSTEPS,
+    IMPLICIT_MIN_SUBSTEPS,
+    MAX_SUBSTEPS,
+    BatchSimulator,
+    SimulationCostError,
+    auto_substeps,
+    implicit_friction,
+    integration_plant,
+    simulate_reference,
+)
+from cdpr_pipeline.sim.trajectories import draw_trajectories
+
+IDEAL = Sensors(0.0, 0, 0.0)
+
+
+@pytest.mark.parametrize("tau", [2e-4, 5e-4, 3e-3])
+def test_short_lag_costs_no_substeps_and_matches_solve_ivp(paper_rig, nominal_plant, tau):
+    # lags from a tenth of a control tick to one tick: RK4 through the lag's own rate
+    # took ceil(2 / (300 tau)) sub-steps (34 at 0.2 ms); its exact solution takes none
+    plant = ActuatorLag(time_constant_s=[tau, 0.0, 2 * tau], cables=[1, 2, 3]).apply(
+        nominal_plant)
+    dt = 1.0 / paper_rig.controller.rate_hz
+    assert auto_substeps(plant, dt) == auto_substeps(nominal_plant, dt) == 1
+    desired = draw_trajectories(["flat_eight", "spiral"], np.random.default_rng(3),
+                                nominal_plant.home, 1.5)
+    sim = BatchSimulator(plant, nominal_plant, paper_rig.controller, IDEAL, 300.0)
+    batched = sim.run(desired, np.random.default_rng(0)).truth["position"]
+    reference = simulate_reference(sim, desired)
+    # the same bound as the lag-free plant against the same reference (1 um)
+    assert np.abs(batched - reference).max() < 1e-6
+
+
+def test_hard_sign_is_stepped_implicitly_close_to_the_resolved_explicit_steps(paper_rig):
+    hard = paper_rig.replace(coulomb_sharpness=None)
+    from cdpr_pipeline.sim.plant import Plant
+
+    plant = Plant.from_rig(hard)
+    dt = 1.0 / hard.controller.rate_hz
+    assert implicit_friction(plant)
+    steps = auto_substeps(plant, dt)
+    assert steps == IMPLICIT_MIN_SUBSTEPS < HARD_SIGN_SUBSTEPS
+    desired = draw_trajectories(["oblique_eight", "flat_circle"], np.random.default_rng(7),
+                                plant.home, 4.0)
+    implicit = BatchSimulator(plant, plant, hard.controller, IDEAL, hard.sample_rate_hz)
+    # the former scheme: the same smooth sign, RK4 at the sub-steps that resolve it
+    smooth = integration_plant(plant, dt)
+    assert not implicit_friction(smooth)
+    explicit = BatchSimulator(smooth, plant, hard.controller, IDEAL, hard.sample_rate_hz,
+                              substeps=HARD_SIGN_SUBSTEPS)
+    a = implicit.run(desired, np.random.default_rng(0))
+    b = explicit.run(desired, np.random.default_rng(0))
+    assert a.substeps == IMPLICIT_MIN_SUBSTEPS and b.substeps == HARD_SIGN_SUBSTEPS
+    gap = a.truth["position"] - b.truth["position"]
+    # far below the motion-capture noise (0.1 mm); the motion itself spans ~1 m
+    assert np.sqrt(np.mean(gap ** 2)) < 2e-5
+    assert np.abs(gap).max() < 2e-4
+    # torques agree away from reversals (where a hard sign's friction is undetermined)
+    same_side = np.sign(a.truth["omega"]) == np.sign(b.truth["omega"])
+    moving = np.abs(b.truth["omega"]) > 0.05
+    du = (a.truth["u_cmd"] - b.truth["u_cmd"])[same_side & moving]
+    assert np.sqrt(np.mean(du ** 2)) < 2e-2
+
+
+def test_a_model_too_stiff_to_simulate_stops_with_its_cause(nominal_plant):
+    # a cable stiffness fitted on a platform that hardly moved: EA without bound
+    plant = CableElasticity(ea_n=1e13).apply(nominal_plant)
+    with pytest.raises(SimulationCostError, match="cable stiffness EA = 1e\\+13 N") as err:
+        auto_substeps(plant, 1.0 / 300.0)
+    assert f"cap of {MAX_SUBSTEPS}" in str(err.value)
+    # a stiff but real cable is simulated
+    assert auto_substeps(CableElasticity(ea_n=3e4).apply(nominal_plant), 1.0 / 300.0) \
+        <= MAX_SUBSTEPS
