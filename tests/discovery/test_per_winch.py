@@ -123,7 +123,8 @@ def test_per_winch_effects_round_trip_a_model_file(tmp_path, paper_rig, nominal_
 def test_effect_classes_carry_their_candidates_shapes_and_scaling(paper_rig):
     """Adding an effect is one class: its candidates, the free-form shapes it names and
     how its strength scales all live on it; discovery only collects them."""
-    from cdpr_pipeline.discovery.candidates import DataScale, candidates_for
+    from cdpr_pipeline.discovery.candidates import candidates_for
+    from cdpr_pipeline.sim.candidate_forms import DataScale
 
     scale = DataScale(2.0, 3, "cdpr", paper_rig.winch_nominal)
     found = {c.effect for c in candidates_for(paper_rig, scale, refit_winches=False)}
