@@ -21,12 +21,12 @@ from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.split import Split
 from cdpr_pipeline.discovery.diagnosis import (
-    BlackBoxSettings,
     Diagnosis,
     DiagnosisSettings,
     diagnose,
     diagnosis_split,
 )
+from cdpr_pipeline.discovery.report import render
 from cdpr_pipeline.sim.model_file import write_model
 from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
 from cdpr_pipeline.wavelet.split import WaveletSplit
@@ -38,9 +38,12 @@ def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
     disc = cfg.discovery
     blackbox = None
     if cfg.blackbox.enabled:
+        # imported here: the network needs torch, which a diagnosis without it never loads
+        from cdpr_pipeline.models.reconstruction import NetworkBlackBox
+
         bb = cfg.blackbox
-        blackbox = BlackBoxSettings(instantiate(bb.model.net), int(bb.window), int(bb.epochs),
-                                    int(bb.max_windows), int(bb.seed))
+        blackbox = NetworkBlackBox(instantiate(bb.model.net), int(bb.window), int(bb.epochs),
+                                   int(bb.max_windows), int(bb.seed))
     heldout = cfg.split.heldout
     return DiagnosisSettings(
         regression=instantiate(cfg.regression),
@@ -82,8 +85,6 @@ def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str,
     ``split``: the diagnosis's split (:func:`diagnosis_split`); when it cut runs into
     time blocks, ``split`` in diagnosis.json lists them (run, samples, seconds).
     """
-    from cdpr_pipeline.discovery.report import render
-
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": out_dir / "diagnosis.json", "html": out_dir / "report.html",
              "model": out_dir / "extended_model.yaml", "metrics": out_dir / "metrics.json"}
