@@ -19,6 +19,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from cdpr_pipeline.data.io import Dataset
+from cdpr_pipeline.data.reading import RegressionSettings, resolve_settings
 from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.split import HELDOUT_FRACTION, MIN_HELDOUT_S, Split, heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
@@ -74,11 +75,7 @@ from cdpr_pipeline.identification.pipeline import (
     min_block_samples,
     trim_words,
 )
-from cdpr_pipeline.identification.regressors import (
-    RegressionSettings,
-    WinchRegression,
-    resolve_settings,
-)
+from cdpr_pipeline.identification.regressors import WinchRegression
 from cdpr_pipeline.sim.effects import Effect, WinchParameterError
 from cdpr_pipeline.sim.plant import smooth_sign
 from cdpr_pipeline.wavelet.split import WaveletSplit, band_energies
@@ -744,7 +741,7 @@ def nominal_rate(signals: Sequence[RunSignals]) -> float:
 
 def analysed_band_hz(regression: RegressionSettings, fs: float) -> float:
     """The band the statistics rows keep: the decimation's pass band ``0.4 fs / q``
-    (:func:`~cdpr_pipeline.identification.regressors.resolve_settings`), or the
+    (:func:`~cdpr_pipeline.data.reading.resolve_settings`), or the
     derivative filter's cut-off without decimation."""
     q = int(regression.decimate)
     return 0.4 * fs / q if q > 1 else float(regression.filter.cutoff_hz)

@@ -51,18 +51,18 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from cdpr_pipeline.data.io import Dataset
-from cdpr_pipeline.data.rig import CdprRig, Rig
-from cdpr_pipeline.data.split import Split
-from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.discovery.residuals import Model, nominal_model, predict, residual_rows
-from cdpr_pipeline.discovery.signals import RunSignals, run_signals
-from cdpr_pipeline.identification.regressors import (
+from cdpr_pipeline.data.reading import (
     AUTO,
     RIG,
     DerivativeFilter,
     RegressionSettings,
     resolve_settings,
 )
+from cdpr_pipeline.data.rig import CdprRig, Rig
+from cdpr_pipeline.data.split import Split
+from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.discovery.residuals import Model, nominal_model, predict, residual_rows
+from cdpr_pipeline.discovery.signals import RunSignals, run_signals
 from cdpr_pipeline.metrics import metric_table
 from cdpr_pipeline.models.features import ChannelLayout
 from cdpr_pipeline.sim.effects import Effect

@@ -150,10 +150,10 @@ def test_the_black_box_share_does_not_depend_on_the_process_threads(quiet_lab):
     from hydra.utils import instantiate
 
     from cdpr_pipeline.config import compose_config
+    from cdpr_pipeline.data.reading import resolve_settings
     from cdpr_pipeline.discovery.diagnosis import blackbox_share
     from cdpr_pipeline.discovery.residuals import nominal_model
     from cdpr_pipeline.discovery.signals import dataset_signals
-    from cdpr_pipeline.identification.regressors import resolve_settings
     from cdpr_pipeline.models.reconstruction import NetworkBlackBox
 
     cfg = compose_config("diagnose", ["blackbox.epochs=1", "blackbox.max_windows=256"])

@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 from lab_cases import fast_settings, lab_dataset, rng_for
 
+from cdpr_pipeline.data.reading import RegressionSettings
 from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.discovery.freeform import WINCH_ANGLE, GrammarGP, ShapeFilter, readable
 from cdpr_pipeline.discovery.signals import RunSignals
-from cdpr_pipeline.identification.regressors import RegressionSettings
 from cdpr_pipeline.sim.effects import (
     EFFECTS,
     ActuatorLag,
@@ -310,10 +310,10 @@ def test_emps_names_its_friction_and_keeps_the_unnamed_part_small(tmp_path):
     from cdpr_pipeline.config import compose_config
     from cdpr_pipeline.data import load_dataset
     from cdpr_pipeline.data.convert import convert_emps
+    from cdpr_pipeline.data.reading import resolve_settings
     from cdpr_pipeline.discovery.diagnosis import diagnosis_split
     from cdpr_pipeline.discovery.residuals import residuals
     from cdpr_pipeline.discovery.signals import dataset_signals
-    from cdpr_pipeline.identification.regressors import resolve_settings
     from cdpr_pipeline.resources import emps_path
     from cdpr_pipeline.sim.effects import SymbolicWinchTorque
     from cdpr_pipeline.stages.diagnose import settings_from_config

@@ -17,6 +17,7 @@ import pytest
 from foreign_cases import foreign_settings
 from lab_cases import lab_dataset, rng_for
 
+from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.discovery.diagnosis import (
     diagnose,
     diagnosis_split,
@@ -24,7 +25,6 @@ from cdpr_pipeline.discovery.diagnosis import (
 )
 from cdpr_pipeline.discovery.residuals import nominal_model, signal_scales
 from cdpr_pipeline.discovery.signals import dataset_signals
-from cdpr_pipeline.identification.regressors import resolve_settings
 from cdpr_pipeline.sim.effects import ActuatorLag, PayloadMassError
 
 
