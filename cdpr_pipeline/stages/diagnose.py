@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.data.split import Split
 from cdpr_pipeline.discovery.diagnosis import (
     Diagnosis,
@@ -121,6 +123,10 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
     data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
                         min_samples=cfg.data.min_samples)
     settings = settings_from_config(cfg)
+    # how the runs are read, chosen from the data once for the command (the diagnosis and
+    # its split then read them the same way, and the choices are logged once)
+    settings = replace(settings, regression=resolve_settings(settings.regression,
+                                                             data.trajectories, data.rig))
     d = diagnose(data, settings)
     paths = write_outputs(d, Path(cfg.out_dir), cfg.data.path, diagnosis_split(data, settings))
     log.info("verdict: %s", d.verdict)
