@@ -124,7 +124,7 @@ def lab_special(args, settings, record) -> None:
     """The lab's issue-21 cases: ``unexplained`` and ``periodic_above_band`` (cogging)."""
     from lab_cases import lab_dataset
 
-    from cdpr_pipeline.identification.regressors import motion_bandwidth_hz
+    from cdpr_pipeline.data.reading import motion_bandwidth_hz
     from cdpr_pipeline.sim.effects import CoggingTorque
 
     cfg = compose_config("simulate", ["trajectory=diagnosis"])
@@ -178,7 +178,7 @@ def independent_special(args, settings, record, tmp: Path) -> None:
     """The independent simulator's issue-21 cases (see the module docstring)."""
     from foreign_cases import rng_for
 
-    from cdpr_pipeline.identification.regressors import motion_bandwidth_hz
+    from cdpr_pipeline.data.reading import motion_bandwidth_hz
     from tests.independent_sim import draw_effect
 
     def upper_half(eff, rig, rng):

@@ -27,6 +27,7 @@ from cdpr_pipeline.data.convert import (
     convert_emps,
 )
 from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.data.reading import DerivativeFilter, RegressionSettings
 from cdpr_pipeline.data.rig import WINCH_KEYS
 from cdpr_pipeline.identification.identifiers import (
     GeneticAlgorithm,
@@ -40,12 +41,7 @@ from cdpr_pipeline.identification.pipeline import (
     split_fit_holdout,
     true_winch_params,
 )
-from cdpr_pipeline.identification.regressors import (
-    DerivativeFilter,
-    RegressionSettings,
-    build_regression,
-    dataset_regression,
-)
+from cdpr_pipeline.identification.regressors import build_regression, dataset_regression
 from cdpr_pipeline.identification.study import (
     parameter_error_pct,
     variant_study,

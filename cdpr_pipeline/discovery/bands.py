@@ -1,7 +1,7 @@
 """Where a residual's energy sits in frequency, read off its full-rate spectrum.
 
 The regression analyses a band derived from the motion (the derivative filter's cut-off
-and the decimation, :func:`~cdpr_pipeline.identification.regressors.resolve_settings`).
+and the decimation, :func:`~cdpr_pipeline.data.reading.resolve_settings`).
 An effect periodic in a winch or axis angle can lie above it: its frequency is the
 angle's rate times its wavenumber. These functions read the band from the residual
 itself, at the full sample rate, so the diagnosis can say where an error sits and widen

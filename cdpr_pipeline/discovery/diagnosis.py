@@ -14,11 +14,12 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from cdpr_pipeline.data.io import Dataset
+from cdpr_pipeline.data.reading import RegressionSettings, resolve_settings
 from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.split import HELDOUT_FRACTION, MIN_HELDOUT_S, Split, heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
@@ -33,6 +34,7 @@ from cdpr_pipeline.discovery.residuals import (
     channel_names,
     measured_rows,
     nominal_model,
+    predict,
     relative_sse,
     residuals,
     signal_scales,
@@ -73,7 +75,7 @@ from cdpr_pipeline.identification.pipeline import (
     min_block_samples,
     trim_words,
 )
-from cdpr_pipeline.identification.regressors import RegressionSettings, resolve_settings
+from cdpr_pipeline.identification.regressors import WinchRegression
 from cdpr_pipeline.sim.effects import Effect, WinchParameterError
 from cdpr_pipeline.sim.plant import smooth_sign
 from cdpr_pipeline.wavelet.split import WaveletSplit, band_energies
@@ -85,15 +87,16 @@ FORMAT = "cdpr-diagnosis/1"
 HELDOUT_FAMILIES = ("spiral", "pulses")
 
 
-@dataclass
-class BlackBoxSettings:
-    """The black-box residual model the named physics is compared with."""
+class BlackBox(Protocol):
+    """The black-box residual model the named physics is compared with. The stage passes
+    one in (:class:`cdpr_pipeline.models.reconstruction.NetworkBlackBox`): the network
+    needs torch, which discovery does not import."""
 
-    net_factory: Any = None          # partial of a network (conf/model/*.yaml net)
-    window: int = 32
-    epochs: int = 5
-    max_windows: int = 4096
-    seed: int = 0
+    #: rows of history a prediction needs: a run's first ``window - 1`` rows get none
+    window: int
+
+    def fit_predict(self, train: WinchRegression, held: WinchRegression) -> np.ndarray:
+        """Fit to ``train``'s target; ``held``'s target predicted per row."""
 
 
 @dataclass
@@ -105,7 +108,7 @@ class DiagnosisSettings:
     freeform: FreeFormSearch | None = field(default_factory=FreeFormSearch)
     heldout: list[str] | None = None
     closed_loop: bool = True
-    blackbox: BlackBoxSettings | None = None
+    blackbox: BlackBox | None = None
     max_lag: int = 20
     wavelet: WaveletSplit = field(default_factory=lambda: WaveletSplit("db4", 5))
     correlation_threshold: float = 0.3
@@ -444,8 +447,6 @@ def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
 
 
 def _full_rate_residual(model: Model, sig: RunSignals, channel: str) -> np.ndarray:
-    from cdpr_pipeline.discovery.residuals import predict
-
     pred = predict(model, model, sig)[channel]
     measured = sig.torque if channel == "torque" else sig.lengths
     r = measured - pred
@@ -556,14 +557,10 @@ def _lags(max_lag: int, rows: int) -> int:
 
 # ---------------------------------------------------------------------- black box
 def blackbox_share(nominal: Model, extended: Model, train: list[RunSignals],
-                   held: list[RunSignals], channel: str, settings: BlackBoxSettings
+                   held: list[RunSignals], channel: str, blackbox: BlackBox
                    ) -> BlackBoxShare:
-    """Held-out share of the nominal residual a sequence network explains, against the
-    share the named physics explains, on the same rows."""
-    import torch
-
-    from cdpr_pipeline.identification.reconstruction import HighFrequencyModel
-    from cdpr_pipeline.identification.regressors import WinchRegression
+    """Held-out share of the nominal residual a sequence network (``blackbox``) explains,
+    against the share the named physics explains, on the same rows."""
 
     def regression(sigs: list[RunSignals]) -> WinchRegression:
         parts = []
@@ -578,22 +575,9 @@ def blackbox_share(nominal: Model, extended: Model, train: list[RunSignals],
         return WinchRegression.concatenate(parts)
 
     tr, ho = regression(train), regression(held)
-    n = tr.n
-    # its share goes into diagnosis.json, which must be the same on any machine: trained
-    # on the CPU (a GPU's kernels sum in another order) with one thread (so do the
-    # reductions), the process's thread count restored after
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        model = HighFrequencyModel(settings.net_factory, settings.window, settings.epochs,
-                                   max_windows=settings.max_windows, seed=settings.seed,
-                                   sample_rate_hz=1.0, accelerator="cpu"
-                                   ).fit(tr, np.zeros((n, tr.phi.shape[2])))
-        pred = model.predict(ho)
-    finally:
-        torch.set_num_threads(threads)
+    pred = blackbox.fit_predict(tr, ho)
     runs = ho.run
-    mask = np.concatenate([np.arange((runs == r).sum()) >= settings.window - 1
+    mask = np.concatenate([np.arange((runs == r).sum()) >= blackbox.window - 1
                            for r in np.unique(runs)])
     before = ho.target[mask]
     after_bb = before - pred[mask]
@@ -746,7 +730,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         closed = ClosedLoopComparison(False, why_not)
 
     blackbox = None
-    if settings.blackbox is not None and settings.blackbox.net_factory is not None:
+    if settings.blackbox is not None:
         t0 = time.perf_counter()
         log.info("black box: training a sequence network on the nominal %s residual "
                  "(%d epochs)", channel, settings.blackbox.epochs)
@@ -775,7 +759,7 @@ def nominal_rate(signals: Sequence[RunSignals]) -> float:
 
 def analysed_band_hz(regression: RegressionSettings, fs: float) -> float:
     """The band the statistics rows keep: the decimation's pass band ``0.4 fs / q``
-    (:func:`~cdpr_pipeline.identification.regressors.resolve_settings`), or the
+    (:func:`~cdpr_pipeline.data.reading.resolve_settings`), or the
     derivative filter's cut-off without decimation."""
     q = int(regression.decimate)
     return 0.4 * fs / q if q > 1 else float(regression.filter.cutoff_hz)

@@ -18,7 +18,6 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.optimize._numdiff import approx_derivative
 
-from cdpr_pipeline.discovery.candidates import TORQUE, Candidate, WinchPart, on_winches
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,
@@ -26,6 +25,7 @@ from cdpr_pipeline.discovery.residuals import (
     runs_rows,
 )
 from cdpr_pipeline.discovery.signals import RunSignals
+from cdpr_pipeline.sim.candidate_forms import TORQUE, Candidate, WinchPart, on_winches
 from cdpr_pipeline.sim.effects import Effect, WinchParameterError
 from cdpr_pipeline.sim.plant import smooth_sign
 
@@ -153,7 +153,7 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
     Parameters
     ----------
     template : Candidate
-        A candidate with a :class:`~cdpr_pipeline.discovery.candidates.WinchForm`.
+        A candidate with a :class:`~cdpr_pipeline.sim.candidate_forms.WinchForm`.
     ctx : FitContext
         The step's fitting context.
     current : list of Effect

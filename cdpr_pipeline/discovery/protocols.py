@@ -23,9 +23,9 @@ import numpy as np
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import Dataset
+from cdpr_pipeline.data.reading import RegressionSettings, resolve_settings
 from cdpr_pipeline.discovery.residuals import Model, measured_rows, nominal_model, residuals
 from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
-from cdpr_pipeline.identification.regressors import RegressionSettings, resolve_settings
 
 #: protocol name -> regression config (``conf/regression/<name>.yaml``)
 PROTOCOLS = {"published": "emps", "held command": "commanded"}

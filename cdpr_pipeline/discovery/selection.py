@@ -37,13 +37,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from cdpr_pipeline.discovery.candidates import (
-    SLOW_SHARE,
-    Candidate,
-    DataScale,
-    candidates_for,
-    vocabulary_shapes,
-)
+from cdpr_pipeline.discovery.candidates import candidates_for, vocabulary_shapes
 from cdpr_pipeline.discovery.fitting import (
     Fit,
     FitContext,
@@ -67,6 +61,7 @@ from cdpr_pipeline.discovery.residuals import (
 )
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.discovery.validity import block_bootstrap, split_blocks
+from cdpr_pipeline.sim.candidate_forms import SLOW_SHARE, Candidate, DataScale
 from cdpr_pipeline.sim.effects import Effect
 
 

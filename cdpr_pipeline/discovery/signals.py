@@ -33,7 +33,7 @@ harmonics fit and a held-out block of the same motion confirms (measured on effe
 one-run recordings of the independent simulator: 5 of 6 false alarms, 20-50 % held-out
 "gain"). :func:`friction_known` therefore also leaves out every sample within the
 reach of the derivative filter (the half-width holding 95 % of its impulse response,
-about one cut-off period: :func:`~cdpr_pipeline.identification.regressors.filter_reach`)
+about one cut-off period: :func:`~cdpr_pipeline.data.reading.filter_reach`)
 of a sample whose friction is unknown. The identification's regression of a cable robot
 does the same, for the same reason (its tensions come from the filtered motion).
 """
@@ -53,15 +53,15 @@ try:  # the compiled kernel of scipy.signal.sosfilt
 except ImportError:     # pragma: no cover - another SciPy layout
     _sosfilt = None
 
-from cdpr_pipeline.data.rig import CdprRig, Rig
-from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.identification.regressors import (
+from cdpr_pipeline.data.reading import (
     DerivativeFilter,
     RegressionSettings,
-    _held_torque,
-    _sliding,
     clear_of_reach,
+    held_torque,
+    sliding,
 )
+from cdpr_pipeline.data.rig import CdprRig, Rig
+from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.sim.plant import Plant, cable_geometry, internal_force_directions
 
 #: statistics rows per cut-off period: rows are thinned to ``2 * cutoff_hz`` (the
@@ -278,17 +278,17 @@ def friction_known(position: np.ndarray, speed: np.ndarray, settings: Regression
     0 elsewhere; None for a smooth law or when nothing is dropped.
 
     The rule is the identification's
-    (:func:`~cdpr_pipeline.identification.regressors._sliding`), applied only to
+    (:func:`~cdpr_pipeline.data.reading.sliding`), applied only to
     channels whose sensor resolves rest (an encoder;
-    :attr:`~cdpr_pipeline.identification.regressors.RegressionSettings.encoder_rest`,
+    :attr:`~cdpr_pipeline.data.reading.RegressionSettings.encoder_rest`,
     decided once for the dataset);
     ``speed`` is the filtered speed. Every dropped sample also drops its neighbours
     within the derivative filter's reach
-    (:func:`~cdpr_pipeline.identification.regressors.clear_of_reach`; module docstring)."""
+    (:func:`~cdpr_pipeline.data.reading.clear_of_reach`; module docstring)."""
     if settings.sign_sharpness is not None:
         return None
     position = np.asarray(position, float)
-    keep = _sliding(position, speed)
+    keep = sliding(position, speed)
     keep[:, ~settings.rest_channels(position)] = True
     if keep.all():
         return None
@@ -345,7 +345,7 @@ def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
     """Prepare one measured run. ``nominal`` (``cdpr``) gives the encoder zero and radius
     that turn lengths into winch angles."""
     filt = settings.filter
-    torque = _held_torque(np.asarray(traj.torques, float), settings.hold)
+    torque = held_torque(np.asarray(traj.torques, float), settings.hold)
     if isinstance(rig, CdprRig):
         if nominal is None:
             nominal = Plant.from_rig(rig)

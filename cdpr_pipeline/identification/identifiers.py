@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from cdpr_pipeline.data.rig import WINCH_KEYS
+from cdpr_pipeline.evolution import MinVector, deap_random
 from cdpr_pipeline.identification.regressors import WinchRegression
 
 log = logging.getLogger(__name__)
@@ -279,8 +280,6 @@ class GeneticAlgorithm:
              ) -> tuple[np.ndarray, list[float]]:
         import random
 
-        from cdpr_pipeline.evolution import deap_random
-
         rnd = random.Random(seed)
         with deap_random(rnd):      # DEAP's tournament and blend draw from rnd too
             return self._evolve(G, h, c, rnd)
@@ -288,8 +287,6 @@ class GeneticAlgorithm:
     def _evolve(self, G: np.ndarray, h: np.ndarray, c: float, rnd
                 ) -> tuple[np.ndarray, list[float]]:
         from deap import base, tools
-
-        from cdpr_pipeline.evolution import MinVector
 
         lo, hi = self.bounds[:, 0], self.bounds[:, 1]
         width = hi - lo

@@ -14,17 +14,15 @@ import yaml
 
 from cdpr_pipeline.data.errors import DataValidationError, Problem
 from cdpr_pipeline.data.io import Dataset
+from cdpr_pipeline.data.reading import TRIM_PERIODS, RegressionSettings, resolve_settings
 from cdpr_pipeline.data.rig import WINCH_KEYS, CdprRig
 from cdpr_pipeline.data.split import Split, heldout_split
 from cdpr_pipeline.data.validation import check_run_lengths, run_file
 from cdpr_pipeline.identification.identifiers import Estimate, fit_metrics
 from cdpr_pipeline.identification.regressors import (
-    TRIM_PERIODS,
-    RegressionSettings,
     WinchRegression,
     build_regression,
     dataset_regression,
-    resolve_settings,
 )
 from cdpr_pipeline.sim.lab import truth_path_for
 from cdpr_pipeline.wavelet import WaveletSplit

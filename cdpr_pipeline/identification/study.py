@@ -15,13 +15,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from cdpr_pipeline.data.io import Dataset
+from cdpr_pipeline.data.reading import RegressionSettings
 from cdpr_pipeline.identification.identifiers import LeastSquares
 from cdpr_pipeline.identification.pipeline import lowpass_regression
-from cdpr_pipeline.identification.regressors import (
-    RegressionSettings,
-    WinchRegression,
-    build_regression,
-)
+from cdpr_pipeline.identification.regressors import WinchRegression, build_regression
 from cdpr_pipeline.wavelet import WaveletSplit
 
 

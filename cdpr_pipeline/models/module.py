@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 
 import lightning as L
 import torch
 from torch import nn
+
+from cdpr_pipeline.models.datamodule import WindowDataset
 
 
 class ForecastModule(L.LightningModule):
@@ -109,10 +112,6 @@ def fit_window_network(make_net: Callable[[], nn.Module], inputs: list, targets:
     Random state stays local: torch's generator is forked and seeded for the network's
     initial weights and the fit, and restored after (no global seed is read or left
     behind; a network built outside would take its weights from the global one)."""
-    from functools import partial
-
-    from cdpr_pipeline.models.datamodule import WindowDataset
-
     with torch.random.fork_rng():
         torch.manual_seed(seed)
         net = make_net()

@@ -51,19 +51,20 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from cdpr_pipeline.data.io import Dataset
-from cdpr_pipeline.data.rig import CdprRig, Rig
-from cdpr_pipeline.data.split import Split
-from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.discovery.residuals import Model, nominal_model, predict, residual_rows
-from cdpr_pipeline.discovery.signals import RunSignals, run_signals
-from cdpr_pipeline.identification.regressors import (
+from cdpr_pipeline.data.reading import (
     AUTO,
     RIG,
     DerivativeFilter,
     RegressionSettings,
     resolve_settings,
 )
+from cdpr_pipeline.data.rig import CdprRig, Rig
+from cdpr_pipeline.data.split import Split
+from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.discovery.residuals import Model, nominal_model, predict, residual_rows
+from cdpr_pipeline.discovery.signals import RunSignals, run_signals
 from cdpr_pipeline.metrics import metric_table
+from cdpr_pipeline.models.features import ChannelLayout
 from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.model_file import read_model
 from cdpr_pipeline.sim.plant import Plant
@@ -385,7 +386,8 @@ class ResidualNetwork:
             gain_rows: list[np.ndarray] | None = None) -> ResidualNetwork:
         """Train on per-segment rows ``inputs[i]`` (N_i, F) -> ``targets[i]`` (N_i, C); the
         output gain is fitted on the rows ``gain_rows[i]`` (default: all)."""
-        from cdpr_pipeline.models.features import ChannelLayout
+        # imported here: the network needs torch and lightning, which a physics-only
+        # comparison never loads
         from cdpr_pipeline.models.module import fit_window_network
 
         st = self.settings
@@ -419,7 +421,7 @@ class ResidualNetwork:
                 ) -> list[np.ndarray]:
         """Predicted residual per row of each segment, from the window ending at that row;
         only at ``rows[i]`` when given (0 elsewhere, and before a full window)."""
-        import torch
+        import torch  # heavy: only a hybrid model loads it
 
         w = self.settings.window
         out = []

@@ -32,7 +32,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from cdpr_pipeline.sim.expressions import evaluate_cached
+from cdpr_pipeline.sim.candidate_forms import TORQUE, Candidate, winch_candidate
+from cdpr_pipeline.sim.expressions import evaluate_cached, to_infix
 from cdpr_pipeline.sim.plant import Plant, smooth_sign
 
 #: Effect classes by vocabulary name, filled by subclass registration.
@@ -223,9 +224,9 @@ class Effect:
     # -- what diagnosis fits -----------------------------------------------------
     @classmethod
     def candidates(cls, rig: Any, scale: Any) -> list[Any]:
-        """The variants diagnosis fits (:class:`~cdpr_pipeline.discovery.candidates.
-        Candidate`), for a rig and the data's :class:`~cdpr_pipeline.discovery.
-        candidates.DataScale`; none for effects outside the vocabulary."""
+        """The variants diagnosis fits (:class:`~cdpr_pipeline.sim.candidate_forms.
+        Candidate`), for a rig and the data's :class:`~cdpr_pipeline.sim.
+        candidate_forms.DataScale`; none for effects outside the vocabulary."""
         return []
 
     @classmethod
@@ -274,10 +275,7 @@ def make_effect(name: str, rng: np.random.Generator, n_cables: int, **fixed: Any
 
 
 # ---------------------------------------------------------------------------- vocabulary
-def _candidate(*args: Any, **kwargs: Any) -> Any:
-    # imported late: diagnosis imports the effects, the effects only describe their fits
-    from cdpr_pipeline.discovery.candidates import Candidate
-
+def _candidate(*args: Any, **kwargs: Any) -> Candidate:
     return Candidate(*args, **kwargs)
 
 
@@ -327,8 +325,6 @@ class WinchParameterError(Effect):
         Inertia, viscous and Coulomb friction stay non-negative: a negative friction
         coefficient is another effect being imitated, not a wrong data sheet. Sparse:
         a wrong F_c alone is one parameter against a free-form term's two."""
-        from cdpr_pipeline.discovery.candidates import TORQUE
-
         return [_candidate(
             cls.name, f"{cls.name}[winch {cable}]",
             lambda x, c=cable: [cls(c, float(x[0]), float(x[1]), float(x[2]), float(x[3]))],
@@ -405,9 +401,7 @@ class StribeckFriction(Effect):
     def candidates(cls, rig, scale):
         """Per winch a size ``F_s - F_c >= 0`` (friction *rises* at low speed: a smaller
         static friction is another effect) and a Stribeck velocity; the data choose the
-        winches (:func:`~cdpr_pipeline.discovery.candidates.winch_candidate`)."""
-        from cdpr_pipeline.discovery.candidates import winch_candidate
-
+        winches (:func:`~cdpr_pipeline.sim.candidate_forms.winch_candidate`)."""
         w = scale.speed_rms
         fc = np.abs(scale.winch.coulomb)
 
@@ -516,9 +510,7 @@ class AsymmetricViscousFriction(Effect):
     def candidates(cls, rig, scale):
         """Per winch a direction (the better of the two) and a size ``c``: more friction
         on one side, or less, down to 5 % of F_v (friction never pushes); the data
-        choose the winches (:func:`~cdpr_pipeline.discovery.candidates.winch_candidate`)."""
-        from cdpr_pipeline.discovery.candidates import winch_candidate
-
+        choose the winches (:func:`~cdpr_pipeline.sim.candidate_forms.winch_candidate`)."""
         fv = np.abs(scale.winch.viscous)
 
         def make(parts):
@@ -807,10 +799,8 @@ class ActuatorLag(Effect):
     @classmethod
     def candidates(cls, rig, scale):
         """Per drive a time constant; the data choose the drives (:func:`~cdpr_pipeline.
-        discovery.candidates.winch_candidate`). The lag adds ``tau u'`` to drive i's
+        sim.candidate_forms.winch_candidate`). The lag adds ``tau u'`` to drive i's
         commanded torque only, linear in ``tau``: each drive's is found by projection."""
-        from cdpr_pipeline.discovery.candidates import winch_candidate
-
         def make(parts):
             cables = sorted(parts)
             return [cls(time_constant_s=[parts[c].magnitude for c in cables], cables=cables)]
@@ -907,8 +897,6 @@ class PositionDependentLoad(Effect):
         """Per axis ``a`` and ``b`` (linear), in the form of the axis's joint type
         (rig.yaml's ``joint_types``, prismatic when unstated): one axis at a time, and
         every axis with its own; the data choose by BIC, as for drum radii."""
-        from cdpr_pipeline.discovery.candidates import TORQUE
-
         n = scale.n
         types = list(getattr(rig, "joint_types", ("prismatic",) * n))
         fc = np.maximum(np.abs(scale.winch.coulomb), 1e-6)
@@ -1038,7 +1026,6 @@ class SymbolicWinchTorque(Effect):
                            for t in self.terms])
 
     def describe(self, plant=None):
-        from cdpr_pipeline.sim.expressions import to_infix
         parts = [f"{t['coefficient']:+.4g} {to_infix(t['expression'], str(t['cable']))}"
                  for t in self.terms]
         return "extra winch torque " + " ".join(parts)

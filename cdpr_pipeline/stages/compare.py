@@ -36,7 +36,10 @@ from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.config import compose_config
+from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.data.split import Split
 from cdpr_pipeline.errors import ConfigError
+from cdpr_pipeline.models.features import run_arrays
 from cdpr_pipeline.models.physics import (
     EXTENDED,
     NOMINAL,
@@ -45,6 +48,7 @@ from cdpr_pipeline.models.physics import (
     PhysicsSettings,
     physics_rows,
 )
+from cdpr_pipeline.pipeline.skip import read_marker
 from cdpr_pipeline.tables import to_markdown
 from cdpr_pipeline.tracking import (
     finished_or_failed,
@@ -209,6 +213,7 @@ def _fit_reference(cfg: DictConfig, ref: str, data_params: dict[str, str]) -> No
         overrides.append(f"tracking.uri={cfg.tracking.uri}")
     # ++: also a key the compared runs added to the config (e.g. +data.gap=...)
     overrides += [f"++data.{k}={v}" for k, v in data_params.items()]
+    # here, not at the top: training imports torch and Lightning
     from cdpr_pipeline.stages.train import train
 
     log.warning("no %s run on this dataset: compare fits it now (source: fitted by compare, "
@@ -309,9 +314,8 @@ def _rescored(cfg: DictConfig, runs: pd.DataFrame, columns: list[str], dataset,
     """The runs with their scores replaced by those of ``channels`` (e.g. an axis
     rig's torques ``u1..un``), recomputed from each run's ``forecaster.pt`` on its split
     with its own evaluation settings; training figures (``time/...``) are kept."""
-    from cdpr_pipeline.data.split import Split
+    # here, not at the top: the forecaster imports torch
     from cdpr_pipeline.models.evaluation import EvaluationSettings, evaluate
-    from cdpr_pipeline.models.features import run_arrays
     from cdpr_pipeline.models.forecast import Forecaster
 
     parts = Split.from_dict(split)
@@ -436,8 +440,6 @@ def compare(cfg: DictConfig) -> Comparison:
         log.warning("data.path=%s does not exist: no physics rows, scores as the runs logged "
                     "them", path)
     elif want_physics or channel != "position":
-        from cdpr_pipeline.data.io import load_dataset
-
         dataset = load_dataset(path, allow_gaps=bool(cfg.data.get("allow_gaps", False)),
                                min_samples=int(cfg.data.get("min_samples", 50)))
         kind = dataset.rig.kind
@@ -513,8 +515,6 @@ def _physics(cfg: DictConfig, dataset, split: dict, runs: pd.DataFrame,
     files: dict[str, Any] = {NOMINAL: None}
     extended = cfg.get("extended_model")
     if extended:
-        from cdpr_pipeline.pipeline.skip import read_marker
-
         skipped = read_marker(extended)
         if skipped is not None:
             log.info("extended_model=%s was skipped by stage %s (%s): the extended_physics "
@@ -549,8 +549,6 @@ def _fitted_on_test(extended: Path, split: dict) -> list[str]:
         fitted = json.loads(report.read_text()).get("split", {}).get("train") or []
     except (OSError, ValueError):
         return []
-    from cdpr_pipeline.data.split import Split
-
     test_runs = Split.from_dict(split).runs("test") if "test" in split else ()
     fitted_runs = {name.split("@", 1)[0] for name in fitted}
     return [r for r in test_runs if r in fitted_runs]

@@ -11,6 +11,7 @@ import json
 import logging
 import math
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -20,14 +21,15 @@ from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.data.split import Split
 from cdpr_pipeline.discovery.diagnosis import (
-    BlackBoxSettings,
     Diagnosis,
     DiagnosisSettings,
     diagnose,
     diagnosis_split,
 )
+from cdpr_pipeline.discovery.report import render
 from cdpr_pipeline.sim.model_file import write_model
 from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
 from cdpr_pipeline.wavelet.split import WaveletSplit
@@ -51,9 +53,12 @@ def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
     disc = cfg.discovery
     blackbox = None
     if cfg.blackbox.enabled:
+        # imported here: the network needs torch, which a diagnosis without it never loads
+        from cdpr_pipeline.models.reconstruction import NetworkBlackBox
+
         bb = cfg.blackbox
-        blackbox = BlackBoxSettings(LazyNet(bb.model.net), int(bb.window), int(bb.epochs),
-                                    int(bb.max_windows), int(bb.seed))
+        blackbox = NetworkBlackBox(LazyNet(bb.model.net), int(bb.window), int(bb.epochs),
+                                   int(bb.max_windows), int(bb.seed))
     heldout = cfg.split.heldout
     return DiagnosisSettings(
         regression=instantiate(cfg.regression),
@@ -95,8 +100,6 @@ def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str,
     ``split``: the diagnosis's split (:func:`diagnosis_split`); when it cut runs into
     time blocks, ``split`` in diagnosis.json lists them (run, samples, seconds).
     """
-    from cdpr_pipeline.discovery.report import render
-
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": out_dir / "diagnosis.json", "html": out_dir / "report.html",
              "model": out_dir / "extended_model.yaml", "metrics": out_dir / "metrics.json"}
@@ -138,6 +141,10 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
     data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
                         min_samples=cfg.data.min_samples)
     settings = settings_from_config(cfg)
+    # how the runs are read, chosen from the data once for the command (the diagnosis and
+    # its split then read them the same way, and the choices are logged once)
+    settings = replace(settings, regression=resolve_settings(settings.regression,
+                                                             data.trajectories, data.rig))
     loading = time.perf_counter() - t0
     log.info("diagnose %s: %d runs loaded in %.1f s (start-up %.1f s CPU)", cfg.data.path,
              len(data.trajectories), loading, startup)

@@ -20,15 +20,16 @@ from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.data.rig import WINCH_KEYS
 from cdpr_pipeline.data.split import Split
 from cdpr_pipeline.errors import InputError
 from cdpr_pipeline.identification.identifiers import LeastSquares
-from cdpr_pipeline.identification.reconstruction import (
+from cdpr_pipeline.identification.regressors import dataset_regression
+from cdpr_pipeline.models.reconstruction import (
     HighFrequencyModel,
     reconstruction_scores,
 )
-from cdpr_pipeline.identification.regressors import dataset_regression, resolve_settings
 from cdpr_pipeline.tables import to_markdown
 from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
 

@@ -11,10 +11,10 @@ from omegaconf import DictConfig
 from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.errors import DataValidationError, Problem
 from cdpr_pipeline.data.io import Dataset, load_dataset
+from cdpr_pipeline.data.reading import RegressionSettings, resolve_settings
 from cdpr_pipeline.data.validation import ValidationReport, check_run_lengths, validate_dataset
 from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnosis_needs
 from cdpr_pipeline.identification.pipeline import identification_needs
-from cdpr_pipeline.identification.regressors import RegressionSettings, resolve_settings
 
 log = logging.getLogger(__name__)
 

@@ -13,6 +13,7 @@ import pytest
 import yaml
 
 from cdpr_pipeline.data import DataValidationError, load_dataset, validate_dataset
+from cdpr_pipeline.data.reading import DerivativeFilter, RegressionSettings, resolve_settings
 from cdpr_pipeline.data.validation import STATIC_RANGE_PER_SIGMA, moves
 from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnosis_needs
 from cdpr_pipeline.discovery.freeform import L0Regression
@@ -22,12 +23,7 @@ from cdpr_pipeline.identification.pipeline import (
     check_torque_labels,
     identification_needs,
 )
-from cdpr_pipeline.identification.regressors import (
-    DerivativeFilter,
-    RegressionSettings,
-    dataset_regression,
-    resolve_settings,
-)
+from cdpr_pipeline.identification.regressors import dataset_regression
 from cdpr_pipeline.resources import foreign_rig_path
 
 F = "trajectories/001_spiral.csv"

@@ -150,13 +150,14 @@ def test_the_black_box_share_does_not_depend_on_the_process_threads(quiet_lab):
     from hydra.utils import instantiate
 
     from cdpr_pipeline.config import compose_config
-    from cdpr_pipeline.discovery.diagnosis import BlackBoxSettings, blackbox_share
+    from cdpr_pipeline.data.reading import resolve_settings
+    from cdpr_pipeline.discovery.diagnosis import blackbox_share
     from cdpr_pipeline.discovery.residuals import nominal_model
     from cdpr_pipeline.discovery.signals import dataset_signals
-    from cdpr_pipeline.identification.regressors import resolve_settings
+    from cdpr_pipeline.models.reconstruction import NetworkBlackBox
 
     cfg = compose_config("diagnose", ["blackbox.epochs=1", "blackbox.max_windows=256"])
-    settings = BlackBoxSettings(instantiate(cfg.blackbox.model.net), 16, 1, 256, 3)
+    settings = NetworkBlackBox(instantiate(cfg.blackbox.model.net), 16, 1, 256, 3)
     reg = resolve_settings(fast_settings().regression, quiet_lab.trajectories, quiet_lab.rig)
     sigs = dataset_signals(quiet_lab.trajectories, quiet_lab.rig, reg)
     nominal = nominal_model(quiet_lab.rig, reg.sign_sharpness)

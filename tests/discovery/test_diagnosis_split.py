@@ -47,8 +47,8 @@ def test_a_single_run_is_diagnosed_on_its_last_block(quiet_lab, tmp_path, readin
     assert split.blocks and held.run == train.run == run.name
     # 25 % of 8 s is 2 s; the held-out block gets 3 s, or the fewest samples a block
     # needs for the regression's trims and rows if more, at the end of the run
+    from cdpr_pipeline.data.reading import resolve_settings
     from cdpr_pipeline.identification.pipeline import min_block_samples
-    from cdpr_pipeline.identification.regressors import resolve_settings
 
     rate = one.rig.sample_rate_hz
     fewest = min_block_samples(resolve_settings(settings.regression, [run], one.rig), rate)

@@ -10,15 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cdpr_pipeline.data.reading import DerivativeFilter, RegressionSettings, resolve_settings
 from cdpr_pipeline.data.rig import AxesRig, WinchParams
 from cdpr_pipeline.data.split import heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.discovery.signals import dataset_signals
-from cdpr_pipeline.identification.regressors import (
-    DerivativeFilter,
-    RegressionSettings,
-    resolve_settings,
-)
 
 FS = 500.0
 

@@ -13,10 +13,10 @@ import pytest
 from lab_cases import candidate_effects
 from scipy.optimize import least_squares
 
+from cdpr_pipeline.data.reading import RegressionSettings, resolve_settings
 from cdpr_pipeline.discovery import residuals as R
 from cdpr_pipeline.discovery.fitting import GroupedJacobian
 from cdpr_pipeline.discovery.signals import dataset_signals
-from cdpr_pipeline.identification.regressors import RegressionSettings, resolve_settings
 from cdpr_pipeline.sim.effects import SymbolicWinchTorque
 
 
@@ -37,7 +37,7 @@ def test_rows_are_scipys_decimation_with_an_even_extension(tmp_path):
     from cdpr_pipeline.resources import emps_path
 
     data = load_dataset(convert_emps(emps_path(), tmp_path / "emps"))
-    from cdpr_pipeline.identification.regressors import DerivativeFilter
+    from cdpr_pipeline.data.reading import DerivativeFilter
 
     auto = RegressionSettings(DerivativeFilter("auto", 4, "auto"), "auto", "rig", "auto")
     regression = resolve_settings(auto, data.trajectories, data.rig)

@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from cdpr_pipeline.data.reading import RegressionSettings
 from cdpr_pipeline.discovery.freeform import (
     WINCH_ANGLE,
     FreeFormSearch,
@@ -20,7 +21,6 @@ from cdpr_pipeline.discovery.freeform import (
     term_columns,
 )
 from cdpr_pipeline.discovery.signals import RunSignals
-from cdpr_pipeline.identification.regressors import RegressionSettings
 from cdpr_pipeline.sim.expressions import evaluate
 
 

@@ -18,9 +18,9 @@ import pytest
 from foreign_cases import foreign_case, foreign_settings, parameters_ok
 from lab_cases import candidate_effects
 
+from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.discovery import residuals as R
 from cdpr_pipeline.discovery.signals import dataset_signals, internal_force_projection
-from cdpr_pipeline.identification.regressors import resolve_settings
 from cdpr_pipeline.sim.effects import ActuatorLag, StribeckFriction, SymbolicWinchTorque
 from cdpr_pipeline.sim.plant import cable_geometry
 

@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 from lab_cases import fast_settings, lab_dataset, rng_for
 
+from cdpr_pipeline.data.reading import RegressionSettings
 from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.discovery.freeform import WINCH_ANGLE, GrammarGP, ShapeFilter, readable
 from cdpr_pipeline.discovery.signals import RunSignals
-from cdpr_pipeline.identification.regressors import RegressionSettings
 from cdpr_pipeline.sim.effects import (
     EFFECTS,
     ActuatorLag,
@@ -123,7 +123,8 @@ def test_per_winch_effects_round_trip_a_model_file(tmp_path, paper_rig, nominal_
 def test_effect_classes_carry_their_candidates_shapes_and_scaling(paper_rig):
     """Adding an effect is one class: its candidates, the free-form shapes it names and
     how its strength scales all live on it; discovery only collects them."""
-    from cdpr_pipeline.discovery.candidates import DataScale, candidates_for
+    from cdpr_pipeline.discovery.candidates import candidates_for
+    from cdpr_pipeline.sim.candidate_forms import DataScale
 
     scale = DataScale(2.0, 3, "cdpr", paper_rig.winch_nominal)
     found = {c.effect for c in candidates_for(paper_rig, scale, refit_winches=False)}
@@ -309,10 +310,10 @@ def test_emps_names_its_friction_and_keeps_the_unnamed_part_small(tmp_path):
     from cdpr_pipeline.config import compose_config
     from cdpr_pipeline.data import load_dataset
     from cdpr_pipeline.data.convert import convert_emps
+    from cdpr_pipeline.data.reading import resolve_settings
     from cdpr_pipeline.discovery.diagnosis import diagnosis_split
     from cdpr_pipeline.discovery.residuals import residuals
     from cdpr_pipeline.discovery.signals import dataset_signals
-    from cdpr_pipeline.identification.regressors import resolve_settings
     from cdpr_pipeline.resources import emps_path
     from cdpr_pipeline.sim.effects import SymbolicWinchTorque
     from cdpr_pipeline.stages.diagnose import settings_from_config

@@ -17,6 +17,7 @@ import pytest
 from foreign_cases import foreign_settings
 from lab_cases import lab_dataset, rng_for
 
+from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.discovery.diagnosis import (
     diagnose,
     diagnosis_split,
@@ -24,7 +25,6 @@ from cdpr_pipeline.discovery.diagnosis import (
 )
 from cdpr_pipeline.discovery.residuals import nominal_model, signal_scales
 from cdpr_pipeline.discovery.signals import dataset_signals
-from cdpr_pipeline.identification.regressors import resolve_settings
 from cdpr_pipeline.sim.effects import ActuatorLag, PayloadMassError
 
 
@@ -92,7 +92,8 @@ def test_cable_damping_is_not_reported_unless_fitted(paper_rig, nominal_plant):
     """The stretch candidates fit EA only (their length residual is quasi-static): the
     damping of a diagnosed stretch is left unknown (null in diagnosis.json), not the
     class default reported as if found, and the extended model keeps the plant's own."""
-    from cdpr_pipeline.discovery.candidates import DataScale, candidates_for
+    from cdpr_pipeline.discovery.candidates import candidates_for
+    from cdpr_pipeline.sim.candidate_forms import DataScale
 
     scale = DataScale(1.0, paper_rig.n, "cdpr")
     for cand in candidates_for(paper_rig, scale, ["cable_elasticity"], False):

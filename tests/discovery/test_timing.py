@@ -2,7 +2,7 @@
 
 A recorded torque held over its control period acts, around each sample, as the command
 of half a control period before it: that is part of *reading* the data
-(:func:`~cdpr_pipeline.identification.regressors._held_torque`, the same in the
+(:func:`~cdpr_pipeline.identification.regressors.held_torque`, the same in the
 identification's regression and in every residual the diagnosis computes, so in every
 candidate). An ``actuator_lag`` is named only beyond it, with an unbiased size.
 
@@ -23,13 +23,9 @@ import pytest
 from foreign_cases import foreign_case, foreign_settings
 from lab_cases import lab_dataset, rng_for
 
+from cdpr_pipeline.data.reading import RegressionSettings, held_torque, resolve_settings
 from cdpr_pipeline.data.rig import AxesRig, WinchParams
 from cdpr_pipeline.discovery.diagnosis import diagnose
-from cdpr_pipeline.identification.regressors import (
-    RegressionSettings,
-    _held_torque,
-    resolve_settings,
-)
 from cdpr_pipeline.sim.effects import ActuatorLag
 
 #: drawn lag range, s
@@ -63,13 +59,13 @@ def test_a_held_command_is_read_as_the_torque_acting_around_each_sample(ratio):
     truth = np.array([applied[k * fine - fine:k * fine + fine + 1] @ weights
                       for k in samples])
     recorded = np.sin(2 * np.pi * f * np.arange(40) / fs)[:, None]
-    read = _held_torque(recorded, 1.0 / ratio)[samples, 0]
+    read = held_torque(recorded, 1.0 / ratio)[samples, 0]
     err = np.abs(read - truth).max()
     # second order in the phase step w T (a delay misread is first order)
     assert err < 0.25 * (2 * np.pi * f / fs) ** 2, err
     # the misreading: as sampled (a held command), or held over the whole sample (a
     # faster controller): a delay of half a sample, or of (1 - 1/ratio) half a sample
-    misread = _held_torque(recorded, 0.0 if ratio == 1 else 1.0)[samples, 0]
+    misread = held_torque(recorded, 0.0 if ratio == 1 else 1.0)[samples, 0]
     assert err < 0.25 * np.abs(misread - truth).max()
 
 

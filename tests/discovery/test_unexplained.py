@@ -78,7 +78,7 @@ def test_a_periodic_torque_above_the_motion_band_is_never_none(tmp_path, seed):
     same rig and references; the analysed band is 10 times it, so the wiggle's faster
     passes lie above it): the issue's case got ``none``. It must get ``unnamed`` with a
     held-out gain, or ``unexplained``, and never a vocabulary name."""
-    from cdpr_pipeline.identification.regressors import motion_bandwidth_hz
+    from cdpr_pipeline.data.reading import motion_bandwidth_hz
     from tests.independent_sim import draw_effect
 
     runs, duration = FAST["cdpr"]

@@ -16,14 +16,14 @@ from cdpr_pipeline.data.convert import (
     EMPS_PUBLISHED_RELATIVE_ERROR,
     convert_emps,
 )
-from cdpr_pipeline.data.rig import AxesRig, WinchParams
-from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.identification.regressors import (
+from cdpr_pipeline.data.reading import (
     DerivativeFilter,
     RegressionSettings,
     motion_bandwidth_hz,
     resolve_settings,
 )
+from cdpr_pipeline.data.rig import AxesRig, WinchParams
+from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.resources import emps_path
 from cdpr_pipeline.stages.identify import identify
 

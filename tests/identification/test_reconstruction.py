@@ -5,12 +5,12 @@ from functools import partial
 import numpy as np
 
 from cdpr_pipeline.identification.pipeline import lowpass_regression
-from cdpr_pipeline.identification.reconstruction import (
+from cdpr_pipeline.identification.regressors import WinchRegression
+from cdpr_pipeline.models.nets import TCN
+from cdpr_pipeline.models.reconstruction import (
     HighFrequencyModel,
     reconstruction_scores,
 )
-from cdpr_pipeline.identification.regressors import WinchRegression
-from cdpr_pipeline.models.nets import TCN
 from cdpr_pipeline.wavelet import WaveletSplit
 
 

@@ -10,12 +10,11 @@ from cdpr_pipeline.data.convert import (
     convert_emps,
 )
 from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.data.reading import DerivativeFilter, RegressionSettings
 from cdpr_pipeline.data.rig import WINCH_KEYS, AxesRig, WinchParams
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.identification.identifiers import LeastSquares
 from cdpr_pipeline.identification.regressors import (
-    DerivativeFilter,
-    RegressionSettings,
     WinchRegression,
     axis_regression,
     build_regression,

@@ -10,10 +10,10 @@ import pytest
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.data.reading import RegressionSettings
 from cdpr_pipeline.data.split import Split
 from cdpr_pipeline.identification.identifiers import LeastSquares
 from cdpr_pipeline.identification.pipeline import identify_dataset, split_fit_holdout
-from cdpr_pipeline.identification.regressors import RegressionSettings
 from cdpr_pipeline.stages.identify import identify
 from cdpr_pipeline.stages.reconstruct import reconstruct
 from cdpr_pipeline.stages.simulate import simulate

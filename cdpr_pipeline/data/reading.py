@@ -1,0 +1,392 @@
+"""How to read a dataset: the settings every command reads measured runs with, and the
+rules they follow (``conf/regression/*.yaml``).
+
+:class:`RegressionSettings` holds the derivative filter, the decimation, the Coulomb law,
+the zero-order hold of the recorded torques and which position sensors resolve standstill;
+:func:`resolve_settings` chooses every ``"auto"`` entry from the data and the rig, once per
+command. The held-torque rule (:func:`held_torque`) and the stick rule (:func:`sliding`)
+say which torque acts around a sample and where the friction is ``+-F_c``. Identification
+(:mod:`cdpr_pipeline.identification.regressors`), discovery and the models read data
+through these.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from functools import lru_cache
+
+import numpy as np
+from scipy.ndimage import minimum_filter1d
+from scipy.signal import butter, periodogram, sosfiltfilt
+
+from cdpr_pipeline.data.rig import AxesRig, CdprRig, Rig
+from cdpr_pipeline.data.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
+
+#: settings chosen from the data (:func:`resolve_settings`)
+AUTO = "auto"
+#: ``sign_sharpness`` that takes the Coulomb law rig.yaml states
+RIG = "rig"
+#: Butterworth cut-off per hertz of motion bandwidth, and the share of the measured
+#: velocity's power that defines that bandwidth (see :func:`motion_bandwidth_hz`)
+CUTOFF_PER_BANDWIDTH = 25.0
+BANDWIDTH_POWER_SHARE = 0.99
+#: highest cut-off as a fraction of the sample rate (0.4 fs: 80 % of Nyquist)
+MAX_CUTOFF_FRACTION = 0.4
+#: edge trim in periods of the cut-off: a zero-phase Butterworth's edge transient has
+#: decayed after a few periods of its cut-off
+TRIM_PERIODS = 5.0
+
+
+@lru_cache(maxsize=32)
+def _butter_sos(order: int, cutoff_hz: float, fs: float) -> np.ndarray:
+    return butter(order, cutoff_hz, fs=fs, output="sos")
+
+
+@dataclass(frozen=True)
+class DerivativeFilter:
+    """Zero-phase low-pass before differentiation.
+
+    Parameters
+    ----------
+    cutoff_hz : float
+        Butterworth cut-off.
+    order : int
+        Filter order (applied forwards and backwards: zero phase, double order).
+    trim_s : float
+        Seconds dropped at both ends, where filtering edge effects live.
+    """
+
+    cutoff_hz: float | str = 15.0
+    order: int = 4
+    trim_s: float | str = 0.3
+
+    def smooth(self, x: np.ndarray, fs: float) -> np.ndarray:
+        if isinstance(self.cutoff_hz, str):
+            raise ValueError("the derivative filter's cut-off is 'auto': choose it from the "
+                             "data first (resolve_settings)")
+        return sosfiltfilt(_butter_sos(self.order, self.cutoff_hz, fs), x, axis=0)
+
+    def derivatives(self, x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                                  np.ndarray]:
+        """Filtered signal, first and second time derivative (central differences)."""
+        fs = 1.0 / float(np.median(np.diff(t)))
+        xf = self.smooth(x, fs)
+        v = np.gradient(xf, t, axis=0)
+        a = np.gradient(v, t, axis=0)
+        return xf, v, a
+
+    def compact_derivatives(self, x: np.ndarray, t: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Filtered signal, its central difference and its *compact* second difference
+        ``(x_k+1 - 2 x_k + x_k-1) / T^2``: the acceleration averaged over the triangle of
+        half-width ``T`` around each sample, the window a torque held over each sample
+        is averaged with (:func:`held_torque`); two central differences in a row would
+        average over twice that window."""
+        step = float(np.median(np.diff(t)))
+        xf = self.smooth(x, 1.0 / step)
+        return xf, np.gradient(xf, t, axis=0), second_difference(xf, step)
+
+
+@dataclass(frozen=True)
+class RegressionSettings:
+    """How the regression is built from measured data (``conf/regression/*.yaml``).
+
+    Parameters
+    ----------
+    filter : DerivativeFilter
+        Low-pass and trimming for the derivatives; ``cutoff_hz`` and ``trim_s`` may be
+        ``"auto"`` (chosen from the data by :func:`resolve_settings`).
+    decimate : int or "auto"
+        Decimation factor after the parallel Butterworth (1: none), with its zero-phase
+        anti-alias filter over every column.
+    sign_sharpness : float, None or "rig"
+        ``tanh(k b)`` for the Coulomb column, the hard ``sign(b)`` when ``None``, the law
+        rig.yaml states (``coulomb_law``) when ``"rig"``.
+    zero_order_hold : bool or "auto"
+        Treat each recorded torque as held until the next sample (see
+        :func:`~cdpr_pipeline.identification.regressors.winch_regression`);
+        ``"auto"``: when rig.yaml states a digital controller
+        (``controller.rate_hz``), whose commands are held over its period, and for a
+        cable robot (the spec's ``u`` is the commanded torque).
+    hold_fraction : float or "auto"
+        With ``zero_order_hold``, the share of a sample period each recorded torque is
+        held for (``(0, 1]``): a controller faster than the recording holds the sampled
+        command for one control period only, and the commands between samples are not
+        recorded; the torque acting around ``t_k`` is then the command of
+        ``t_k - hold_fraction T / 2`` (:func:`held_torque`). ``"auto"``: the controller
+        period over the sample period, at most 1, when rig.yaml states a controller
+        rate; 1 otherwise (the command held until the next sample).
+    encoder_rest : bool, sequence of bool or "auto"
+        Per channel, whether its recorded position resolves standstill (an encoder whose
+        count stays unchanged at rest), so that a hard-sign Coulomb law can tell stops
+        and reversals sample by sample (:func:`sliding`); one bool for every channel.
+        ``"auto"``: a channel whose position stays unchanged for
+        :data:`STANDSTILL_SAMPLES` samples somewhere in *any* run. A property of the
+        sensor, so decided once for the dataset: a time block cut from a run that never
+        stops in it still has its encoder.
+    """
+
+    filter: DerivativeFilter = DerivativeFilter()
+    decimate: int | str = 1
+    sign_sharpness: float | str | None = RIG
+    zero_order_hold: bool | str = True
+    encoder_rest: bool | tuple[bool, ...] | str = AUTO
+    hold_fraction: float | str = AUTO
+
+    def __post_init__(self) -> None:
+        # a list from a yaml file becomes a tuple (the settings stay hashable)
+        if not isinstance(self.encoder_rest, (bool, str)):
+            object.__setattr__(self, "encoder_rest",
+                               tuple(bool(v) for v in self.encoder_rest))
+
+    @property
+    def resolved(self) -> bool:
+        """Whether nothing is left to choose from the data."""
+        return not any(isinstance(v, str) for v in (
+            self.filter.cutoff_hz, self.filter.trim_s, self.decimate, self.sign_sharpness,
+            self.zero_order_hold, self.encoder_rest, self.hold_fraction))
+
+    @property
+    def hold(self) -> float:
+        """The share of a sample period the recorded torque is held for (0: read as
+        sampled); a fraction still ``"auto"`` counts as the whole sample."""
+        if not self.zero_order_hold:
+            return 0.0
+        return 1.0 if isinstance(self.hold_fraction, str) else float(self.hold_fraction)
+
+    def rest_channels(self, position: np.ndarray) -> np.ndarray:
+        """``(n,)``: which channels of a run with ``position`` (N, n) resolve standstill
+        (:attr:`encoder_rest`; still ``"auto"``: decided from this run alone)."""
+        n = np.shape(position)[1]
+        rest = self.encoder_rest
+        if isinstance(rest, str):
+            return shows_standstill(np.asarray(position, float))
+        if isinstance(rest, bool):
+            return np.full(n, rest)
+        if len(rest) != n:
+            raise ValueError(f"regression.encoder_rest: {len(rest)} entries for {n} channels")
+        return np.array(rest, bool)
+
+
+def motion_bandwidth_hz(trajectories: Sequence[Trajectory]) -> float:
+    """The measured motion's bandwidth: the frequency below which
+    :data:`BANDWIDTH_POWER_SHARE` of the velocity's power lies (median over runs).
+
+    Velocity power is the position periodogram (Hann window, linear trend removed) times
+    ``(2 pi f)^2``, after subtracting the white measurement-noise floor read off the top
+    quarter of the band (motion has no power there; differentiated noise would otherwise
+    dominate). Positions are the encoder lengths of a cable robot (cleaner than motion
+    capture) and the axis positions of drive axes.
+    """
+    found = []
+    for tr in trajectories:
+        q = recorded_position(tr)
+        fs = 1.0 / float(np.median(np.diff(tr.t)))
+        f, p = periodogram(q, fs=fs, window="hann", detrend="linear", axis=0)
+        p = p.sum(axis=1)
+        floor = float(np.median(p[f > 0.75 * fs / 2])) if len(f) > 8 else 0.0
+        power = np.clip(p - floor, 0.0, None) * (2 * np.pi * f) ** 2
+        if not power.sum() > 0:
+            continue
+        share = np.cumsum(power) / power.sum()
+        found.append(float(f[min(np.searchsorted(share, BANDWIDTH_POWER_SHARE), len(f) - 1)]))
+    if not found:
+        raise ValueError("no run moves: cannot choose the derivative filter from the data")
+    return float(np.median(found))
+
+
+def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajectory],
+                     rig: Rig) -> RegressionSettings:
+    """``settings`` with every ``"auto"``/``"rig"`` entry chosen from the data and the rig,
+    each choice logged with its reason.
+
+    The rules follow the IDIM practice of robot identification (Gautier; Janot et al.):
+
+    - derivative filter: zero-phase Butterworth at ``25 x`` the motion bandwidth
+      (:func:`motion_bandwidth_hz`), at most ``0.4 fs``, so neither its gain nor its
+      phase touch the motion while noise above it is removed;
+    - decimation ``q = floor(fs / cut-off)``: the decimation's own anti-alias pass band,
+      ``0.8 fs / (2 q)``, stays at ``0.4 x`` the cut-off (10x the motion bandwidth) and the
+      rows left are about as many as the filtered signal carries information;
+    - edge trim: :data:`TRIM_PERIODS` periods of the cut-off;
+    - Coulomb law: rig.yaml's ``coulomb_law`` (hard ``sign`` when absent, the spec);
+    - zero-order hold of the recorded torques when rig.yaml states a digital controller
+      rate (the command is held over a control period), and always for a cable robot,
+      whose ``u`` the spec defines as the commanded torque;
+    - encoder rest: a channel whose recorded position stands still somewhere in any run
+      (:attr:`RegressionSettings.encoder_rest`).
+
+    On the EMPS benchmark (1 kHz, 3.7 Hz motion bandwidth) these give the published
+    protocol (Butterworth about 100 Hz, decimation by 10).
+    """
+    if settings.resolved:
+        return settings
+    filt = settings.filter
+    fs = float(rig.sample_rate_hz)
+    cutoff = filt.cutoff_hz
+    if cutoff == AUTO:
+        bw = motion_bandwidth_hz(trajectories)
+        cutoff = min(CUTOFF_PER_BANDWIDTH * bw, MAX_CUTOFF_FRACTION * fs)
+        log.info("derivative filter: cut-off %.3g Hz = min(%g x motion bandwidth %.3g Hz "
+                 "(%g %% of the velocity power), %g x sample rate %g Hz)", cutoff,
+                 CUTOFF_PER_BANDWIDTH, bw, 100 * BANDWIDTH_POWER_SHARE,
+                 MAX_CUTOFF_FRACTION, fs)
+    trim = filt.trim_s
+    if trim == AUTO:
+        trim = TRIM_PERIODS / float(cutoff)
+        log.info("edge trim: %.3g s (%g periods of the cut-off)", trim, TRIM_PERIODS)
+    q = settings.decimate
+    if q == AUTO:
+        q = max(1, int(fs // float(cutoff)))
+        log.info("decimation: by %d (sample rate %g Hz / cut-off %.3g Hz; parallel filtering "
+                 "band %.3g Hz)", q, fs, cutoff, 0.4 * fs / q if q > 1 else float(cutoff))
+    law = settings.sign_sharpness
+    if law == RIG:
+        law = rig.coulomb_sharpness
+        log.info("Coulomb law: %s (as rig.yaml states)",
+                 "hard sign" if law is None else f"tanh({law:g} w)")
+    hold = settings.zero_order_hold
+    rate = (rig.controller.rate_hz if isinstance(rig, CdprRig) and rig.controller
+            else (rig.controller or {}).get("rate_hz") if isinstance(rig, AxesRig)
+            else None)
+    if hold == AUTO:
+        # the spec defines a cable robot's u as the commanded torque, which a digital
+        # drive holds until the next command; an axis's u is the force applied
+        commanded = isinstance(rig, CdprRig)
+        hold = rate is not None or commanded
+        log.info("recorded torques %s", f"held over the controller period ({rate:g} Hz)"
+                 if rate is not None else "held over the sample (a cable robot's u is the "
+                 "commanded torque)" if commanded
+                 else "taken as sampled (rig.yaml states no controller rate)")
+    fraction = settings.hold_fraction
+    if fraction == AUTO:
+        fraction = min(1.0, fs / float(rate)) if rate else 1.0
+        if hold is True and fraction < 1.0:
+            log.info("each recorded torque held for %.3g of a sample: the controller "
+                     "(%g Hz) is faster than the recording (%g Hz), whose torque around a "
+                     "sample is the command of %.3g ms before it", fraction, rate, fs,
+                     500 * fraction / fs)
+    if not isinstance(fraction, str) and not 0.0 < float(fraction) <= 1.0:
+        raise ValueError(f"regression.hold_fraction: {fraction!r} is not in (0, 1]")
+    rest = settings.encoder_rest
+    if rest == AUTO:
+        seen = [shows_standstill(np.asarray(recorded_position(tr), float))
+                for tr in trajectories]
+        rest = tuple(bool(v) for v in np.any(seen, axis=0)) if seen else True
+        log.info("position sensors resolving standstill (encoders): %s", ", ".join(
+            f"{i + 1}: {'yes' if r else 'no'}" for i, r in enumerate(np.atleast_1d(rest))))
+    for name, value in (("filter.cutoff_hz", cutoff), ("filter.trim_s", trim),
+                        ("decimate", q), ("sign_sharpness", law),
+                        ("zero_order_hold", hold), ("encoder_rest", rest),
+                        ("hold_fraction", fraction)):
+        if isinstance(value, str):
+            raise ValueError(f"regression.{name}: unknown setting {value!r} "
+                             f"(a value, or {AUTO!r}/{RIG!r} where documented)")
+    return RegressionSettings(replace(filt, cutoff_hz=float(cutoff), trim_s=float(trim)),
+                              int(q), None if law is None else float(law), bool(hold), rest,
+                              float(fraction))
+
+
+def recorded_position(traj: Trajectory) -> np.ndarray:
+    """What a run's position sensors recorded per channel: the encoder lengths of a
+    cable robot, the axis positions of drive axes."""
+    q = traj.lengths if traj.lengths is not None else traj.position
+    return np.asarray(q, float).reshape(len(traj.t), -1)
+
+
+def held_torque(torques: np.ndarray, hold: float) -> np.ndarray:
+    """The torque acting around each sample, from recorded commands each held for
+    ``hold`` of a sample period (:attr:`RegressionSettings.hold`; 0: as sampled).
+
+    A torque recorded at ``t_k`` and held until ``t_k+1`` (``hold`` 1): the triangle of
+    half-width ``T`` around ``t_k`` that the second difference averages the acceleration
+    with (:func:`second_difference`) sees samples ``k-1`` and ``k`` for half each,
+    exactly (read as sampled instead, a half-sample lag every candidate would have to
+    explain). Held for a share ``f`` only (a faster controller whose commands between
+    samples are not recorded), the torque acting around ``t_k`` is the command of
+    ``t_k - f T / 2``: samples ``k-1`` and ``k`` weighted ``f / 2`` and ``1 - f / 2``.
+    """
+    hold = float(hold)
+    if hold <= 0.0:
+        return torques
+    held = torques.copy()
+    held[1:] = (1.0 - 0.5 * hold) * torques[1:] + 0.5 * hold * torques[:-1]
+    return held
+
+
+def second_difference(x: np.ndarray, step: float) -> np.ndarray:
+    """``(x_k+1 - 2 x_k + x_k-1) / T^2``: exactly the acceleration averaged with the
+    triangle of half-width ``T`` around ``t_k`` (ends copied)."""
+    a = np.empty_like(x)
+    a[1:-1] = (x[2:] - 2 * x[1:-1] + x[:-2]) / step**2
+    a[0], a[-1] = a[1], a[-2]
+    return a
+
+
+#: share of the derivative filter's impulse response (absolute area) whose half-width is
+#: its reach (:func:`filter_reach`)
+REACH_SHARE = 0.95
+
+
+@lru_cache(maxsize=64)
+def filter_reach(order: int, cutoff_hz: float, fs: float) -> int:
+    """Half-width in samples of the zero-phase Butterworth (``order``, forward and
+    backward) that holds :data:`REACH_SHARE` of its impulse response's absolute area:
+    how far a non-smooth instant of the motion spreads into the filtered derivatives
+    (about ``1 / cutoff_hz`` for order 4)."""
+    half = int(np.ceil(20 * fs / cutoff_hz))
+    pulse = np.zeros(2 * half + 1)
+    pulse[half] = 1.0
+    mass = np.abs(sosfiltfilt(butter(order, cutoff_hz, fs=fs, output="sos"), pulse))
+    inside = np.cumsum(mass[half:] + mass[half::-1]) - mass[half]
+    return int(np.searchsorted(inside, REACH_SHARE * mass.sum()))
+
+
+def clear_of_reach(keep: np.ndarray, filt: DerivativeFilter, fs: float) -> np.ndarray:
+    """``keep`` (N, n) with every sample within :func:`filter_reach` of a dropped one
+    dropped too: where a column is computed from *filtered* motion (a cable robot's
+    tensions from the filtered platform acceleration), a stick or reversal's jump is
+    spread over that reach and the column there disagrees with the raw torque."""
+    reach = filter_reach(int(filt.order), float(filt.cutoff_hz), float(fs))
+    if reach <= 0 or keep.all():
+        return keep
+    return minimum_filter1d(keep.astype(np.uint8), size=2 * reach + 1, axis=0,
+                            mode="nearest").astype(bool)
+
+
+def sliding(position: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(N, n)``: samples whose triangle ``[t_k-1, t_k+1]`` the axis slides through in one
+    direction, so that its friction is ``F_c sign(v)`` throughout.
+
+    Both intervals of the triangle and their outer neighbours must have moved the same
+    way on the recorded position (the encoder counted: no rest; no reversal), and the
+    filtered speed must agree at the sample. The others hold a stick, a stop, a start or a
+    reversal at an instant between samples, where the friction is not ``+-F_c``.
+    """
+    dq = np.sign(np.diff(position, axis=0))
+    one_way = np.zeros(dq.shape, bool)
+    one_way[1:-1] = (dq[1:-1] != 0) & (dq[:-2] == dq[1:-1]) & (dq[2:] == dq[1:-1])
+    out = np.zeros(position.shape, bool)
+    out[1:-1] = one_way[:-1] & one_way[1:] & (np.sign(b[1:-1]) == dq[1:])
+    return out
+
+
+#: consecutive unchanged samples that show a position sensor resolving standstill
+STANDSTILL_SAMPLES = 3
+
+
+def shows_standstill(position: np.ndarray) -> np.ndarray:
+    """``(n,)``: whether each channel's recorded position stays exactly unchanged for
+    :data:`STANDSTILL_SAMPLES` differences somewhere, as an encoder does where the axis
+    stands still. Only such a sensor tells rests, stops and reversals sample by sample
+    (:func:`sliding`); on a noisy or never-stopping position the raw differences would
+    only bring noise in, and every sample is taken as sliding the way ``b`` says."""
+    still = np.diff(position, axis=0) == 0
+    if len(still) < STANDSTILL_SAMPLES:
+        return np.zeros(still.shape[1:], bool)
+    runs = np.lib.stride_tricks.sliding_window_view(still, STANDSTILL_SAMPLES, axis=0)
+    return runs.all(axis=-1).any(axis=0)

@@ -1,0 +1,203 @@
+"""The package's layers point one way: every import goes to its own layer or one below.
+
+The order, lowest first (a layer may import its own and any lower one, never a higher):
+
+1. leaves: ``errors``, ``config``, ``progress``, ``metrics``, ``tables``, ``evolution``,
+   ``resources`` (no project imports);
+2. ``data``: reading and checking datasets (how a run is read: ``data.reading``), rigs,
+   splits;
+3. ``wavelet``: the wavelet split;
+4. ``sim``: the plant, the effects and their candidate forms, the simulator;
+5. ``identification``: the regressors and the identifiers;
+6. ``discovery``: diagnosis (no torch: the black box is a strategy passed in);
+7. ``models``: networks, reconstruction, the diagnosis's black box, the physics predictor;
+8. ``tracking``, ``outputs``: MLflow and the output folders;
+9. ``command``, ``pipeline``: running a command, the DVC pipeline;
+10. ``stages``: one command each;
+11. ``api``, ``cli``, ``cli_help`` and the package itself.
+
+Every import is read with :mod:`ast`, at module level (``TYPE_CHECKING`` blocks too) and
+inside functions. An import inside a function is allowed only where it defers a module
+that loads torch or Lightning (:data:`HEAVY`, checked to be heavy) or in the two facades
+that load a command's modules when called (:data:`FACADES`): never to dodge a cycle.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import cdpr_pipeline
+
+PACKAGE = Path(cdpr_pipeline.__file__).parent
+
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("errors", "config", "progress", "metrics", "tables", "evolution", "resources"),
+    ("data",),
+    ("wavelet",),
+    ("sim",),
+    ("identification",),
+    ("discovery",),
+    ("models",),
+    ("tracking", "outputs"),
+    ("command", "pipeline"),
+    ("stages",),
+    ("api", "cli", "cli_help", ""),
+)
+RANK = {unit: i for i, layer in enumerate(LAYERS) for unit in layer}
+
+#: third-party packages heavy enough to defer to the function that needs them
+HEAVY_DEPS = ("torch", "lightning")
+#: function-level project imports that defer torch/Lightning to the call that needs them:
+#: (importing module, imported module)
+HEAVY = {
+    ("cdpr_pipeline.models.physics", "cdpr_pipeline.models.module"),
+    ("cdpr_pipeline.stages.compare", "cdpr_pipeline.stages.train"),
+    ("cdpr_pipeline.stages.compare", "cdpr_pipeline.models.evaluation"),
+    ("cdpr_pipeline.stages.compare", "cdpr_pipeline.models.forecast"),
+    ("cdpr_pipeline.stages.compare", "cdpr_pipeline.models.datamodule"),
+    ("cdpr_pipeline.stages.diagnose", "cdpr_pipeline.models.reconstruction"),
+}
+#: top-layer modules whose functions load a command's modules on the call (PEP 562 in
+#: the package, the Python API): `import cdpr_pipeline` stays cheap
+FACADES = {"cdpr_pipeline", "cdpr_pipeline.api"}
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _modules() -> dict[str, Path]:
+    return {_module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def _unit(module: str) -> str:
+    """The layer unit of a project module: its subpackage or top-level module."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else ""
+
+
+def _imports(module: str, path: Path) -> list[tuple[str, int, bool]]:
+    """``(imported module, line, inside a function)`` for every import in the file."""
+    tree = ast.parse(path.read_text(), str(path))
+    is_package = path.name == "__init__.py"
+    out: list[tuple[str, int, bool]] = []
+
+    def visit(node: ast.AST, in_function: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            inside = in_function or isinstance(
+                child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
+            if isinstance(child, ast.Import):
+                out.extend((a.name, child.lineno, in_function) for a in child.names)
+            elif isinstance(child, ast.ImportFrom):
+                base = child.module or ""
+                if child.level:
+                    anchor = module.split(".")
+                    anchor = anchor[:len(anchor) - child.level + is_package]
+                    base = ".".join(anchor + ([base] if base else []))
+                if base == "cdpr_pipeline":     # `from cdpr_pipeline import api`
+                    out.extend((f"{base}.{a.name}", child.lineno, in_function)
+                               for a in child.names)
+                else:
+                    out.append((base, child.lineno, in_function))
+            visit(child, inside)
+
+    visit(tree, False)
+    return out
+
+
+MODULES = _modules()
+IMPORTS = {m: _imports(m, p) for m, p in MODULES.items()}
+
+
+def _project(imported: str) -> bool:
+    return imported == "cdpr_pipeline" or imported.startswith("cdpr_pipeline.")
+
+
+def test_every_unit_has_a_layer():
+    units = {_unit(m) for m in MODULES}
+    assert units <= set(RANK), f"give these a layer in LAYERS: {sorted(units - set(RANK))}"
+
+
+def test_imports_go_to_the_same_or_a_lower_layer():
+    upward = [f"{MODULES[m].relative_to(PACKAGE.parent)}:{line}: {m} -> {imported}"
+              for m, found in IMPORTS.items() for imported, line, _ in found
+              if _project(imported) and RANK[_unit(imported)] > RANK[_unit(m)]]
+    assert not upward, "imports up the layers:\n" + "\n".join(upward)
+
+
+def test_no_function_level_project_import_but_the_heavy_and_the_facades():
+    lazy = [f"{MODULES[m].relative_to(PACKAGE.parent)}:{line}: {m} -> {imported}"
+            for m, found in IMPORTS.items() for imported, line, inside in found
+            if inside and _project(imported) and m not in FACADES
+            and (m, imported) not in HEAVY]
+    assert not lazy, ("function-level project imports (move them to the top; a cycle "
+                      "means a definition belongs in a lower layer):\n" + "\n".join(lazy))
+
+
+def test_no_private_name_crosses_a_package():
+    """A ``_name`` is its package's own: another package that needs it needs a public
+    name (where a dataset is read, :mod:`cdpr_pipeline.data.reading`, is one)."""
+    crossing = []
+    for m, path in MODULES.items():
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if (isinstance(node, ast.ImportFrom) and node.level == 0 and node.module
+                    and _project(node.module) and _unit(node.module) != _unit(m)):
+                crossing += [f"{path.relative_to(PACKAGE.parent)}:{node.lineno}: {m} imports "
+                             f"{node.module}.{a.name}" for a in node.names
+                             if a.name.startswith("_")]
+    assert not crossing, "private names imported across packages:\n" + "\n".join(crossing)
+
+
+def _loads_heavy(module: str, seen: set[str]) -> bool:
+    """Whether importing ``module`` loads torch or Lightning (module-level imports)."""
+    if module in seen or module not in MODULES:
+        return False
+    seen.add(module)
+    for imported, _, inside in IMPORTS[module]:
+        if inside:
+            continue
+        if imported.split(".")[0] in HEAVY_DEPS:
+            return True
+        if _project(imported) and _loads_heavy(imported, seen):
+            return True
+    return False
+
+
+@pytest.mark.parametrize("importer, imported", sorted(HEAVY))
+def test_the_allowed_function_level_imports_are_heavy_and_still_there(importer, imported):
+    """An entry of HEAVY is a module that loads torch or Lightning, still imported inside
+    a function of its importer (a stale entry would let a cycle-dodge in)."""
+    assert _loads_heavy(imported, set()), f"{imported} does not load torch or Lightning"
+    assert any(i == imported and inside for i, _, inside in IMPORTS[importer]), (
+        f"{importer} no longer imports {imported} in a function: drop it from HEAVY")
+
+
+def test_the_checks_see_an_upward_and_a_lazy_import(tmp_path):
+    """The parser finds what the checks look for: a function-level, a relative and a
+    ``from cdpr_pipeline import`` import, and ranks an upward arrow above."""
+    source = tmp_path / "x.py"
+    source.write_text("from . import y\n"
+                      "def f():\n    from cdpr_pipeline.models import physics\n"
+                      "from cdpr_pipeline import api\n")
+    found = _imports("cdpr_pipeline.discovery.x", source)
+    assert ("cdpr_pipeline.discovery", 1, False) in found
+    assert ("cdpr_pipeline.models", 3, True) in found
+    assert ("cdpr_pipeline.api", 4, False) in found
+    assert RANK[_unit("cdpr_pipeline.models.physics")] > RANK[_unit("cdpr_pipeline.discovery.x")]
+
+
+def test_discovery_imports_without_torch():
+    """Diagnosis runs without torch; only the black box (passed in) needs it."""
+    modules = sorted(m for m in MODULES if _unit(m) == "discovery")
+    code = ("import importlib, sys\n"
+            f"for m in {modules!r}:\n    importlib.import_module(m)\n"
+            "print(sorted(d for d in ('torch', 'lightning') if d in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]", f"importing discovery loaded {out}"
