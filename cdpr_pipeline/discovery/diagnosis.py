@@ -200,7 +200,9 @@ class Diagnosis:
 
     ``timings`` holds the seconds per phase (signals, candidates, free-form, validity,
     closed loop, black box, total); it is not part of ``diagnosis.json``, which depends
-    only on the data and the settings. ``plots`` holds the arrays of the report's figures.
+    only on the data and the settings, but of ``metrics.json`` (``time_<phase>_s``,
+    with the command's start-up CPU seconds and loading beside them). ``plots`` holds
+    the arrays of the report's figures.
     """
 
     dataset: str

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from cdpr_pipeline.sim.effects import ActuatorLag, CableElasticity
+from cdpr_pipeline.sim.plant import Plant
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import (
     HARD_SIGN_SUBSTEPS,
@@ -41,30 +42,36 @@ def test_short_lag_costs_no_substeps_and_matches_solve_ivp(paper_rig, nominal_pl
     assert np.abs(batched - reference).max() < 1e-6
 
 
-def test_hard_sign_is_stepped_implicitly_close_to_the_resolved_explicit_steps(paper_rig):
+@pytest.mark.parametrize("lag", [0.0, 5e-4])
+def test_hard_sign_is_stepped_implicitly_close_to_the_resolved_explicit_steps(paper_rig, lag):
     hard = paper_rig.replace(coulomb_sharpness=None)
-    from cdpr_pipeline.sim.plant import Plant
-
     plant = Plant.from_rig(hard)
+    if lag:         # a lag far shorter than the step, on two drives
+        plant = ActuatorLag(time_constant_s=lag, cables=[1, 3]).apply(plant)
     dt = 1.0 / hard.controller.rate_hz
     assert implicit_friction(plant)
     steps = auto_substeps(plant, dt)
     assert steps == IMPLICIT_MIN_SUBSTEPS < HARD_SIGN_SUBSTEPS
     desired = draw_trajectories(["oblique_eight", "flat_circle"], np.random.default_rng(7),
                                 plant.home, 4.0)
-    implicit = BatchSimulator(plant, plant, hard.controller, IDEAL, hard.sample_rate_hz)
+    nominal = Plant.from_rig(hard)
+    implicit = BatchSimulator(plant, nominal, hard.controller, IDEAL, hard.sample_rate_hz)
     # the former scheme: the same smooth sign, RK4 at the sub-steps that resolve it
     smooth = integration_plant(plant, dt)
     assert not implicit_friction(smooth)
-    explicit = BatchSimulator(smooth, plant, hard.controller, IDEAL, hard.sample_rate_hz,
+    explicit = BatchSimulator(smooth, nominal, hard.controller, IDEAL, hard.sample_rate_hz,
                               substeps=HARD_SIGN_SUBSTEPS)
     a = implicit.run(desired, np.random.default_rng(0))
     b = explicit.run(desired, np.random.default_rng(0))
     assert a.substeps == IMPLICIT_MIN_SUBSTEPS and b.substeps == HARD_SIGN_SUBSTEPS
     gap = a.truth["position"] - b.truth["position"]
-    # far below the motion-capture noise (0.1 mm); the motion itself spans ~1 m
-    assert np.sqrt(np.mean(gap ** 2)) < 2e-5
-    assert np.abs(gap).max() < 2e-4
+    # at rest a hard sign leaves the static friction anywhere in [-F_c, F_c]: where the
+    # platform settles before the run differs by a fraction of a millimetre between any
+    # two integrations (as in test_hard_sign); once moving, far below the motion-capture
+    # noise (0.1 mm), the motion itself spanning ~1 m
+    moving = slice(gap.shape[1] // 2, None)
+    assert np.sqrt(np.mean(gap[:, moving] ** 2)) < 2e-5
+    assert np.abs(gap).max() < 1e-3
     # torques agree away from reversals (where a hard sign's friction is undetermined)
     same_side = np.sign(a.truth["omega"]) == np.sign(b.truth["omega"])
     moving = np.abs(b.truth["omega"]) > 0.05

@@ -77,6 +77,12 @@ def test_diagnose_writes_the_spec_files(tmp_path, anchor_lab, cfg):
     cl = record["closed_loop"]["position"]
     assert max(cl["heldout_rmse_after"]) < max(cl["heldout_rmse_before"])
     assert record["blackbox"]["heldout_explained_share_physics"] > 0.9
+    # metrics.json says where the time went: every phase, in seconds
+    metrics = json.loads((out / "metrics.json").read_text())
+    phases = ("startup_cpu", "loading", "signals", "candidates", "free_form", "validity",
+              "closed_loop", "black_box", "total")
+    assert all(metrics[f"time_{k}_s"] >= 0.0 for k in phases)
+    assert metrics["time_total_s"] >= sum(metrics[f"time_{k}_s"] for k in phases[2:-1])
 
     html = (out / "report.html").read_text()
     assert "Verdict: anchor_offset" in html and "cable 2" in html and "<img" in html
