@@ -18,6 +18,7 @@ from scipy.integrate import solve_ivp
 
 from cdpr_pipeline.data.rig import ControllerSpec
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.errors import UserError
 from cdpr_pipeline.progress import progress
 from cdpr_pipeline.sim.controller import ComputedTorquePD
 from cdpr_pipeline.sim.plant import Plant, cable_geometry, forward_kinematics
@@ -132,9 +133,10 @@ MAX_SUBSTEPS = 64
 IMPLICIT_MIN_SUBSTEPS = 2
 
 
-class SimulationCostError(ValueError):
+class SimulationCostError(UserError, ValueError):
     """A simulation would need more than :data:`MAX_SUBSTEPS` sub-steps per control tick;
-    the message names the time scale that demands them."""
+    the message names the time scale that demands them (a user error: the data or model
+    asks for more than the cap, and the command says so without a traceback)."""
 
 
 def implicit_friction(plant: Plant) -> bool:
