@@ -60,7 +60,7 @@ HEAVY = {
     ("cdpr_pipeline.stages.compare", "cdpr_pipeline.models.evaluation"),
     ("cdpr_pipeline.stages.compare", "cdpr_pipeline.models.forecast"),
     ("cdpr_pipeline.stages.compare", "cdpr_pipeline.models.datamodule"),
-    ("cdpr_pipeline.stages.diagnose", "cdpr_pipeline.models.reconstruction"),
+    ("cdpr_pipeline.models.blackbox", "cdpr_pipeline.models.reconstruction"),
 }
 #: top-layer modules whose functions load a command's modules on the call (PEP 562 in
 #: the package, the Python API): `import cdpr_pipeline` stays cheap

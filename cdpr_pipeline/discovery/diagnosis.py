@@ -89,7 +89,7 @@ HELDOUT_FAMILIES = ("spiral", "pulses")
 
 class BlackBox(Protocol):
     """The black-box residual model the named physics is compared with. The stage passes
-    one in (:class:`cdpr_pipeline.models.reconstruction.NetworkBlackBox`): the network
+    one in (:class:`cdpr_pipeline.models.blackbox.NetworkBlackBox`): the network
     needs torch, which discovery does not import."""
 
     #: rows of history a prediction needs: a run's first ``window - 1`` rows get none

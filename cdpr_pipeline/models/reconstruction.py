@@ -1,14 +1,12 @@
 """Reconstruction of ``U*`` from identified parameters, plus a network for the
 high-frequency part the physical model leaves (the paper's gray-box model), scored per
-winch with MSE, MAE and PPL (the paper's Tables IV and V), and the diagnosis's black box
-(:class:`NetworkBlackBox`, the strategy the diagnose stage passes to discovery, so that
-discovery itself never imports torch).
+winch with MSE, MAE and PPL (the paper's Tables IV and V). The diagnosis's black box,
+built on :class:`HighFrequencyModel`, is :class:`cdpr_pipeline.models.blackbox.NetworkBlackBox`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import torch
@@ -100,40 +98,3 @@ def reconstruction_scores(target: np.ndarray, predictions: dict[str, np.ndarray]
                     "mae": np.atleast_1d(mae(target, p)).tolist(),
                     "ppl": np.atleast_1d(ppl(target, p)).tolist()}
             for label, p in predictions.items()}
-
-
-@dataclass
-class NetworkBlackBox:
-    """The diagnosis's black box (:class:`~cdpr_pipeline.discovery.diagnosis.BlackBox`): a
-    :class:`HighFrequencyModel` fitted to the nominal model's residual from the regressors
-    alone (no physical parameters), whose held-out share the named physics is compared with.
-
-    Parameters
-    ----------
-    net_factory : callable
-        A partial of a network (``conf/model/*.yaml``'s ``net``).
-    window, epochs, max_windows, seed : training sizes
-    """
-
-    net_factory: Any = None
-    window: int = 32
-    epochs: int = 5
-    max_windows: int = 4096
-    seed: int = 0
-
-    def fit_predict(self, train: WinchRegression, held: WinchRegression) -> np.ndarray:
-        """Fit to ``train``'s target and predict ``held``'s, per row (0 before a run's
-        first full window)."""
-        # its share goes into diagnosis.json, which must be the same on any machine: trained
-        # on the CPU (a GPU's kernels sum in another order) with one thread (so do the
-        # reductions), the process's thread count restored after
-        threads = torch.get_num_threads()
-        torch.set_num_threads(1)
-        try:
-            model = HighFrequencyModel(self.net_factory, self.window, self.epochs,
-                                       max_windows=self.max_windows, seed=self.seed,
-                                       sample_rate_hz=1.0, accelerator="cpu"
-                                       ).fit(train, np.zeros((train.n, train.phi.shape[2])))
-            return model.predict(held)
-        finally:
-            torch.set_num_threads(threads)

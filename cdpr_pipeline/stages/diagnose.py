@@ -30,6 +30,7 @@ from cdpr_pipeline.discovery.diagnosis import (
     diagnosis_split,
 )
 from cdpr_pipeline.discovery.report import render
+from cdpr_pipeline.models.blackbox import NetworkBlackBox
 from cdpr_pipeline.sim.model_file import write_model
 from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
 from cdpr_pipeline.wavelet.split import WaveletSplit
@@ -53,9 +54,6 @@ def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
     disc = cfg.discovery
     blackbox = None
     if cfg.blackbox.enabled:
-        # imported here: the network needs torch, which a diagnosis without it never loads
-        from cdpr_pipeline.models.reconstruction import NetworkBlackBox
-
         bb = cfg.blackbox
         blackbox = NetworkBlackBox(LazyNet(bb.model.net), int(bb.window), int(bb.epochs),
                                    int(bb.max_windows), int(bb.seed))

@@ -154,7 +154,7 @@ def test_the_black_box_share_does_not_depend_on_the_process_threads(quiet_lab):
     from cdpr_pipeline.discovery.diagnosis import blackbox_share
     from cdpr_pipeline.discovery.residuals import nominal_model
     from cdpr_pipeline.discovery.signals import dataset_signals
-    from cdpr_pipeline.models.reconstruction import NetworkBlackBox
+    from cdpr_pipeline.models.blackbox import NetworkBlackBox
 
     cfg = compose_config("diagnose", ["blackbox.epochs=1", "blackbox.max_windows=256"])
     settings = NetworkBlackBox(instantiate(cfg.blackbox.model.net), 16, 1, 256, 3)
