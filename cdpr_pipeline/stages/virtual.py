@@ -27,6 +27,7 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
@@ -35,6 +36,7 @@ from cdpr_pipeline.data.io import load_dataset, read_rig
 from cdpr_pipeline.data.rig import AxesRig, CdprRig
 from cdpr_pipeline.data.split import heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.data.validation import moves
 from cdpr_pipeline.errors import ConfigError
 from cdpr_pipeline.models.forecast import Forecaster
 from cdpr_pipeline.models.virtual import (
@@ -120,7 +122,10 @@ def _rollout(cfg: DictConfig, rig: CdprRig | AxesRig, path: str | Path) -> Rollo
     else:
         runs, recorded = _axes_runs(cfg, fc, rig)
         bounds = position_bounds(recorded)
-    valid = [r for r in runs if physically_valid(r, rig, bounds=bounds)]
+    # a run that never moves is refused by the data format (it shows no dynamics), so it
+    # counts as unusable like a diverged one
+    valid = [r for r in runs if physically_valid(r, rig, bounds=bounds)
+             and any(moves(column) for column in np.asarray(r.position).T)]
     return Rollout(Path(path).parent.name, str(path), runs, valid,
                    time.perf_counter() - start)
 

@@ -67,7 +67,12 @@ def test_virtual_data_is_a_valid_dataset_marked_virtual(small_lab, tmp_path):
     data = load_dataset(small_lab)
     layout = FeatureLayout.for_rig(data.rig)
     runs = [run_arrays(tr, layout) for tr in data]
-    fc = Forecaster(ConstantVelocity(layout), layout, Standardizer.fit(runs, layout), 8,
+    scaler = Standardizer.fit(runs, layout)
+    # a creep of 1e-5 m per sample on each position increment: the open-loop rollout moves
+    # (a run that never moves is unusable), and stays inside the frame
+    creep = np.r_[np.full(3, 1e-5), np.zeros(layout.n_state - 3)]
+    scaler.target_mean = scaler.target_mean + creep
+    fc = Forecaster(ConstantVelocity(layout), layout, scaler, 8,
                     {"_target_": "cdpr_pipeline.models.references.ConstantVelocity",
                      "_partial_": True})
     path = fc.save(tmp_path / "fc.pt")
@@ -79,10 +84,11 @@ def test_virtual_data_is_a_valid_dataset_marked_virtual(small_lab, tmp_path):
     assert yaml.safe_load((out / "rig.yaml").read_text())["virtual"] is True
     assert len(v) == 5 and v.rig.virtual
     tr = v[0]
-    # it starts at rest at the first desired point: a constant-velocity rollout stays put
-    # until the desired trajectory would move it (here it never does: it is open loop)
+    # it starts at rest at the first desired point, then its increment grows by the creep
+    # every step (open loop): 0.45 m on x, y and z in 300 steps, written to 1e-8 m
     np.testing.assert_allclose(tr.position[0], tr.desired[0], atol=1e-9)
-    np.testing.assert_allclose(tr.position[-1], tr.position[0], atol=1e-6)
+    step = np.diff(tr.position, axis=0)
+    np.testing.assert_allclose(np.diff(step, axis=0), 1e-5, atol=1e-7)
     assert tr.n_samples == 301
 
 

@@ -3,10 +3,10 @@ predictor of ``fallback_dirs`` that stays in range drives the virtual runs, and
 ``virtual.json`` and the report say so; when none keeps a run in range the stage is not
 applicable, and the pipeline skips it with that reason.
 
-The predictors are constant-velocity extrapolations (a virtual run starts at rest, so it
-stays where it starts: in range) and the same with a bias of ``DRIFT_M`` per sample on
-every position increment (it crosses the foreign rig's 4 m frame within a few dozen
-samples: diverged).
+The predictors are constant-velocity extrapolations with a bias on every position
+increment: ``CREEP_M`` per sample moves a run a few centimetres in 0.5 s (in range; a run
+that never moves is unusable), ``DRIFT_M`` crosses the foreign rig's 4 m frame within a
+few dozen samples (diverged).
 """
 
 from __future__ import annotations
@@ -35,6 +35,8 @@ from cdpr_pipeline.tracking import PARENT_RUN_ENV
 
 #: the diverging predictors' bias on each position increment, m per sample
 DRIFT_M = 0.2
+#: the in-range predictors' bias: the run moves, and stays in range
+CREEP_M = 1e-5
 #: 3 + 2 + 1 virtual runs of 0.5 s
 COUNTS = ["trajectory.duration_s=0.5", "trajectory.counts.flat_circle=3",
           "trajectory.counts.oblique_circle=2", "trajectory.counts.flat_eight=1",
@@ -46,7 +48,7 @@ def data():
     return load_dataset(foreign_rig_path())
 
 
-def _train_dir(data, root: Path, name: str, drift_m: float = 0.0,
+def _train_dir(data, root: Path, name: str, drift_m: float = CREEP_M,
                freerun_rmse: float | None = None) -> Path:
     """A `cdpr train` out_dir: forecaster.pt (and metrics.json when a score is given)."""
     layout = FeatureLayout.for_rig(data.rig)
@@ -75,9 +77,9 @@ def test_a_predictor_whose_free_runs_all_diverge_gives_way_to_the_best_that_stay
     configured = _train_dir(data, tmp_path, "configured", DRIFT_M, 1e-5)
     # ranked first by its score, but its free runs diverge too
     diverging = _train_dir(data, tmp_path, "diverging", DRIFT_M, 1e-4)
-    worse = _train_dir(data, tmp_path, "worse", 0.0, 1e-2)
-    better = _train_dir(data, tmp_path, "better", 0.0, 1e-3)
-    unscored = _train_dir(data, tmp_path, "unscored", 0.0)        # no metrics.json: last
+    worse = _train_dir(data, tmp_path, "worse", CREEP_M, 1e-2)
+    better = _train_dir(data, tmp_path, "better", CREEP_M, 1e-3)
+    unscored = _train_dir(data, tmp_path, "unscored", CREEP_M)        # no metrics.json: last
     out = virtual(_config(configured / "forecaster.pt",
                           [configured, unscored, worse, diverging, better], tmp_path / "v"))
     runs = load_dataset(out)
@@ -97,8 +99,8 @@ def test_a_predictor_whose_free_runs_all_diverge_gives_way_to_the_best_that_stay
 
 
 def test_the_configured_predictor_drives_the_runs_when_they_stay_in_range(data, tmp_path):
-    configured = _train_dir(data, tmp_path, "configured", 0.0, 1e-2)
-    better = _train_dir(data, tmp_path, "better", 0.0, 1e-3)
+    configured = _train_dir(data, tmp_path, "configured", CREEP_M, 1e-2)
+    better = _train_dir(data, tmp_path, "better", CREEP_M, 1e-3)
     out = virtual(_config(configured / "forecaster.pt", [better], tmp_path / "v"))
     record = json.loads((out / RECORD).read_text())
     assert record["predictor"] == "configured" and record["fallback"] is False
