@@ -104,3 +104,17 @@ def test_a_periodic_torque_above_the_motion_band_is_never_none(tmp_path, seed):
     if record["verdict"] == "unnamed":
         assert record["gain"]["ci95"][0] > 0, text
     assert ADEQUATE not in record["summary"], text
+
+
+def test_power_band_finds_a_tone_above_white_noise(seed):
+    """A tone (2-40 Hz) in white noise ten times its power at 200 Hz: the band holding
+    80 % of the power above the noise floor brackets it, within a Welch bin."""
+    from cdpr_pipeline.discovery.bands import power_band_hz
+
+    rng = np.random.default_rng(seed)
+    tone = float(rng.uniform(2.0, 40.0))
+    t = np.arange(0, 60, 1 / 200)
+    x = np.sin(2 * np.pi * tone * t + rng.uniform(0, 6.3)) \
+        + np.sqrt(5.0) * rng.standard_normal(t.size)
+    lo, hi = power_band_hz(x, 200.0)
+    assert tone - 0.5 <= lo <= tone <= hi <= tone + 0.5, (seed, tone, lo, hi)
