@@ -3,9 +3,9 @@
 The regression analyses a band derived from the motion (the derivative filter's cut-off
 and the decimation, :func:`~cdpr_pipeline.data.reading.resolve_settings`).
 An effect periodic in a winch or axis angle can lie above it: its frequency is the
-angle's rate times its wavenumber. These functions read the band from the residual
-itself, at the full sample rate, so the diagnosis can say where an error sits and widen
-the analysed band to it.
+angle's rate times its wavenumber. These functions read where a residual's
+power sits above its noise floor, and the measurement noise the statistics rows carry,
+so the diagnosis can say where an unexplained error sits and whether it is material.
 """
 
 from __future__ import annotations
@@ -26,7 +26,8 @@ def excess_power(x: np.ndarray, fs: float, seconds: float = 4.0
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Frequencies and the power spectral density of ``x`` (rows, or rows x columns summed)
     above its white noise floor (Welch, Hann windows of ``seconds``, linear trend removed;
-    the floor is the median of the top :data:`FLOOR_SHARE` of the band)."""
+    the floor is the median of the top :data:`FLOOR_SHARE` of the band; bins within the
+    floor's scatter count as none)."""
     x = np.asarray(x, float)
     x = x[:, None] if x.ndim == 1 else x
     nper = int(min(len(x), max(16, round(seconds * fs))))
@@ -34,7 +35,12 @@ def excess_power(x: np.ndarray, fs: float, seconds: float = 4.0
     p = p.sum(axis=1)
     top = f > (1 - FLOOR_SHARE) * fs / 2
     floor = float(np.median(p[top])) if top.sum() >= 4 else 0.0
-    return f, np.clip(p - floor, 0.0, None)
+    # a bin counts only where it stands out of the floor's own scatter (Welch's average
+    # of K half-overlapping segments scatters by about 1/sqrt(K)): five times that, so
+    # that hundreds of noise bins leave about none above it (chi-square's right tail)
+    segments = max(1, 2 * len(x) // nper - 1)
+    stands = p > floor * (1 + 5 / np.sqrt(segments))
+    return f, np.where(stands, p - floor, 0.0)
 
 
 def power_band_hz(x: np.ndarray, fs: float, share: float = 0.8
@@ -49,13 +55,6 @@ def power_band_hz(x: np.ndarray, fs: float, share: float = 0.8
     lo = float(f[min(np.searchsorted(c, (1 - share) / 2), len(f) - 1)])
     hi = float(f[min(np.searchsorted(c, (1 + share) / 2), len(f) - 1)])
     return lo, max(hi, lo)
-
-
-def share_above(x: np.ndarray, fs: float, f_hz: float) -> float:
-    """The share of the residual's power above its noise floor that lies above ``f_hz``."""
-    f, p = excess_power(x, fs)
-    total = p.sum()
-    return float(p[f > f_hz].sum() / total) if total > 0 else 0.0
 
 
 def row_noise(signals: Sequence[RunSignals], channel: str = "torque") -> np.ndarray:

@@ -19,7 +19,12 @@ from typing import Any, Protocol
 import numpy as np
 
 from cdpr_pipeline.data.io import Dataset
-from cdpr_pipeline.data.reading import RegressionSettings, resolve_settings
+from cdpr_pipeline.data.reading import (
+    MAX_CUTOFF_FRACTION,
+    TRIM_PERIODS,
+    RegressionSettings,
+    resolve_settings,
+)
 from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.split import HELDOUT_FRACTION, MIN_HELDOUT_S, Split, heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
@@ -126,6 +131,14 @@ class DiagnosisSettings:
     #: ... and at least this share (%) of its measured signal's RMS (what "material"
     #: means where a recording carries no measurable noise)
     unexplained_min_error_pct: float = 0.1
+    #: the band follows the residual: a diagnosis that would be ``unexplained`` is made
+    #: once more on rows whose band is this many times wider (derivative cut-off and
+    #: decimation alike, at most 0.4 fs), the free-form angle harmonics as many times
+    #: more, the selection's alpha halved (a second look at the same data); a cause it
+    #: finds (never worse on held-out runs) is the verdict. An effect periodic in a winch
+    #: or axis angle lies at its wavenumber times the angle's rate, above a band derived
+    #: from the motion. 1 (or less): off
+    follow_residual: float = 4.0
 
 
 def diagnosis_split(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Split:
@@ -229,6 +242,9 @@ class Diagnosis:
     #: set when no cause was found although the held-out residual fails the validity
     #: tests with a material size (verdict ``unexplained``)
     unexplained: Unexplained | None = None
+    #: the band the statistics rows kept and where it came from (``motion``, or
+    #: ``residual`` when :attr:`DiagnosisSettings.follow_residual` widened it)
+    band: dict[str, Any] = field(default_factory=dict)
 
     @property
     def verdict(self) -> str:
@@ -253,6 +269,7 @@ class Diagnosis:
             "verdict": self.verdict,
             "summary": self.sentence,
             "unexplained": self.unexplained.as_dict() if self.unexplained else None,
+            "band": dict(self.band),
             "extended_model": extended_model_file,
             "extended": {"metrics": self.extended_metrics.as_dict()},
             "gain": self.gain.as_dict(),
@@ -748,10 +765,58 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     plots["before_after"] = {"before": before_held.stacked(channel),
                              "after": after_held.stacked(channel), "channel": channel,
                              "t": np.concatenate([s.row_times() for s in held])}
-    return Diagnosis(str(dataset.root), rig, tuple(train_names), tuple(held_names), nominal,
-                     extended, tuple(causes), selection.steps, tuple(found), nominal_metrics,
-                     extended_metrics, gain, validity, closed, blackbox, sentence, clock, plots,
-                     tuple(extension), unusable, unexplained)
+    band = {"analysed_hz": analysed_band_hz(settings.regression, rig.sample_rate_hz),
+            "derivative_cutoff_hz": float(settings.regression.filter.cutoff_hz),
+            "decimate": int(settings.regression.decimate), "from": "motion"}
+    result = Diagnosis(str(dataset.root), rig, tuple(train_names), tuple(held_names), nominal,
+                       extended, tuple(causes), selection.steps, tuple(found), nominal_metrics,
+                       extended_metrics, gain, validity, closed, blackbox, sentence, clock,
+                       plots, tuple(extension), unusable, unexplained, band)
+    wider = _follow_residual(settings, float(rig.sample_rate_hz)) if unexplained else None
+    if wider is None:
+        return result
+    log.info("unexplained in the band from the motion (0-%.3g Hz): the causes are sought "
+             "again on 0-%.3g Hz (derivative cut-off %.3g Hz, decimation by %d, %d angle "
+             "harmonics, alpha %.3g)", band["analysed_hz"],
+             analysed_band_hz(wider.regression, rig.sample_rate_hz),
+             wider.regression.filter.cutoff_hz, wider.regression.decimate,
+             wider.freeform.harmonics if wider.freeform else 0, wider.selection.alpha)
+    again = diagnose(dataset, wider)
+    clock = {**{f"{k} (motion band)": v for k, v in clock.items()}, **again.timings}
+    if not again.causes:
+        log.info("nothing found on the wider band either: the verdict stays unexplained")
+        return dataclasses.replace(
+            result, timings=clock, band={**band, "tried": {**again.band,
+                                                           "verdict": again.verdict}},
+            sentence=result.sentence + f" Sought again on 0-{again.band['analysed_hz']:.3g} "
+            f"Hz (the band following the residual): no cause found there either.")
+    widened = {**again.band, "from": "residual", "motion": band}
+    text = (f"The nominal model was unexplained in the band derived from the motion "
+            f"(0-{band['analysed_hz']:.3g} Hz); the causes were sought again on "
+            f"0-{widened['analysed_hz']:.3g} Hz. ")
+    return dataclasses.replace(again, timings=clock, band=widened,
+                               sentence=text + again.sentence)
+
+
+def _follow_residual(settings: DiagnosisSettings, fs: float) -> DiagnosisSettings | None:
+    """The settings of the second look (:attr:`DiagnosisSettings.follow_residual`), or
+    None when it is off or the band cannot widen (already at 0.4 fs)."""
+    factor = float(settings.follow_residual)
+    reg = settings.regression
+    cutoff = min(factor * float(reg.filter.cutoff_hz), MAX_CUTOFF_FRACTION * fs)
+    if not factor > 1 or not cutoff > float(reg.filter.cutoff_hz) * (1 + 1e-9):
+        return None
+    grow = cutoff / float(reg.filter.cutoff_hz)
+    widened = dataclasses.replace(
+        reg, filter=dataclasses.replace(reg.filter, cutoff_hz=float(cutoff),
+                                        trim_s=float(TRIM_PERIODS / cutoff)),
+        decimate=max(1, int(fs // cutoff)))
+    freeform = settings.freeform and dataclasses.replace(
+        settings.freeform, harmonics=int(np.ceil(settings.freeform.harmonics * grow)))
+    return dataclasses.replace(
+        settings, regression=widened, freeform=freeform, follow_residual=1.0,
+        selection=dataclasses.replace(settings.selection,
+                                      alpha=settings.selection.alpha / 2))
 
 
 def nominal_rate(signals: Sequence[RunSignals]) -> float:
