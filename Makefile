@@ -71,7 +71,7 @@ test-slow: $(STAMP)
 ## docs/measurements.md (bench_diagnose.py: see its own docstring)
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks.bench_simulator
-	$(BIN)/python benchmarks/bench_diagnose.py
+	$(BIN)/python -m benchmarks.bench_diagnose
 	$(BIN)/python -m benchmarks.bench_foreign_diagnose
 	$(BIN)/python -m benchmarks.bench_emps
 

@@ -10,7 +10,7 @@ loop, five 15 s runs): the ratio says how the command compares with work of know
 on the machine it ran on, which matters on a machine shared with other jobs (the CPU
 time then says more than the wall time).
 
-    python benchmarks/bench_diagnose.py [--cases none stribeck_friction hard:stribeck_friction]
+    python -m benchmarks.bench_diagnose [--cases none stribeck_friction hard:stribeck_friction]
 
 A case ``hard:EFFECT`` states no Coulomb law in rig.yaml (the spec's default, a hard
 sign) at 250 Hz, the blind sets' setting. Figures go to docs/measurements.md.
@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from measurements import record
+from benchmarks.measurements import record
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.sim.effects import make_effect
@@ -130,7 +130,7 @@ def main() -> None:
                 f"during the run: {os.getloadavg()[0]:.1f} (the wall time includes waiting "
                 f"for the CPU; the CPU time does not).")
     record("diagnose", "Speed of cdpr diagnose", "\n".join(body),
-           command="python benchmarks/bench_diagnose.py " + " ".join(
+           command="python -m benchmarks.bench_diagnose " + " ".join(
                f"--cases {' '.join(args.cases)}".split()))
 
 

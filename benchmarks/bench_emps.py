@@ -11,7 +11,7 @@ friction_library`, 12 coefficients). Also: the share of each model's cross-test 
 that lies in the 50 ms after each force pulse's edge. Writes the tables to
 ``docs/measurements.md`` (section ``emps``).
 
-    python benchmarks/bench_emps.py
+    python -m benchmarks.bench_emps
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from measurements import record
+from benchmarks.measurements import record
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.convert import EMPS_PUBLISHED_RELATIVE_ERROR, convert_emps
@@ -113,7 +113,7 @@ def main() -> None:
     ])
     print(table)
     record("emps", "EMPS: one protocol per comparison", table,
-           command="python benchmarks/bench_emps.py")
+           command="python -m benchmarks.bench_emps")
 
 
 if __name__ == "__main__":

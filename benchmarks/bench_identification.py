@@ -8,7 +8,7 @@
   virtual runs, the virtual runs alone, and how many real runs they save;
 - EMPS: LSM against the published numbers.
 
-    python benchmarks/bench_identification.py [--data DIR] [--virtual DIR]
+    python -m benchmarks.bench_identification [--data DIR] [--virtual DIR]
 """
 
 from __future__ import annotations

@@ -48,9 +48,16 @@ def test_what_nothing_tried_explains_is_unexplained_and_located(tmp_path, seed):
     u = record["unexplained"]
     eff = case.truth.effects[0]
     affected = {f"u{c + 1}" for c in eff.channels}
-    # where it sits: on affected winches, among them the column with the largest
-    # held-out error, with most of the error, and the failed tests named
-    assert set(u["channels"]) <= affected, case.describe()
+    # where it sits: on the affected winches, with most of the error, and the failed tests
+    # named. A 3-cable platform's tensions follow from its motion alone, so the residual
+    # stays on the affected winches; with more cables than the platform's 3 degrees of
+    # freedom the tensions share an internal force, through which one winch's torque error
+    # reaches the others (and an affected winch with a small amplitude may fall below the
+    # materiality threshold): there the named winches include an affected one
+    if case.rig.n == 3:
+        assert set(u["channels"]) <= affected, case.describe()
+    else:
+        assert set(u["channels"]) & affected, case.describe()
     assert u["share_of_error"] > 0.5, case.describe()
     assert u["failed_tests"] and u["band_hz"][1] >= u["band_hz"][0] >= 0.0
     for col in u["columns"]:
