@@ -384,3 +384,23 @@ def test_suite_covers_both_kinds_and_forty_cases() -> None:
     assert len(CASES) >= 40
     assert {c.kind for c in CASES} == {"cdpr", "axes"}
     assert len({(c.kind, c.name) for c in CASES}) == len(CASES)
+
+
+@pytest.mark.slow
+def test_static_run_beside_moving_ones_is_warned_and_left_out(bases, tmp_path,
+                                                              monkeypatch) -> None:
+    """A hold the user may have recorded on purpose: a warning, and diagnose runs on the
+    moving run alone (the static held-out spiral once crashed it), within the limit."""
+    monkeypatch.chdir(tmp_path)
+    data = tmp_path / "data"
+    shutil.copytree(bases["cdpr"], data)
+    still(["x", "y", "z", "xd", "yd", "zd", "l1", "l2", "l3"], CS)(data)
+    out_dir = tmp_path / "out"
+    code, text, seconds = run_command(["diagnose", f"data.path={data}", f"out_dir={out_dir}",
+                                       f"tracking.uri=sqlite:///{tmp_path / 'mlflow.db'}",
+                                       "blackbox.enabled=false"])
+    assert code == 0 and seconds < LIMIT_S, text[-3000:]
+    assert f"{CS}, column 'x': the platform never moves" in text
+    assert "left out of the analysis" in text
+    record = yaml.safe_load((out_dir / "diagnosis.json").read_text())
+    assert "001_spiral" not in str(record.get("heldout")) + str(record.get("train"))

@@ -257,3 +257,28 @@ def test_sparse_regression_stops_at_its_step_cap(caplog) -> None:
     with caplog.at_level(logging.WARNING):
         capped = L0Regression(max_terms=8, max_steps=2).fit(X, y)
     assert len(capped.support_) == 2 and "max_steps=2" in caplog.text
+
+
+def test_position_jump_faster_than_any_drive_is_refused(axes_dir: Path) -> None:
+    file = "trajectories/000_sine.csv"
+
+    def spike(frame):
+        frame.loc[30, "q1"] = 5000.0          # one sample of 5 km at 100 Hz: 5e5 m/s
+        return frame
+    edit_csv(axes_dir, file, spike)
+    found = errors(axes_dir)
+    assert [(p.column, p.row, p.kind) for p in found] == [("q1", 32, "jump")]
+    assert found[0].count == 2                 # into the spike and out of it
+
+
+def test_rig_number_beyond_any_range_or_float(cdpr_dir: Path) -> None:
+    text = (cdpr_dir / "rig.yaml").read_text()
+    (cdpr_dir / "rig.yaml").write_text(text.replace("platform_mass_kg: 2.0",
+                                                    "platform_mass_kg: " + "7" * 400))
+    problem, = errors(cdpr_dir)
+    assert (problem.file, problem.column) == ("rig.yaml", "platform_mass_kg")
+    assert len(str(problem)) < 200
+    (cdpr_dir / "rig.yaml").write_text(text.replace("platform_mass_kg: 2.0",
+                                                    "platform_mass_kg: 1.0e+20"))
+    problem, = errors(cdpr_dir)
+    assert "beyond any physical range" in problem.message
