@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from contextvars import ContextVar
@@ -203,16 +204,29 @@ def log_params_once(client, run_id: str, params: Mapping[str, str]) -> None:
         client.log_batch(run_id, params=new[lo:lo + 100])
 
 
+def metric_name(name: str) -> str:
+    """``name`` in the characters MLflow accepts (alphanumerics, ``_ - . : /`` and
+    spaces): brackets dropped, anything else replaced by ``_``. A phase such as
+    ``signals (motion band)`` becomes ``signals_motion_band``; MLflow refuses the whole
+    batch over one bad name.
+
+    >>> metric_name("time/signals_(motion_band)_s")
+    'time/signals_motion_band_s'
+    """
+    return re.sub(r"[^\w\-. :/]", "_", re.sub(r"[()\[\]{}]", "", name))
+
+
 def log_metrics(client, run_id: str, metrics: Mapping[str, float], step: int = 0) -> None:
-    """Log many metrics in batches (one request per 500). Non-finite values (a NaN
-    time-to-best, an undefined R^2) are left out rather than stored as numbers."""
+    """Log many metrics in batches (one request per 500), their names made acceptable to
+    MLflow (:func:`metric_name`). Non-finite values (a NaN time-to-best, an undefined
+    R^2) are left out rather than stored as numbers."""
     import math
     import time
 
     from mlflow.entities import Metric
 
     now = int(time.time() * 1000)
-    items = [Metric(k, float(v), now, step) for k, v in metrics.items()
+    items = [Metric(metric_name(k), float(v), now, step) for k, v in metrics.items()
              if v is not None and math.isfinite(float(v))]
     for lo in range(0, len(items), 500):
         client.log_batch(run_id, metrics=items[lo:lo + 500])

@@ -5,7 +5,12 @@ from __future__ import annotations
 from mlflow.tracking import MlflowClient
 
 from cdpr_pipeline.tracking import experiment_id, tracking_uri
-from cdpr_pipeline.tracking.mlflow import DEFAULT_TRACKING_URI, artifact_location
+from cdpr_pipeline.tracking.mlflow import (
+    DEFAULT_TRACKING_URI,
+    artifact_location,
+    log_metrics,
+    metric_name,
+)
 
 
 def test_uri_order(monkeypatch, tmp_path):
@@ -31,3 +36,15 @@ def test_artifacts_live_beside_a_local_store_wherever_the_code_runs(tmp_path, mo
     assert exp.artifact_location == (tmp_path / "store" / "mlruns").as_uri()
     assert experiment_id(client, "x") == exp.experiment_id          # found, not re-created
     assert artifact_location("http://host:5000") is None            # a server decides
+
+
+def test_metric_names_mlflow_refuses_are_made_acceptable(tmp_path):
+    """A diagnosis phase named ``signals (motion band)`` made MLflow refuse the whole
+    batch (and `cdpr diagnose` fail after writing its outputs)."""
+    client = MlflowClient(f"sqlite:///{tmp_path / 'mlflow.db'}")
+    run = client.create_run(experiment_id(client, "x"))
+    log_metrics(client, run.info.run_id, {"time/signals_(motion_band)_s": 1.5,
+                                          "gain/relative": 0.25, "nan": float("nan")})
+    got = client.get_run(run.info.run_id).data.metrics
+    assert got == {"time/signals_motion_band_s": 1.5, "gain/relative": 0.25}
+    assert metric_name("a b/c:d-e.f") == "a b/c:d-e.f" and metric_name("x*y") == "x_y"
