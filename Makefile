@@ -56,11 +56,13 @@ test: $(STAMP)
 ## test-pipeline: the end-to-end pipeline tests (cdpr repro profile=tiny in scratch copies):
 ## on the virtual lab (with a DVC push/clone/pull round trip), then ingesting the shipped
 ## foreign rig and the shipped EMPS data; and scaling out: DDP on 2 CPU processes, joblib
-## and submitit_local sweeps (the files side by side, one process each; each repro's wall
+## and submitit_local sweeps; the wheel installed into a fresh venv, a diagnose killed
+## mid-write (the files side by side, one process each; each repro's wall
 ## time is printed)
 test-pipeline: $(STAMP)
 	$(BIN)/python -m pytest -m slow $(XDIST) tests/stages/test_pipeline_e2e.py \
 		tests/stages/test_pipeline_ingest_e2e.py tests/stages/test_scale_out.py \
+		tests/test_install.py tests/test_command_outputs.py \
 		--durations=3 $(PYTEST_ARGS)
 
 ## test-slow: every slow end-to-end test
