@@ -127,7 +127,7 @@ class DiagnosisSettings:
     #: tests at hundreds of rows with errors of 0.5-5.6 times it (filter, tension and
     #: noise artefacts: 12 independent datasets); a periodic torque above the analysed
     #: band left 7-39 times it
-    unexplained_noise_ratio: float = 10.0
+    unexplained_noise_ratio: float = 20.0
     #: ... and at least this share (%) of its measured signal's RMS (what "material"
     #: means where a recording carries no measurable noise)
     unexplained_min_error_pct: float = 0.1
