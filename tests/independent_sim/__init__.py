@@ -46,7 +46,9 @@ anchor_offset                 cdpr   true anchor moved by a random direction, 0.
 drum_radius_error             cdpr   true radius off by +-0.02..0.05 r (m)
 cable_elasticity              cdpr   ``EA`` (N) giving a static stretch of 2..6 mm at the
                                      centre; cables not named stay 50x stiffer than the
-                                     stiffest named one
+                                     stiffest named one. Kelvin-Voigt loss time constant:
+                                     each cable's own mode damped at 10 % (1.5-3.5 ms), or
+                                     drawn in a range given (``damping_time_s=``)
 actuator_lag                  both   first-order lag of the applied torque, time constant
                                      3..15 ms (cdpr), 2..10 ms (axes), at most 0.3 / w_c
 quadratic_drag                both   extra ``c w |w|``, ``c`` in 0.3..0.8 F_v / w_typ

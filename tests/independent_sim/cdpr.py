@@ -538,8 +538,12 @@ class _ElasticPlant:
         length = unit_vectors(self.anchors, center)[1]
         stiff = self.ea / length
         n = self.r.size
-        # a loss time constant per cable: the cable alone carrying m/n is damped at 10 %
+        # a loss time constant per cable: the cable alone carrying m/n is damped at 10 %,
+        # unless the effect states the cable's own
         self.tau_d = 2 * self.DAMPING_RATIO / np.sqrt(stiff * n / self.m)
+        if model.cable_damping_s is not None:
+            self.tau_d = np.where(np.isfinite(model.cable_damping_s), model.cable_damping_s,
+                                  self.tau_d)
         omega = np.sqrt(np.r_[stiff * self.r**2 / self.inertia, stiff.sum() / self.m])
         rates = np.r_[stiff * self.tau_d * self.r**2 / self.inertia,
                       (stiff * self.tau_d).sum() / self.m]

@@ -108,7 +108,8 @@ def _signed(rng: np.random.Generator, lo: float, hi: float, size: int) -> np.nda
 
 def draw_effect(name: str, rig: Any, rng: np.random.Generator,
                 channels: tuple[int, ...] | list[int] | None = None,
-                frequency_hz: tuple[float, float] | None = None) -> Effect:
+                frequency_hz: tuple[float, float] | None = None,
+                damping_time_s: tuple[float, float] | None = None) -> Effect:
     """Draw one hidden effect at a random magnitude within its documented range.
 
     Parameters
@@ -126,6 +127,11 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
         ``periodic_torque`` only: draw its frequency at the channel's typical speed
         uniformly in this range instead of its wavenumber (cdpr: rounded to whole
         periods per motor turn, at least one), e.g. to place it above the motion's band.
+    damping_time_s : (float, float), optional
+        ``cable_elasticity`` only: draw the named cables' Kelvin-Voigt loss time
+        constant (s, one for all: one cable material) uniformly in this range, after the
+        stiffness (which stays the draw it would be without it); omitted, each cable's
+        own mode is damped at 10 % (:class:`~.cdpr._ElasticPlant`, 1.5-3.5 ms).
 
     Returns
     -------
@@ -183,6 +189,9 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
         stretch = rng.uniform(0.002, 0.006, m)
         tension, length = rig.static_tension(), rig.home_lengths()
         params = {"ea_n": per_channel(tension[idx] * length[idx] / stretch)}
+        if damping_time_s is not None:
+            # one material: one time constant for every named cable
+            params["damping_time_s"] = per_channel(np.full(m, rng.uniform(*damping_time_s)))
     elif name == "actuator_lag":
         hi = 0.015 if rig.kind == "cdpr" else 0.010
         lag = rng.uniform(0.003 if rig.kind == "cdpr" else 0.002, hi, m)
@@ -220,6 +229,8 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
         raise AssertionError(name)
     if frequency_hz is not None and name != "periodic_torque":
         raise ValueError(f"frequency_hz applies to periodic_torque, not {name!r}")
+    if damping_time_s is not None and name != "cable_elasticity":
+        raise ValueError(f"damping_time_s applies to cable_elasticity, not {name!r}")
     return Effect(name, chans, params)
 
 
@@ -251,6 +262,9 @@ class TrueModel:
     anchors: np.ndarray | None = None
     radius: np.ndarray | None = None
     ea: np.ndarray | None = None
+    #: Kelvin-Voigt loss time constant per cable, s; NaN (or None for all): the
+    #: elastic plant's default (each cable's own mode damped at 10 %)
+    cable_damping_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.refresh()
@@ -357,6 +371,10 @@ def true_model(rig: Any, effects: list[Effect]) -> TrueModel:
         elif eff.name == "cable_elasticity":
             ea = np.where(on, p["ea_n"], np.inf)
             model.ea = ea if model.ea is None else np.minimum(model.ea, ea)
+            if "damping_time_s" in p:
+                base = np.full(n, np.nan) if model.cable_damping_s is None \
+                    else model.cable_damping_s
+                model.cable_damping_s = np.where(on, p["damping_time_s"], base)
         elif eff.name == "actuator_lag":
             model.lag_s = model.lag_s + p["time_constant_s"]
         elif eff.name == "quadratic_drag":

@@ -1,0 +1,199 @@
+"""The loss time constant of elastic cables, from the lag of their stretch.
+
+A Kelvin-Voigt cable of stiffness ``EA`` and loss time constant ``tau`` carries
+``t = EA (e + tau e') / l0``, ``e = L - l0`` its elongation (the motion-capture geometric
+length minus the encoder's reeled-out length). So ``e + tau e' = s``, ``s = t L / (EA + t)``
+the quasi-static stretch the ``cable_elasticity`` candidates fit: the elongation follows
+the stretch through a first-order lag. At the motion's frequencies that lag is a small
+quadrature part, about ``omega tau`` of the stretch change (tens of micrometres on the
+lab's cables), which moves the length residual's sum of squares by a few per cent only,
+yet over thousands of rows it is a likelihood-ratio of tens to hundreds: the data can
+determine ``tau``. Tensions are not recorded; they come from the platform's acceleration
+(:meth:`~cdpr_pipeline.sim.plant.Plant.load_tensions`).
+
+The band matters. The tension model is the acceleration low-passed at
+:data:`~cdpr_pipeline.discovery.signals.STRETCH_CUTOFF_HZ` (a wider acceleration shares
+the mocap noise of the elongation: errors in variables); so the elongation is compared
+with it in that band only, both through the same zero-phase low-pass. Measured on the
+virtual lab (``EA = 1e4`` N, ``tau = 25`` ms, the diagnosis experiment): noiseless, the
+fit gives 25.0 ms in that band, 28.1 ms (+13 %) when the elongation keeps the 15 Hz band
+the tension does not have; with noise, tensions from a 6 Hz acceleration gave -51 % on
+one draw of two, the 3 Hz band -4 % (one standard error).
+
+The stiffness stays the candidate's: ``tau`` is fitted afterwards, with each cable's
+compliance free to move by a factor (the two are nearly orthogonal: in phase and in
+quadrature) and the encoder zero per run and cable. One ``tau`` for every elastic cable
+(one material). Its standard error is the profile's curvature at the minimum with the
+residual variance; the residual rows are the low-pass band sampled at its Nyquist rate
+(nearly independent). ``tau`` is reported only when its 95 % interval lies within
+:data:`REPORT_WITHIN` of the value; otherwise the interval is still given, with the
+reason (e.g. a stiff cable stretches too little for the lag to show above the mocap
+noise).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+from scipy.signal import lfilter
+
+from cdpr_pipeline.discovery.signals import STRETCH_CUTOFF_HZ, RunSignals, zero_phase_lowpass
+from cdpr_pipeline.sim.plant import Plant
+
+#: largest time constant searched, s (a cable mode damped far beyond critical)
+TAU_MAX_S = 0.2
+#: the 95 % interval's half-width, relative to the value, within which ``tau`` is reported
+REPORT_WITHIN = 0.25
+#: two-sided 95 % normal quantile
+Z95 = 1.959963984540054
+#: seconds trimmed at both ends of a run after the stretch-band low-pass (its edge effects)
+TRIM_S = 1.0
+
+
+@dataclass(frozen=True)
+class DampingFit:
+    """The fitted loss time constant and what the data say of it.
+
+    Attributes
+    ----------
+    tau_s : float
+        Best-fitting time constant, s (within ``[0, TAU_MAX_S]``).
+    stderr_s : float
+        Its standard error, s (``inf`` where the profile is flat).
+    interval_s : (float, float)
+        95 % interval, clipped at 0.
+    chi2_rigid : float
+        Likelihood-ratio statistic of ``tau = 0`` against the fit.
+    rows : int
+        Residual rows used (every cable together).
+    reported : bool
+        The interval lies within :data:`REPORT_WITHIN` of the value.
+    reason : str
+        Why it is not reported (empty when it is).
+    """
+
+    tau_s: float
+    stderr_s: float
+    interval_s: tuple[float, float]
+    chi2_rigid: float
+    rows: int
+    reported: bool
+    reason: str
+
+
+def kelvin_voigt_lag(x: np.ndarray, tau: float, fs: float) -> np.ndarray:
+    """``e`` with ``e + tau e' = x`` along axis 0, started at rest (``e = x[0]``): exact
+    for ``x`` linear between samples, so the lag has no half-sample bias (a plain
+    one-pole recursion delays by ``tau - T/2``, 1.7 ms at 300 Hz)."""
+    if tau <= 0.0:
+        return x
+    h = 1.0 / fs
+    a = np.exp(-h / tau)
+    b0 = 1.0 - tau / h * (1.0 - a)
+    b1 = tau / h * (1.0 - a) - a
+    return lfilter([b0, b1], [1.0, -a], x, axis=0, zi=(a + b1) * x[:1])[0]
+
+
+class _Problem:
+    """The elongation residual of every run in the stretch band, ``tau`` free."""
+
+    def __init__(self, model: Plant, nominal: Plant, signals: Sequence[RunSignals],
+                 cables: np.ndarray) -> None:
+        self.runs = []
+        # encoder length = const + (r_nominal / r_model) * reeled length
+        gain = (nominal.drum_radius / model.drum_radius)[cables]
+        ea = model.cable_stiffness[cables]
+        for sig in signals:
+            tension, g, _ = model.load_tensions(sig.position, sig.slow_acceleration)
+            tension, g = np.maximum(tension[:, cables], 0.0), g[:, cables]
+            stretch = gain * g * tension / (ea + tension)
+            # measured minus the quasi-static prediction (reeled = g - s), up to the zero
+            measured = sig.lengths[:, cables] - gain * (g - stretch)
+            self.runs.append((sig, stretch, self._rows(sig, measured)))
+
+    @staticmethod
+    def _rows(sig: RunSignals, x: np.ndarray) -> np.ndarray:
+        """The stretch band's rows, each run's mean (the encoder zero) removed."""
+        filt = replace(sig.settings.filter, cutoff_hz=min(STRETCH_CUTOFF_HZ,
+                                                          float(sig.settings.filter.cutoff_hz)))
+        trim = int(round(TRIM_S * sig.fs))
+        thin = max(1, int(sig.fs // (2.0 * float(filt.cutoff_hz))))
+        rows = zero_phase_lowpass(x, filt, sig.fs)[trim:len(x) - trim:thin]
+        return rows - rows.mean(axis=0)
+
+    def sse(self, tau: float) -> tuple[float, int]:
+        """Residual sum of squares at ``tau`` with each cable's compliance factor fitted
+        (linear), and the number of rows."""
+        lag, prediction = [], []
+        for sig, stretch, measured in self.runs:
+            lagged = kelvin_voigt_lag(stretch, tau, sig.fs)
+            # elongation e_tau instead of s: the reeled length is g - e_tau, the encoder
+            # reads (s - e_tau) more; a compliance factor (1 + d) scales e_tau
+            lag.append(self._rows(sig, stretch - lagged) - measured)
+            prediction.append(self._rows(sig, lagged))
+        r, x = np.concatenate(lag), np.concatenate(prediction)
+        d = -(r * x).sum(axis=0) / np.maximum((x * x).sum(axis=0), 1e-300)
+        return float(((r + d * x) ** 2).sum()), r.size
+
+
+def fit_cable_damping(model: Plant, nominal: Plant, signals: Sequence[RunSignals]
+                      ) -> DampingFit | None:
+    """Fit the loss time constant of ``model``'s elastic cables (see the module).
+
+    Parameters
+    ----------
+    model : Plant
+        The model with its ``cable_elasticity`` (finite ``EA`` on the elastic cables).
+    nominal : Plant
+        The rig as stated (its drum radii turn angles into encoder lengths).
+    signals : sequence of RunSignals
+        The runs to fit on (the diagnosis' training runs).
+
+    Returns
+    -------
+    DampingFit, or None when the model has no elastic cable or the runs too few rows.
+    """
+    if not model.elastic:
+        return None
+    cables = np.flatnonzero(np.isfinite(model.cable_stiffness))
+    if cables.size == 0:
+        return None
+    problem = _Problem(model, nominal, signals, cables)
+    sse0, rows = problem.sse(0.0)
+    n_free = cables.size * (1 + len(problem.runs)) + 1
+    if rows <= 2 * n_free:
+        return None
+    # a coarse grid first (the profile need not be convex over 0-200 ms), then refine
+    grid = np.r_[0.0, np.geomspace(1e-3, TAU_MAX_S, 24)]
+    values = [problem.sse(float(t))[0] for t in grid]
+    k = int(np.argmin(values))
+    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+    best = minimize_scalar(lambda t: problem.sse(float(t))[0], bounds=(lo, hi),
+                           method="bounded", options={"xatol": 1e-5})
+    tau = float(best.x) if best.fun < values[k] else float(grid[k])
+    sse = min(float(best.fun), values[k])
+    sigma2 = sse / (rows - n_free)
+    # curvature of the profile (central difference; one-sided at the lower bound)
+    h = max(0.05 * tau, 2e-4)
+    if tau > h:
+        curv = (problem.sse(tau + h)[0] - 2 * sse + problem.sse(tau - h)[0]) / h**2
+    else:
+        curv = (problem.sse(tau + 2 * h)[0] - 2 * problem.sse(tau + h)[0] + sse) / h**2
+    stderr = float(np.sqrt(2 * sigma2 / curv)) if curv > 0 else float("inf")
+    interval = (max(tau - Z95 * stderr, 0.0), tau + Z95 * stderr)
+    chi2 = max(sse0 - sse, 0.0) / sigma2
+    half = Z95 * stderr
+    if not np.isfinite(stderr) or interval[0] <= 0.0:
+        reason = (f"the data do not determine it: the 95 % interval "
+                  f"{1e3 * interval[0]:.3g}-{1e3 * interval[1]:.3g} ms includes no damping "
+                  f"(the stretch's lag does not show above the length noise)")
+    elif half > REPORT_WITHIN * tau:
+        reason = (f"the data determine it only to +-{100 * half / tau:.0f} % (95 % interval "
+                  f"{1e3 * interval[0]:.3g}-{1e3 * interval[1]:.3g} ms), not within "
+                  f"{100 * REPORT_WITHIN:.0f} %")
+    else:
+        reason = ""
+    return DampingFit(tau, stderr, interval, chi2, rows, not reason, reason)
