@@ -41,6 +41,7 @@ from scipy.optimize import minimize_scalar
 from scipy.signal import lfilter
 
 from cdpr_pipeline.discovery.signals import STRETCH_CUTOFF_HZ, RunSignals, zero_phase_lowpass
+from cdpr_pipeline.sim.effects import CableElasticity
 from cdpr_pipeline.sim.plant import Plant
 
 #: largest time constant searched, s (a cable mode damped far beyond critical)
@@ -197,3 +198,16 @@ def fit_cable_damping(model: Plant, nominal: Plant, signals: Sequence[RunSignals
     else:
         reason = ""
     return DampingFit(tau, stderr, interval, chi2, rows, not reason, reason)
+
+
+def with_fitted_damping(effect: CableElasticity, model: Plant, nominal: Plant,
+                        signals: Sequence[RunSignals]) -> CableElasticity:
+    """``effect`` (part of ``model``) with the time constant the data give: set where
+    :func:`fit_cable_damping` reports it, left unknown (None) otherwise; the interval
+    and the reason go with it. Unchanged when nothing could be fitted."""
+    fit = fit_cable_damping(model, nominal, signals)
+    if fit is None:
+        return effect
+    return replace(effect, damping_time_s=fit.tau_s if fit.reported else None,
+                   damping_interval_s=[float(v) for v in fit.interval_s],
+                   damping_note=fit.reason or None)

@@ -31,6 +31,7 @@ from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.data.validation import check_run_lengths
 from cdpr_pipeline.discovery.bands import power_band_hz, row_noise
 from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
+from cdpr_pipeline.discovery.damping import with_fitted_damping
 from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
 from cdpr_pipeline.discovery.freeform import FreeFormSearch
 from cdpr_pipeline.discovery.residuals import (
@@ -81,7 +82,7 @@ from cdpr_pipeline.identification.pipeline import (
     trim_words,
 )
 from cdpr_pipeline.identification.regressors import WinchRegression
-from cdpr_pipeline.sim.effects import Effect, WinchParameterError
+from cdpr_pipeline.sim.effects import CableElasticity, Effect, WinchParameterError
 from cdpr_pipeline.sim.plant import smooth_sign
 from cdpr_pipeline.wavelet.split import WaveletSplit, band_energies
 
@@ -714,6 +715,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         log.info("never worse: %s withdrawn (held-out gain %.1f %%, 95 %% CI %.1f to %.1f %%)",
                  dropped.label, 100 * gain.relative, 100 * gain.ci95[0], 100 * gain.ci95[1])
     gain = dataclasses.replace(gain, withdrawn=tuple(withdrawn))
+    causes, extended = _cable_damping(causes, nominal, train)
     if unusable:
         unusable = dataclasses.replace(unusable, kept=any(c.label == first.label for c in causes))
 
@@ -796,6 +798,25 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
             f"0-{widened['analysed_hz']:.3g} Hz. ")
     return dataclasses.replace(again, timings=clock, band=widened,
                                sentence=text + again.sentence)
+
+
+def _cable_damping(causes: list[Judgement], nominal: Model, train: list[RunSignals]
+                   ) -> tuple[list[Judgement], Model]:
+    """The causes with every cable elasticity's loss time constant fitted on the
+    training runs (:mod:`~cdpr_pipeline.discovery.damping`), and the extended model
+    they make. The residuals predict the quasi-static stretch, so no gain changes."""
+    extended = nominal.with_effects([e for c in causes for e in c.effects])
+    if not any(isinstance(e, CableElasticity) for c in causes for e in c.effects):
+        return causes, extended
+    out = []
+    for c in causes:
+        effects = tuple(with_fitted_damping(e, extended, nominal, train)
+                        if isinstance(e, CableElasticity) else e for e in c.effects)
+        for e in effects:
+            if isinstance(e, CableElasticity) and e.damping_interval_s is not None:
+                log.info("cable damping: %s", e.describe().split("; ", 1)[-1])
+        out.append(dataclasses.replace(c, effects=effects))
+    return out, nominal.with_effects([e for c in out for e in c.effects])
 
 
 def _follow_residual(settings: DiagnosisSettings, fs: float) -> DiagnosisSettings | None:

@@ -564,12 +564,13 @@ class CableElasticity(Effect):
     value (every cable in ``cables``) or one per cable in ``cables`` (see
     :func:`per_winch`); cables not listed stay rigid.
 
-    ``damping_time_s`` None: not known, the plant keeps its own (what the diagnosis
-    fits: its length residual is the quasi-static stretch, which does not determine the
-    damping; measured on independent-generator cables with 2-3.4 ms of true loss time
-    constant, the residual's sum of squares moves by under 4 % between no damping and
-    twice the truth, so a fitted value would be noise and a default would be reported
-    as if it were found)."""
+    ``damping_time_s``: the Kelvin-Voigt loss time constant, s; None: not known, the
+    plant keeps its own. The candidates fit the stiffness only (their length residual
+    is the quasi-static stretch); the diagnosis then fits the time constant from the
+    stretch's lag behind the tension (:mod:`cdpr_pipeline.discovery.damping`) and sets
+    it only where its 95 % interval (``damping_interval_s``) lies within 25 % of it;
+    otherwise ``damping_note`` says why it is left unknown (a stiff cable's stretch is
+    too small for the lag to show above the motion-capture noise)."""
 
     name: ClassVar[str] = "cable_elasticity"
     expression: ClassVar[str] = "dl = -t l / (EA + t)"
@@ -580,6 +581,10 @@ class CableElasticity(Effect):
     ea_n: float | list[float] = 2.0e4
     damping_time_s: float | None = 2e-3
     cables: list[int] | None = None
+    #: the fitted time constant's 95 % interval, s (None: not fitted)
+    damping_interval_s: list[float] | None = None
+    #: why a fitted time constant is not reported (None: reported, or not fitted)
+    damping_note: str | None = None
 
     def apply(self, plant):
         damping = plant.cable_damping_time if self.damping_time_s is None \
@@ -589,7 +594,7 @@ class CableElasticity(Effect):
                              cable_damping_time=damping)
 
     def scaled(self, s):
-        return type(self)(_map(self.ea_n, lambda v: v / s), self.damping_time_s, self.cables)
+        return dataclasses.replace(self, ea_n=_map(self.ea_n, lambda v: v / s))
 
     @classmethod
     def candidates(cls, rig, scale):
@@ -626,11 +631,19 @@ class CableElasticity(Effect):
 
     def describe(self, plant=None):
         if np.ndim(self.ea_n) == 0 and self.cables is None:
-            return f"cables stretch with EA = {self.ea_n:.0f} N"
-        cables = self.cables or list(range(1, np.size(self.ea_n) + 1))
-        values = per_winch(self.ea_n, cables, max(cables))[np.asarray(cables) - 1]
-        return "cables stretch: " + ", ".join(
-            f"cable {c} EA = {v:.0f} N" for c, v in zip(cables, values, strict=True))
+            text = f"cables stretch with EA = {self.ea_n:.0f} N"
+        else:
+            cables = self.cables or list(range(1, np.size(self.ea_n) + 1))
+            values = per_winch(self.ea_n, cables, max(cables))[np.asarray(cables) - 1]
+            text = "cables stretch: " + ", ".join(
+                f"cable {c} EA = {v:.0f} N" for c, v in zip(cables, values, strict=True))
+        if self.damping_interval_s is None:
+            return text
+        lo, hi = (1e3 * v for v in self.damping_interval_s)
+        if self.damping_note:
+            return f"{text}; loss time constant not determined ({self.damping_note})"
+        return (f"{text}; loss time constant {1e3 * self.damping_time_s:.3g} ms "
+                f"(95 %: {lo:.3g}-{hi:.3g} ms)")
 
 
 @dataclass

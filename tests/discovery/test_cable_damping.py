@@ -1,0 +1,150 @@
+"""Cable damping: the Kelvin-Voigt loss time constant of elastic cables, identified
+from the lag of the stretch behind the tension (:mod:`cdpr_pipeline.discovery.damping`).
+
+Ranges drawn (documented, not tuned to a seed):
+
+* time constant 10-30 ms, one for every cable (one material): the blind sets' truths
+  (12-20 ms, issue 21) lie inside, and it is where a 5 x 15 s diagnosis experiment
+  determines it to 25 % on cables that stretch enough. Below about 5 ms, or on stiff
+  cables, the 95 % interval is wider than 25 % and the time constant is left unknown
+  with the reason (docs/method.md, known limits; the test below checks that
+  damping-free data are not given one).
+* lab: ``EA`` 1e4-2e4 N (log-uniform; the lower part of the effect's 1e4-5e4 range:
+  a stiffer cable stretches too little for a 25 % answer on this experiment, measured
+  standard errors 1.5-7 ms at 4-5e4 N);
+* independent generator: its own stiffness draw (static stretch 2-6 mm), every cable
+  elastic.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from foreign_cases import foreign_case
+from lab_cases import fast_settings, lab_dataset
+from lab_cases import rng_for as lab_rng
+
+from cdpr_pipeline.data.reading import resolve_settings
+from cdpr_pipeline.discovery.damping import (
+    Z95,
+    fit_cable_damping,
+    kelvin_voigt_lag,
+    with_fitted_damping,
+)
+from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnose
+from cdpr_pipeline.discovery.residuals import nominal_model
+from cdpr_pipeline.discovery.signals import dataset_signals
+from cdpr_pipeline.sim.effects import CableElasticity
+from tests.independent_sim import draw_effect
+
+#: drawn time constants, s (module docstring)
+TAU_RANGE = (0.010, 0.030)
+#: drawn lab stiffness, N (log-uniform)
+LAB_EA_RANGE = (1.0e4, 2.0e4)
+#: the issue's accuracy
+WITHIN = 0.25
+
+
+def _damping(record_or_effects) -> CableElasticity:
+    found = [e for e in record_or_effects if isinstance(e, CableElasticity)]
+    assert len(found) == 1, record_or_effects
+    return found[0]
+
+
+def _check(effect: CableElasticity, tau: float, what: str) -> None:
+    assert effect.damping_time_s is not None, f"{effect.damping_note}: {what}"
+    assert effect.damping_time_s == pytest.approx(tau, rel=WITHIN), what
+    # the interval is honest: the truth within three of its standard errors (a 95 %
+    # interval misses in 1 draw of 20; three standard errors in 1 of 370)
+    lo, hi = effect.damping_interval_s
+    stderr = (hi - lo) / (2 * Z95)
+    assert abs(effect.damping_time_s - tau) <= 3 * stderr, what
+
+
+def test_the_lag_is_the_kelvin_voigt_ode():
+    """``e + tau e' = x``: a sine comes out with the first-order gain and phase, and
+    a ramp lags by exactly ``tau`` (no half-sample bias)."""
+    fs, tau = 300.0, 0.02
+    t = np.arange(0, 20, 1 / fs)
+    w = 2 * np.pi * 2.0
+    e = kelvin_voigt_lag(np.sin(w * t)[:, None], tau, fs)[:, 0]
+    expected = np.sin(w * t - np.arctan(w * tau)) / np.hypot(1, w * tau)
+    late = t > 10 * tau
+    assert np.max(np.abs(e[late] - expected[late])) < 2e-4
+    ramp = kelvin_voigt_lag(t[:, None], tau, fs)[:, 0]
+    settled = t > 30 * tau      # the start from rest has decayed to 1e-13 tau
+    assert ramp[settled] == pytest.approx(t[settled] - tau, abs=1e-9)
+
+
+def test_damping_is_identified_on_the_lab(paper_rig, seed):
+    """Lab, ``trajectory=diagnosis``: a hidden time constant drawn in :data:`TAU_RANGE`
+    on cables drawn in :data:`LAB_EA_RANGE` is reported within 25 %, inside its
+    interval, and the stiffness stays within the stiffness tests' 15 %."""
+    rng = lab_rng(seed)
+    tau = float(rng.uniform(*TAU_RANGE))
+    ea = float(np.exp(rng.uniform(*np.log(LAB_EA_RANGE))))
+    ds = lab_dataset(paper_rig, [CableElasticity(ea_n=ea, damping_time_s=tau)], seed)
+    diag = diagnose(ds, fast_settings(freeform=None))
+    what = f"seed {seed}: tau {1e3 * tau:.1f} ms, EA {ea:.0f} N"
+    assert diag.verdict == "cable_elasticity", what
+    effect = _damping(diag.causes[0].effects)
+    fitted = np.atleast_1d(effect.ea_n)
+    assert fitted == pytest.approx(np.full(fitted.shape, ea), rel=0.15), what
+    _check(effect, tau, what)
+    assert f"{1e3 * effect.damping_time_s:.3g} ms" in effect.describe()
+
+
+def test_damping_is_identified_on_the_independent_generator(tmp_path, seed):
+    """Independent generator, the full experiment (five 15 s runs, 3 or 4 cables,
+    100-1000 Hz), every cable elastic with one drawn time constant: reported within
+    25 % and inside its interval."""
+    def draw(rig, rng):
+        return draw_effect("cable_elasticity", rig, rng, channels=list(range(rig.n)),
+                           damping_time_s=TAU_RANGE)
+
+    case = foreign_case(tmp_path, "cdpr", [draw], seed)
+    tau = float(case.truth.effects[0].params["damping_time_s"][0])
+    record = case.diagnose(fast_settings(freeform=None))
+    assert record["verdict"] == "cable_elasticity", case.describe()
+    _check(_damping(case.diagnosis.causes[0].effects), tau, case.describe())
+
+
+def test_damping_free_cables_get_no_time_constant(paper_rig, seed):
+    """Lab cables without loss (``tau = 0``): the fit's estimate stays within four
+    standard errors of zero (at 0 the profile's minimum sits on the bound, so the
+    estimate is one-sided)."""
+    rng = lab_rng(seed)
+    ea = float(np.exp(rng.uniform(*np.log(LAB_EA_RANGE))))
+    ds = lab_dataset(paper_rig, [CableElasticity(ea_n=ea, damping_time_s=0.0)], seed)
+    settings = DiagnosisSettings()
+    reg = resolve_settings(settings.regression, ds.trajectories, ds.rig)
+    signals = dataset_signals(ds.trajectories, ds.rig, reg)
+    nominal = nominal_model(ds.rig, reg.sign_sharpness)
+    fit = fit_cable_damping(nominal.with_effects([CableElasticity(ea_n=ea)]), nominal,
+                            signals[:-1])
+    what = f"seed {seed}: EA {ea:.0f} N, {fit}"
+    assert fit.tau_s < 4 * fit.stderr_s, what
+    assert not fit.reported, what
+
+
+def test_the_damping_fit_leaves_the_stiffness_alone(paper_rig):
+    """What the diagnosis adds to a ``cable_elasticity`` cause is the time constant,
+    its interval and note: ``EA`` and the cables are the candidates' (so every
+    stiffness result stays what it was)."""
+    ds = lab_dataset(paper_rig, [CableElasticity(ea_n=1.5e4, damping_time_s=0.02)], 5,
+                     duration_s=8.0)
+    reg = resolve_settings(DiagnosisSettings().regression, ds.trajectories, ds.rig)
+    signals = dataset_signals(ds.trajectories, ds.rig, reg)
+    nominal = nominal_model(ds.rig, reg.sign_sharpness)
+    cause = CableElasticity(ea_n=[1.4e4, 1.6e4], damping_time_s=None, cables=[1, 3])
+    out = with_fitted_damping(cause, nominal.with_effects([cause]), nominal, signals)
+    assert out.ea_n == cause.ea_n and out.cables == cause.cables
+    assert out.damping_interval_s is not None
+    assert (out.damping_time_s is None) == (out.damping_note is not None)
+
+
+def test_a_rigid_model_has_nothing_to_fit(paper_rig, quiet_lab):
+    reg = resolve_settings(DiagnosisSettings().regression, quiet_lab.trajectories, paper_rig)
+    signals = dataset_signals(quiet_lab.trajectories, paper_rig, reg)
+    nominal = nominal_model(paper_rig, reg.sign_sharpness)
+    assert fit_cable_damping(nominal, nominal, signals) is None
