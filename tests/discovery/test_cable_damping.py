@@ -7,13 +7,15 @@ Ranges drawn (documented, not tuned to a seed):
   (12-20 ms, issue 21) lie inside, and it is where a 5 x 15 s diagnosis experiment
   determines it to 25 % on cables that stretch enough. Below about 5 ms, or on stiff
   cables, the 95 % interval is wider than 25 % and the time constant is left unknown
-  with the reason (docs/method.md, known limits; the test below checks that
-  damping-free data are not given one).
-* lab: ``EA`` 1e4-2e4 N (log-uniform; the lower part of the effect's 1e4-5e4 range:
-  a stiffer cable stretches too little for a 25 % answer on this experiment, measured
-  standard errors 1.5-7 ms at 4-5e4 N);
+  with the reason (docs/method.md, known limits; a test below checks that damping-free
+  data are not given one).
 * independent generator: its own stiffness draw (static stretch 2-6 mm), every cable
-  elastic.
+  elastic; its faster, larger motions determine the time constant to 1-5 %
+  (``benchmarks/bench_cable_damping.py``), so it must be reported within 25 %.
+* lab: ``EA`` 1e4-2e4 N (log-uniform; the lower part of the effect's 1e4-5e4 range:
+  standard errors 1.5-7 ms at 4-5e4 N). The paper rig's slow paths leave it
+  undetermined in some draws even there, so the lab test checks the report is honest
+  either way.
 """
 
 from __future__ import annotations
@@ -76,10 +78,14 @@ def test_the_lag_is_the_kelvin_voigt_ode():
     assert ramp[settled] == pytest.approx(t[settled] - tau, abs=1e-9)
 
 
-def test_damping_is_identified_on_the_lab(paper_rig, seed):
+def test_damping_is_identified_on_the_lab_where_the_data_determine_it(paper_rig, seed):
     """Lab, ``trajectory=diagnosis``: a hidden time constant drawn in :data:`TAU_RANGE`
-    on cables drawn in :data:`LAB_EA_RANGE` is reported within 25 %, inside its
-    interval, and the stiffness stays within the stiffness tests' 15 %."""
+    on cables drawn in :data:`LAB_EA_RANGE`. The paper rig's slow motions (0.4 Hz) make
+    its standard error vary fourfold with the drawn paths (0.7-3.5 ms measured at
+    EA 1.2e4 N), so: reported within 25 % and its interval honest where the 95 %
+    interval lies within 25 %, else ``null`` with that interval in the note, the truth
+    within three standard errors of the estimate; the stiffness within the stiffness
+    tests' 15 % either way."""
     rng = lab_rng(seed)
     tau = float(rng.uniform(*TAU_RANGE))
     ea = float(np.exp(rng.uniform(*np.log(LAB_EA_RANGE))))
@@ -90,8 +96,18 @@ def test_damping_is_identified_on_the_lab(paper_rig, seed):
     effect = _damping(diag.causes[0].effects)
     fitted = np.atleast_1d(effect.ea_n)
     assert fitted == pytest.approx(np.full(fitted.shape, ea), rel=0.15), what
-    _check(effect, tau, what)
-    assert f"{1e3 * effect.damping_time_s:.3g} ms" in effect.describe()
+    if effect.damping_time_s is not None:
+        _check(effect, tau, what)
+        assert f"{1e3 * effect.damping_time_s:.3g} ms" in effect.describe()
+        return
+    # the fit behind the note, repeated on the diagnosis' training runs: its interval
+    # is the one stated, and honest
+    reg = resolve_settings(DiagnosisSettings().regression, ds.trajectories, ds.rig)
+    train = [s for s in dataset_signals(ds.trajectories, ds.rig, reg) if s.name in diag.train]
+    fit = fit_cable_damping(diag.extended, diag.nominal, train)
+    assert effect.damping_note == fit.reason and not fit.reported, what
+    assert effect.damping_interval_s == pytest.approx(list(fit.interval_s)), what
+    assert abs(fit.tau_s - tau) <= 3 * fit.stderr_s, f"{what}: {fit}"
 
 
 def test_damping_is_identified_on_the_independent_generator(tmp_path, seed):
