@@ -23,10 +23,11 @@ one draw of two, the 3 Hz band -4 % (one standard error).
 The stiffness stays the candidate's: ``tau`` is fitted afterwards, with each cable's
 compliance free to move by a factor (the two are nearly orthogonal: in phase and in
 quadrature) and the encoder zero per run and cable. One ``tau`` for every elastic cable
-(one material). Its standard error is the profile's curvature at the minimum with the
-residual variance; the residual rows are the low-pass band sampled at its Nyquist rate
-(nearly independent). ``tau`` is reported only when its 95 % interval lies within
-:data:`REPORT_WITHIN` of the value; otherwise the interval is still given, with the
+(one material). Its standard error is the larger of the profile's curvature at the
+minimum with the residual variance (white rows: the low-pass band sampled at its
+Nyquist rate) and a Newey-West one that allows for the residual's own correlation.
+``tau`` is reported only when its 95 % interval lies within :data:`REPORT_WITHIN` of
+the value; otherwise the interval is still given, with the
 reason (e.g. a stiff cable stretches too little for the lag to show above the mocap
 noise).
 """
@@ -150,31 +151,52 @@ class _Problem:
         rows = zero_phase_lowpass(x, cls._filter(sig), sig.fs)[cls._index(sig)]
         return rows - rows.mean(axis=0)
 
-    def sse(self, tau: float) -> tuple[float, int]:
-        """Residual sum of squares at ``tau`` with each cable's compliance factor fitted
-        (linear), and the number of independent residual entries."""
+    def residuals(self, tau: float) -> list[np.ndarray]:
+        """Per run, the residual rows (rows, cables) at ``tau`` with each cable's
+        compliance factor fitted (linear, every run together)."""
         m = self.runs[0][1].shape[1]
-        normal, rhs, total, size = np.zeros((m, m)), np.zeros(m), 0.0, 0
+        eye = np.eye(m)
+        normal, rhs, parts = np.zeros((m, m)), np.zeros(m), []
         for sig, stretch, measured, keep in self.runs:
             lagged = kelvin_voigt_lag(stretch, tau, sig.fs)
             # elongation e_tau instead of s: the reeled length is g - e_tau, the encoder
             # reads (s - e_tau) more; a compliance factor (1 + d) scales e_tau:
-            # residual = x d - r
+            # residual = design d - r, design's column j cable j's factor
             r = self._rows(sig, stretch - lagged) - measured
-            x = self._rows(sig, lagged)
-            if keep is None:
-                normal += np.diag((x * x).sum(axis=0))
-                rhs += (x * r).sum(axis=0)
-                total += float((r * r).sum())
-            else:
+            design = self._rows(sig, lagged)[:, None, :] * eye
+            if keep is not None:
                 r = np.einsum("kij,kj->ki", keep, r)
-                design = keep * x[:, None, :]          # column j: cable j's factor
-                normal += np.einsum("kij,kil->jl", design, design)
-                rhs += np.einsum("kij,ki->j", design, r)
-                total += float((r * r).sum())
-            size += r.size - self.lost * len(r)
-        d = np.linalg.solve(normal + 1e-300 * np.eye(m), rhs)
-        return max(total - float(rhs @ d), 0.0), size
+                design = keep @ design
+            normal += np.einsum("kij,kil->jl", design, design)
+            rhs += np.einsum("kij,ki->j", design, r)
+            parts.append((design, r))
+        d = np.linalg.solve(normal + 1e-300 * eye, rhs)
+        return [design @ d - r for design, r in parts]
+
+    def sse(self, tau: float) -> tuple[float, int]:
+        """Residual sum of squares at ``tau`` and the number of independent residual
+        entries."""
+        res = self.residuals(tau)
+        return float(sum((r * r).sum() for r in res)), \
+            sum(r.size - self.lost * len(r) for r in res)
+
+    def robust_stderr(self, tau: float, h: float) -> float:
+        """Standard error of ``tau`` from the residual's own correlation (Newey-West
+        over the rows of each run, Bartlett weights, the usual ``4 (n / 100)^(2/9)``
+        lags): what the profile's curvature alone understates when the residual is not
+        white (model error at the motion's frequencies; measured on the independent
+        generator, errors of 1.4 times the curvature's standard error, RMS)."""
+        lo = max(tau - h, 0.0)
+        slope = [(p - q) / (tau + h - lo) for p, q in zip(self.residuals(tau + h),
+                                                          self.residuals(lo), strict=True)]
+        info, score = 0.0, 0.0
+        for j, r in zip(slope, self.residuals(tau), strict=True):
+            info += float((j * j).sum())
+            u = (j * r).sum(axis=1)
+            lags = int(4 * (len(u) / 100.0) ** (2.0 / 9.0))
+            score += float(u @ u) + 2.0 * sum(
+                (1.0 - k / (lags + 1.0)) * float(u[k:] @ u[:-k]) for k in range(1, lags + 1))
+        return float(np.sqrt(max(score, 0.0)) / info) if info > 0 else float("inf")
 
 
 def fit_cable_damping(model: Plant, nominal: Plant, signals: Sequence[RunSignals]
@@ -221,6 +243,8 @@ def fit_cable_damping(model: Plant, nominal: Plant, signals: Sequence[RunSignals
     else:
         curv = (problem.sse(tau + 2 * h)[0] - 2 * problem.sse(tau + h)[0] + sse) / h**2
     stderr = float(np.sqrt(2 * sigma2 / curv)) if curv > 0 else float("inf")
+    # the larger of the white-noise and the correlation-robust answers
+    stderr = max(stderr, problem.robust_stderr(tau, h))
     interval = (max(tau - Z95 * stderr, 0.0), tau + Z95 * stderr)
     chi2 = max(sse0 - sse, 0.0) / sigma2
     half = Z95 * stderr
