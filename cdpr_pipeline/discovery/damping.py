@@ -18,7 +18,9 @@ with it in that band only, both through the same zero-phase low-pass. Measured o
 virtual lab (``EA = 1e4`` N, ``tau = 25`` ms, the diagnosis experiment): noiseless, the
 fit gives 25.0 ms in that band, 28.1 ms (+13 %) when the elongation keeps the 15 Hz band
 the tension does not have; with noise, tensions from a 6 Hz acceleration gave -51 % on
-one draw of two, the 3 Hz band -4 % (one standard error).
+one draw of two, the 3 Hz band -4 % (one standard error). Tensions from the winch side
+(recorded torque minus the nominal winch model, over the drum radius) were no better:
++32 % noiseless, +80 % with noise (the nominal friction at reversals, the held torque).
 
 The stiffness stays the candidate's: ``tau`` is fitted afterwards, with each cable's
 compliance free to move by a factor (the two are nearly orthogonal: in phase and in
