@@ -716,6 +716,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
                  dropped.label, 100 * gain.relative, 100 * gain.ci95[0], 100 * gain.ci95[1])
     gain = dataclasses.replace(gain, withdrawn=tuple(withdrawn))
     causes, extended = _cable_damping(causes, nominal, train)
+    extension = [e for c in causes for e in c.effects]
     if unusable:
         unusable = dataclasses.replace(unusable, kept=any(c.label == first.label for c in causes))
 

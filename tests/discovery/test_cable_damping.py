@@ -123,6 +123,8 @@ def test_damping_is_identified_on_the_independent_generator(tmp_path, seed):
     record = case.diagnose(fast_settings(freeform=None))
     assert record["verdict"] == "cable_elasticity", case.describe()
     _check(_damping(case.diagnosis.causes[0].effects), tau, case.describe())
+    # the extended model (extended_model.yaml) carries it too
+    assert _damping(case.diagnosis.effects) == _damping(case.diagnosis.causes[0].effects)
 
 
 def test_damping_free_cables_get_no_time_constant(paper_rig, seed):
