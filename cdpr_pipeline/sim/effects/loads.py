@@ -32,7 +32,7 @@ class PositionDependentLoad(Effect):
     ``a`` alone, and ``b`` is the constant it comes with (a spring's ``-k q_0``).
 
     Not drawn by the project's lab, which simulates cable robots only; the independent
-    generator (``tests/independent_sim``) draws it on drive axes.
+    generator (:mod:`cdpr_pipeline.testing.independent_sim`) draws it on drive axes.
     """
 
     name: ClassVar[str] = "position_dependent_load"
