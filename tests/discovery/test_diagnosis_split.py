@@ -6,11 +6,11 @@ from __future__ import annotations
 import json
 
 import pytest
-from lab_cases import fast_settings
 
 from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.discovery.diagnosis import diagnose, diagnosis_split, split_runs
 from cdpr_pipeline.stages.diagnose import write_outputs
+from cdpr_pipeline.testing.lab_cases import fast_settings
 
 
 def test_whole_runs_by_default_and_by_name(quiet_lab):

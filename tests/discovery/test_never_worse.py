@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from lab_cases import draw_seed, fast_settings, lab_dataset, rng_for
 
 from cdpr_pipeline.discovery import diagnosis as diagnosis_module
 from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.discovery.selection import Judgement, Selection
 from cdpr_pipeline.sim.effects import DrumRadiusError, PayloadMassError
+from cdpr_pipeline.testing.lab_cases import draw_seed, fast_settings, lab_dataset, rng_for
 
 
 def test_a_cause_that_makes_held_out_runs_worse_is_withdrawn(paper_rig, monkeypatch):

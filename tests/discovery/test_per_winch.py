@@ -19,7 +19,6 @@ from collections import Counter
 
 import numpy as np
 import pytest
-from lab_cases import fast_settings, lab_dataset, rng_for
 
 from cdpr_pipeline.data.reading import RegressionSettings
 from cdpr_pipeline.discovery.diagnosis import diagnose
@@ -38,6 +37,7 @@ from cdpr_pipeline.sim.effects import (
 )
 from cdpr_pipeline.sim.expressions import evaluate
 from cdpr_pipeline.sim.model_file import read_model, write_model
+from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset, rng_for
 
 VOCABULARY = {n for n, c in EFFECTS.items() if c.in_vocabulary}
 

@@ -14,8 +14,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-from foreign_cases import foreign_settings
-from lab_cases import lab_dataset, rng_for
 
 from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.discovery.diagnosis import (
@@ -26,6 +24,8 @@ from cdpr_pipeline.discovery.diagnosis import (
 from cdpr_pipeline.discovery.residuals import nominal_model, signal_scales
 from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.sim.effects import ActuatorLag, PayloadMassError
+from cdpr_pipeline.testing.foreign_cases import foreign_settings
+from cdpr_pipeline.testing.lab_cases import lab_dataset, rng_for
 
 
 def _true_contributions(data, settings, effect_sets):

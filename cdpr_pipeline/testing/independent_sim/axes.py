@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .effects import Effect, TrueModel, lag_response, true_model
+from .effects import Effect, TrueModel, lag_response, resolve_effects, true_model
 from .writer import FORMAT, RunTruth, Truth, write_simulated
 
 AXES_FAMILIES = ("multisine", "moves", "mixed")
@@ -137,7 +137,7 @@ class AxesRigSpec:
             "controller": {"type": "pd_with_feedforward", "kp": kp.tolist(),
                            "kd": kd.tolist(), "feedforward": "nominal",
                            "rate_hz": float(self.rate_hz)},
-            "generator": "tests.independent_sim",
+            "generator": "cdpr_pipeline.testing.independent_sim",
             **({"joint_types": list(self.joint_types)} if self.joint_types else {}),
         }
 
@@ -454,8 +454,6 @@ def simulate_axes_dataset(out_dir: str | Path, rig: AxesRigSpec, effects: Any = 
     -------
     Truth
     """
-    from .cdpr import resolve_effects
-
     families = list(families) if families is not None else default_axes_families(n_runs)
     if len(families) != n_runs:
         raise ValueError(f"{len(families)} families for {n_runs} runs")

@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from .effects import Effect, TrueModel, draw_effect, lag_response, true_model
+from .effects import Effect, TrueModel, lag_response, resolve_effects, true_model
 from .writer import FORMAT, RunTruth, Truth, write_simulated
 
 #: trajectory families (the part of the file name after the index)
@@ -168,7 +168,7 @@ class RigSpec:
                                "and min-norm tension feedforward",
                 "kp_nm_per_rad": kp.tolist(), "kd_nms_per_rad": kd.tolist(),
                 "min_tension_n": float(self.min_tension_n), "rate_hz": float(self.rate_hz)},
-            "generator": "tests.independent_sim",
+            "generator": "cdpr_pipeline.testing.independent_sim",
         }
 
     def describe(self) -> dict[str, Any]:
@@ -738,15 +738,6 @@ def simulate_runs(rig: RigSpec, effects: list[Effect], families: list[str], dura
     if isinstance(plant, _ElasticPlant):
         settings["cable_loss_time_constant_s"] = plant.tau_d.tolist()
     return columns, truth, settings
-
-
-def resolve_effects(rig: Any, effects: Any, seed: int) -> list[Effect]:
-    """Effect objects as given; names are drawn with :func:`draw_effect`."""
-    rng = np.random.default_rng([int(seed), 0xEFF])
-    out = []
-    for eff in effects or ():
-        out.append(eff if isinstance(eff, Effect) else draw_effect(str(eff), rig, rng))
-    return out
 
 
 def simulate_dataset(out_dir: str | Path, rig: RigSpec, effects: Any = (), n_runs: int = 5,

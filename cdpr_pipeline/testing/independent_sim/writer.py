@@ -130,7 +130,7 @@ class Truth:
 
     def to_dict(self) -> dict[str, Any]:
         return plain({
-            "generator": "tests.independent_sim",
+            "generator": "cdpr_pipeline.testing.independent_sim",
             "kind": self.kind,
             "seed": int(self.seed),
             "effects": [e.to_dict() for e in self.effects],
