@@ -145,20 +145,6 @@ def test_no_function_level_project_import_but_the_heavy_and_the_facades():
                       "means a definition belongs in a lower layer):\n" + "\n".join(lazy))
 
 
-def test_no_private_name_crosses_a_package():
-    """A ``_name`` is its package's own: another package that needs it needs a public
-    name (where a dataset is read, :mod:`cdpr_pipeline.data.reading`, is one)."""
-    crossing = []
-    for m, path in MODULES.items():
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            if (isinstance(node, ast.ImportFrom) and node.level == 0 and node.module
-                    and _project(node.module) and _unit(node.module) != _unit(m)):
-                crossing += [f"{path.relative_to(PACKAGE.parent)}:{node.lineno}: {m} imports "
-                             f"{node.module}.{a.name}" for a in node.names
-                             if a.name.startswith("_")]
-    assert not crossing, "private names imported across packages:\n" + "\n".join(crossing)
-
-
 def _loads_heavy(module: str, seen: set[str]) -> bool:
     """Whether importing ``module`` loads torch or Lightning (module-level imports)."""
     if module in seen or module not in MODULES:

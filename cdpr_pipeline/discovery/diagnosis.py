@@ -23,7 +23,7 @@ from cdpr_pipeline.data.reading import (
     MAX_CUTOFF_FRACTION,
     TRIM_PERIODS,
     RegressionSettings,
-    resolve_settings,
+    as_resolved,
 )
 from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.split import HELDOUT_FRACTION, MIN_HELDOUT_S, Split, heldout_split
@@ -148,10 +148,11 @@ def diagnosis_split(dataset: Dataset, settings: DiagnosisSettings | None = None)
     ``settings.heldout`` entries match a run name or family; by default families
     ``spiral`` or ``pulses`` are held out, else the last file. A single run holds out its
     last block (25 %, at least 3 s while half the run is left to train on); a block too
-    short for the regression's trims and 100 rows raises.
+    short for the regression's trims and 100 rows raises. ``settings.regression`` as
+    :func:`diagnose` reads with it: resolved by the command, else resolved here.
     """
     settings = settings or DiagnosisSettings()
-    regression = resolve_settings(settings.regression, dataset.trajectories, dataset.rig)
+    regression = as_resolved(settings.regression, dataset.trajectories, dataset.rig)
     return heldout_split(dataset.trajectories, settings.heldout,
                          default_families=HELDOUT_FAMILIES, unknown="raise",
                          min_samples=min_block_samples(regression, dataset.rig.sample_rate_hz),
@@ -618,8 +619,9 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         (:func:`~cdpr_pipeline.identification.pipeline.check_torque_labels`).
     """
     settings = settings or DiagnosisSettings()
-    # filter, decimation and Coulomb law chosen once, from the whole dataset and its rig
-    settings = dataclasses.replace(settings, regression=resolve_settings(
+    # filter, decimation and Coulomb law chosen once, from the whole dataset and its rig:
+    # by the command (the stage), or here when called on its own
+    settings = dataclasses.replace(settings, regression=as_resolved(
         settings.regression, dataset.trajectories, dataset.rig))
     needs, why = diagnosis_needs(dataset, settings)
     check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "diagnose",
