@@ -120,6 +120,22 @@ def _relative(size: np.ndarray, nominal: np.ndarray) -> np.ndarray:
     return np.where(ok, size / np.where(ok, nominal, 1.0), np.nan)
 
 
+
+def _described_sizes(size: Any, ratio: Any, k: int, nominal: np.ndarray | None,
+                     offset: float = 0.0) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The ``k`` per-winch sizes of an effect given absolutely (``size``) or relative to a
+    nominal parameter (``ratio = offset + size / nominal``), for its description: each
+    form as given, the other one from the ``nominal`` values of the winches described
+    (None without them); a ratio to a nominal of about zero is NaN (:func:`_relative`)."""
+    size = None if size is None else per_winch(size, None, k)
+    ratio = None if ratio is None else per_winch(ratio, None, k)
+    if nominal is not None:
+        size = (ratio - offset) * nominal if size is None else size
+        if ratio is None:
+            relative = _relative(size, nominal)
+            ratio = offset + relative if offset else relative
+    return size, ratio
+
 @dataclass
 class Effect:
     """Base class of all hidden effects."""

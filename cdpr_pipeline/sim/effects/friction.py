@@ -14,6 +14,7 @@ from cdpr_pipeline.sim.effects.base import (
     Effect,
     _affected,
     _cable_mask,
+    _described_sizes,
     _finite,
     _map,
     _relative,
@@ -114,12 +115,9 @@ class StribeckFriction(Effect):
                                          self.stribeck_velocity], plant)
         k = len(cables) if cables else 1
         speed = per_winch(self.stribeck_velocity, None, k, fill=1.0)
-        size = None if self.extra_static is None else per_winch(self.extra_static, None, k)
-        ratio = None if self.static_ratio is None else per_winch(self.static_ratio, None, k)
-        if plant is not None and cables:
-            fc = plant.winch.coulomb[np.asarray(cables) - 1]
-            size = (ratio - 1.0) * fc if size is None else size
-            ratio = 1.0 + _relative(size, fc) if ratio is None else ratio
+        fc = plant.winch.coulomb[np.asarray(cables) - 1] if plant is not None and cables \
+            else None
+        size, ratio = _described_sizes(self.extra_static, self.static_ratio, k, fc, offset=1.0)
         parts = []
         for j in range(k):
             bits = [] if size is None else [f"F_s - F_c = {size[j]:.3g}"]
@@ -216,12 +214,9 @@ class AsymmetricViscousFriction(Effect):
         cables = _affected(self.cables, [self.coefficient, self.ratio, self.direction], plant)
         k = len(cables) if cables else 1
         direction = per_winch(self.direction, None, k, fill=1.0)
-        size = None if self.coefficient is None else per_winch(self.coefficient, None, k)
-        ratio = None if self.ratio is None else per_winch(self.ratio, None, k)
-        if plant is not None and cables:
-            fv = plant.winch.viscous[np.asarray(cables) - 1]
-            size = ratio * fv if size is None else size
-            ratio = _relative(size, fv) if ratio is None else ratio
+        fv = plant.winch.viscous[np.asarray(cables) - 1] if plant is not None and cables \
+            else None
+        size, ratio = _described_sizes(self.coefficient, self.ratio, k, fv)
         parts = []
         for j in range(k):
             bits = [] if size is None else [f"{size[j]:+.3g}"]

@@ -48,8 +48,8 @@ from typing import Any
 
 import numpy as np
 
-from .effects import Effect, TrueModel, lag_response, resolve_effects, true_model
-from .writer import FORMAT, RunTruth, Truth, write_simulated
+from .effects import Effect, TrueModel, lag_response, true_model
+from .writer import FORMAT, RunTruth, Truth, simulate_and_write
 
 #: trajectory families (the part of the file name after the index)
 CDPR_FAMILIES = ("flat_circle", "oblique_circle", "flat_eight", "oblique_eight", "spiral",
@@ -773,10 +773,6 @@ def simulate_dataset(out_dir: str | Path, rig: RigSpec, effects: Any = (), n_run
     -------
     Truth
     """
-    families = list(families) if families is not None else default_families(n_runs)
-    if len(families) != n_runs:
-        raise ValueError(f"{len(families)} families for {n_runs} runs")
-    eff = resolve_effects(rig, effects, seed)
-    columns, runs, settings = simulate_runs(rig, eff, families, duration_s, seed, noise)
-    return write_simulated(out_dir, "cdpr", rig, eff, true_model(rig, eff), seed, columns,
-                           runs, settings, write_truth, overwrite)
+    return simulate_and_write(out_dir, "cdpr", rig, effects, n_runs, duration_s, seed,
+                              families, noise, write_truth, overwrite, simulate=simulate_runs,
+                              default_families=default_families)
