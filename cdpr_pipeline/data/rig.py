@@ -447,3 +447,8 @@ class AxesRig(_Signals):
                                  f"one of {list(JOINT_TYPES)}, got {value!r}")
         return tuple(str(v) for v in raw)
 
+
+#: the kinds of rig rig.yaml may state, by its ``kind``
+RIG_KINDS: dict[str, type[CdprRig] | type[AxesRig]] = {CdprRig.kind: CdprRig,
+                                                       AxesRig.kind: AxesRig}
+

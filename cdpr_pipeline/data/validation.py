@@ -23,7 +23,16 @@ import pandas as pd
 import yaml
 
 from .errors import ROW_NOTE, DataValidationError, Problem, Severity
-from .rig import FORMAT, WINCH_KEYS, AxesRig, CdprRig, ControllerSpec, Rig, WinchParams
+from .rig import (
+    FORMAT,
+    RIG_KINDS,
+    WINCH_KEYS,
+    AxesRig,
+    CdprRig,
+    ControllerSpec,
+    Rig,
+    WinchParams,
+)
 from .trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -241,7 +250,7 @@ class _RigChecker:
             self.error("format", f"unknown format {_short(fmt)} (expected '{FORMAT}')", "format")
             return None
         kind = self.raw.get("kind", "cdpr")
-        if kind not in ("cdpr", "axes"):
+        if kind not in RIG_KINDS:
             self.error("kind", f"unknown kind {_short(kind)} (expected 'cdpr' or 'axes')", "kind")
             return None
         return kind
