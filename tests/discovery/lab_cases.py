@@ -49,12 +49,12 @@ def candidate_effects(rig, signals, seed: int) -> list[list[Effect]]:
     too), each at its start moved by two of its scales at random, then every other set
     together: models of every structure the fast residual path must match the direct
     one on."""
-    from cdpr_pipeline.discovery.candidates import candidates_for
+    from cdpr_pipeline.discovery.candidates import candidates_for, nominal_winch
     from cdpr_pipeline.sim.candidate_forms import DataScale
 
     omega = np.concatenate([s.omega for s in signals])
     scale = DataScale(float(np.sqrt(np.mean(omega ** 2))), omega.shape[1], "cdpr",
-                      rig.nominal_winch)
+                      nominal_winch(rig))
     rng = np.random.default_rng(seed)
     sets = []
     for cand in candidates_for(rig, scale, None, True):
