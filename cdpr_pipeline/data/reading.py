@@ -22,7 +22,7 @@ import numpy as np
 from scipy.ndimage import minimum_filter1d
 from scipy.signal import butter, periodogram, sosfiltfilt
 
-from cdpr_pipeline.data.rig import AxesRig, CdprRig, Rig
+from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.data.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -303,13 +303,11 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
         log.info("Coulomb law: %s (as rig.yaml states)",
                  "hard sign" if law is None else f"tanh({law:g} w)")
     hold = settings.zero_order_hold
-    rate = (rig.controller.rate_hz if isinstance(rig, CdprRig) and rig.controller
-            else (rig.controller or {}).get("rate_hz") if isinstance(rig, AxesRig)
-            else None)
+    rate = rig.controller_rate_hz
     if hold == AUTO:
         # the spec defines a cable robot's u as the commanded torque, which a digital
         # drive holds until the next command; an axis's u is the force applied
-        commanded = isinstance(rig, CdprRig)
+        commanded = rig.torque_commanded
         hold = rate is not None or commanded
         log.info("recorded torques %s", f"held over the controller period ({rate:g} Hz)"
                  if rate is not None else "held over the sample (a cable robot's u is the "

@@ -72,8 +72,7 @@ def _explaining_plot(d: Diagnosis) -> str:
         ax.plot(x[order], np.convolve(r[order], np.ones(k) / k, mode="same"), "C3", lw=2,
                 label="running mean")
     ax.set_xlabel(key)
-    unit = "m" if entry.signal == "length" else "N m" if hasattr(d.rig, "anchors_m") \
-        else "force/torque units"
+    unit = "m" if entry.signal == "length" else d.rig.torque_unit or "force/torque units"
     ax.set_ylabel(f"{entry.channel} residual ({unit})")
     ax.set_title(f"{entry.channel}: residual against {key} (r = {corr[key]:+.2f})")
     ax.legend(fontsize=8)

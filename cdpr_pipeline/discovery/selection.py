@@ -499,7 +499,7 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
        ``unnamed`` cause if they pass the tests every candidate passes (they add
        significantly, and on held-out runs, beyond the named causes).
     """
-    kind = "axes" if not hasattr(nominal, "anchors") else "cdpr"
+    kind = nominal.kind
     search = _Search(nominal, train, heldout, settings, freeform,
                      _data_scale(train, kind, nominal), kind, log)
     candidates = candidates_for(rig, search.scale, settings.effects, settings.refit_winches)

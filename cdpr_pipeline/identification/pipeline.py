@@ -20,7 +20,7 @@ from cdpr_pipeline.data.reading import (
     ResolvedReading,
     as_resolved,
 )
-from cdpr_pipeline.data.rig import WINCH_KEYS, CdprRig
+from cdpr_pipeline.data.rig import WINCH_KEYS
 from cdpr_pipeline.data.split import Split, heldout_split
 from cdpr_pipeline.data.validation import check_run_lengths, run_file
 from cdpr_pipeline.identification.identifiers import Estimate, fit_metrics
@@ -81,7 +81,7 @@ def check_reversals(reg: WinchRegression, dataset: Dataset, runs: Sequence[str])
         Naming the first fitted run's file and the position column of each channel.
     """
     problems = []
-    column = "l" if isinstance(dataset.rig, CdprRig) else "q"
+    column = dataset.rig.channel_position
     for i in range(reg.n):
         b = reg.phi[:, i, 1]
         up, down = int(np.sum(b > 0)), int(np.sum(b < 0))
@@ -123,7 +123,7 @@ def check_torque_labels(dataset: Dataset, settings: RegressionSettings) -> None:
     rig = dataset.rig
     if rig.n < 2:
         return
-    theta = (rig.winch_nominal if isinstance(rig, CdprRig) else rig.nominal).as_matrix()
+    theta = rig.nominal_winch.as_matrix()
     found: list[tuple[str, int, int, float, float]] = []
     for tr in dataset.trajectories:
         reg = build_regression(tr, rig, settings)

@@ -18,8 +18,9 @@ are taken out of every column before the filters (:func:`_assemble`).
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.signal import decimate
@@ -264,12 +265,25 @@ def axis_regression(traj: Trajectory, rig: AxesRig,
 
 def build_regression(traj: Trajectory, rig: Rig,
                      settings: RegressionSettings | None = None) -> WinchRegression:
-    """The regression of one run of either kind (``settings`` as in
-    :func:`winch_regression`)."""
+    """The regression of one run of any kind (:data:`REGRESSIONS`).
+
+    Raises
+    ------
+    ValueError
+        Naming the kind, for a kind without a regression.
+    """
     settings = as_resolved(settings, [traj], rig)
-    if isinstance(rig, CdprRig):
-        return winch_regression(traj, rig, None, settings)
-    return axis_regression(traj, rig, settings)
+    if rig.kind not in REGRESSIONS:
+        raise ValueError(f"kind {rig.kind!r}: no regression for this kind of rig (known: "
+                         f"{sorted(REGRESSIONS)})")
+    return REGRESSIONS[rig.kind](traj, rig, settings)
+
+
+#: the regression of a run, by rig.yaml's kind: ``(trajectory, rig, settings)``
+REGRESSIONS: dict[str, Callable[[Trajectory, Any, RegressionSettings], WinchRegression]] = {
+    CdprRig.kind: lambda traj, rig, settings: winch_regression(traj, rig, None, settings),
+    AxesRig.kind: axis_regression,
+}
 
 
 def dataset_regression(trajectories: Iterable[Trajectory], rig: Rig,

@@ -15,7 +15,6 @@ from cdpr_pipeline.sim.effects.base import (
     _map,
     per_winch,
 )
-from cdpr_pipeline.sim.plant import Plant
 
 
 @dataclass
@@ -59,7 +58,7 @@ class PositionDependentLoad(Effect):
         return out
 
     def apply(self, plant):
-        if isinstance(plant, Plant):
+        if plant.kind not in self.kinds:
             raise ValueError(f"{self.name} acts on drive axes (kind axes), not on a cable "
                              "robot's winches")
         self.rotary(plant.n)        # validates the joint types against the axes
@@ -93,7 +92,7 @@ class PositionDependentLoad(Effect):
         (rig.yaml's ``joint_types``, prismatic when unstated): one axis at a time, and
         every axis with its own; the data choose by BIC, as for drum radii."""
         n = scale.n
-        types = list(getattr(rig, "joint_types", ("prismatic",) * n))
+        types = list(rig.joint_types)     # candidates are made for kind axes only
         fc = np.maximum(np.abs(scale.winch.coulomb), 1e-6)
 
         def make(x: np.ndarray, cables: list[int]) -> list[Effect]:
