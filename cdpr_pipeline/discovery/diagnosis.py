@@ -32,7 +32,7 @@ from cdpr_pipeline.data.validation import check_run_lengths
 from cdpr_pipeline.discovery.bands import power_band_hz, row_noise
 from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
 from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
-from cdpr_pipeline.discovery.freeform import FreeFormSearch
+from cdpr_pipeline.discovery.freeform.search import FreeFormSearch
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,

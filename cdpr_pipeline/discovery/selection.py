@@ -45,11 +45,10 @@ from cdpr_pipeline.discovery.fitting import (
     fit_candidate,
     fit_winches,
 )
-from cdpr_pipeline.discovery.freeform import (
-    WINCH_ANGLE,
+from cdpr_pipeline.discovery.freeform.periodicity import WINCH_ANGLE, Periodicity
+from cdpr_pipeline.discovery.freeform.search import (
     FreeFormResult,
     FreeFormSearch,
-    Periodicity,
     symbolic_torque,
 )
 from cdpr_pipeline.discovery.residuals import (

@@ -34,7 +34,7 @@ def fast_settings(**changes):
     """Diagnosis settings for tests: everything on but the closed loop and black box,
     a short GP budget."""
     from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings
-    from cdpr_pipeline.discovery.freeform import FreeFormSearch
+    from cdpr_pipeline.discovery.freeform.search import FreeFormSearch
 
     base = {"freeform": FreeFormSearch(), "closed_loop": False}
     return DiagnosisSettings(**{**base, **changes})
