@@ -141,7 +141,7 @@ class Judgement:
     freeform: FreeFormResult | None = None
     #: its share of the final model's held-out gain, in shares of the nominal model's
     #: held-out error summed over channels (set by the diagnosis when it ranks causes:
-    #: :func:`~cdpr_pipeline.discovery.diagnosis.heldout_contributions`)
+    #: :func:`~cdpr_pipeline.discovery.never_worse.heldout_contributions`)
     contribution: float | None = None
 
     def failed(self, reason: str) -> Judgement:
