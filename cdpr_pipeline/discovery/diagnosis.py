@@ -33,6 +33,7 @@ from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_erro
 from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
 from cdpr_pipeline.discovery.freeform.search import FreeFormSearch
 from cdpr_pipeline.discovery.never_worse import never_worse
+from cdpr_pipeline.discovery.plots import BeforeAfterPlot, ClosedLoopPlot, ColumnPlot, Plots
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,
@@ -211,7 +212,7 @@ class Diagnosis:
     closed loop, black box, total); it is not part of ``diagnosis.json``, which depends
     only on the data and the settings, but of ``metrics.json`` (``time_<phase>_s``,
     with the command's start-up CPU seconds and loading beside them). ``plots`` holds
-    the arrays of the report's figures.
+    the arrays of the report's figures (:class:`~cdpr_pipeline.discovery.plots.Plots`).
     """
 
     dataset: str
@@ -231,7 +232,7 @@ class Diagnosis:
     blackbox: BlackBoxShare | None
     sentence: str
     timings: dict[str, float] = field(compare=False)
-    plots: dict[str, Any] = field(compare=False, repr=False)
+    plots: Plots = field(compare=False, repr=False)
     extension: tuple[Effect, ...] = ()
     #: set when the stated model was grossly wrong and re-identified first
     unusable: Unusable | None = None
@@ -423,10 +424,10 @@ def _innovations(res: Residuals, channel: str, noise: dict[str, NoiseModel]) -> 
 
 def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
                   settings: DiagnosisSettings, noise: dict[str, NoiseModel]
-                  ) -> tuple[list[Discrepancy], dict[str, Any]]:
+                  ) -> tuple[list[Discrepancy], dict[str, ColumnPlot]]:
     """Per channel column of the nominal model: residual size, share, band, whiteness
-    (of the innovations), what it follows, and the correlation tests. Also returns plot
-    data, with what the extended model explains of each residual."""
+    (of the innovations), what it follows, and the correlation tests. Also returns each
+    column's plot data, with what the extended model explains of its residual."""
     res = residuals(nominal, nominal, signals)
     ext = residuals(extended, nominal, signals)
     out, plots = [], {}
@@ -456,8 +457,7 @@ def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
                                    float(np.sum(r ** 2) / total), bands,
                                    ljung_box_pvalue(innovations[:, i], lags),
                                    tuple(follows), corr, tests))
-            plots[name] = {"residual": r, "explained": r - ext.stacked(ch)[:, i],
-                           "signatures": sigs, "bands": bands, "tests": tests}
+            plots[name] = ColumnPlot(r, r - ext.stacked(ch)[:, i], sigs)
     return out, plots
 
 
@@ -581,7 +581,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         unusable = dataclasses.replace(unusable, kept=any(c.label == first.label for c in causes))
 
     noise = fit_noise(extended, nominal, train)
-    found, plots = discrepancies(nominal, extended, signals, settings, noise)
+    found, columns = discrepancies(nominal, extended, signals, settings, noise)
     nominal_metrics = model_metrics(nominal, nominal, train, held)
     validity = ValidityComparison(
         channel, _validity(before_held, held, channel, settings.max_lag, noise),
@@ -594,7 +594,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     clock["validity"] = time.perf_counter() - t0
     log.info("never worse and validity: %.1f s", clock["validity"])
 
-    closed = ClosedLoopComparison(False)
+    closed, closed_plot = ClosedLoopComparison(False), None
     why_not = can_resimulate(rig, trajectories) if settings.closed_loop else "disabled"
     if why_not is None and split.blocks:
         # a block inside a run does not start at rest, where the re-simulation starts
@@ -603,8 +603,8 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         log.info("closed loop not re-simulated: %s", why_not)
     if why_not is None:
         t0 = time.perf_counter()
-        closed, rows, plots["closed_loop"] = _closed_loop(nominal, extended, rig, trajectories,
-                                                          held_names, bool(causes))
+        closed, rows, closed_plot = _closed_loop(nominal, extended, rig, trajectories,
+                                                 held_names, bool(causes))
         found += rows
         clock["closed loop"] = time.perf_counter() - t0
         log.info("closed loop: %.1f s", clock["closed loop"])
@@ -625,9 +625,10 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     failing = [k for k, v in validity.before.items() if failed_tests(v, alpha)]
     sentence = summary_sentence(causes, nominal, gain, unusable, withdrawn, unexplained,
                                 failing, settings.unexplained_noise_ratio)
-    plots["before_after"] = {"before": before_held.stacked(channel),
-                             "after": after_held.stacked(channel), "channel": channel,
-                             "t": np.concatenate([s.row_times() for s in held])}
+    plots = Plots(columns, BeforeAfterPlot(before_held.stacked(channel),
+                                           after_held.stacked(channel), channel,
+                                           np.concatenate([s.row_times() for s in held])),
+                  closed_plot)
     band = {"analysed_hz": analysed_band_hz(settings.regression, rig.sample_rate_hz),
             "derivative_cutoff_hz": float(settings.regression.filter.cutoff_hz),
             "decimate": int(settings.regression.decimate), "from": "motion"}
@@ -835,7 +836,7 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
 
 def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names,
                  extended_differs: bool
-                 ) -> tuple[ClosedLoopComparison, list[Discrepancy], dict[str, Any]]:
+                 ) -> tuple[ClosedLoopComparison, list[Discrepancy], ClosedLoopPlot]:
     """Both models re-simulated in closed loop: the comparison, one discrepancy row per
     column of the nominal model's errors, and the data of the report's figure."""
     sim_nom = resimulate(nominal, nominal, rig, trajectories, label="nominal model")
@@ -860,6 +861,5 @@ def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names,
             tuple(float(v) for v in np.sqrt(np.mean(hb ** 2, axis=0))),
             tuple(float(v) for v in np.sqrt(np.mean(ha ** 2, axis=0))))
     first = held_names[0]
-    plot = {"run": first, "before": err_nom[first]["position"],
-            "after": err_ext[first]["position"]}
+    plot = ClosedLoopPlot(first, err_nom[first]["position"], err_ext[first]["position"])
     return ClosedLoopComparison(True, None, errors["position"], errors["torque"]), rows, plot

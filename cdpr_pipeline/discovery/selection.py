@@ -148,10 +148,15 @@ class Judgement:
         """The same judgement, not passed, for ``reason``."""
         return replace(self, passed=False, reason=reason)
 
+    @property
+    def heldout_rmse_drop(self) -> float:
+        """The held-out RMSE drop (a share) that its sum-of-squares drop
+        (:attr:`heldout_gain`) means."""
+        return 1 - np.sqrt(max(1 - self.heldout_gain, 0.0))
+
     def evidence(self) -> dict[str, Any]:
         return {"pvalue": self.pvalue, "lr": self.lr, "n_params": self.n_params,
-                "bic_drop": self.bic_drop, "heldout_rmse_drop_pct": 100 * (
-                    1 - np.sqrt(max(1 - self.heldout_gain, 0.0))),
+                "bic_drop": self.bic_drop, "heldout_rmse_drop_pct": 100 * self.heldout_rmse_drop,
                 "heldout_sse_drop_pct": 100 * self.heldout_gain,
                 "heldout_sse_drop_ci95_pct": [100 * self.ci[0], 100 * self.ci[1]],
                 "signal": self.channel, "variant": self.label,
