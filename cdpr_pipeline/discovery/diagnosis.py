@@ -26,7 +26,6 @@ from cdpr_pipeline.data.reading import (
 )
 from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.split import HELDOUT_FRACTION, MIN_HELDOUT_S, Split, heldout_split
-from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.data.validation import check_run_lengths
 from cdpr_pipeline.discovery.bands import power_band_hz, row_noise
 from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
@@ -85,8 +84,6 @@ from cdpr_pipeline.wavelet.split import WaveletSplit, band_energies
 log = logging.getLogger(__name__)
 
 FORMAT = "cdpr-diagnosis/1"
-#: families held out by default (docs/diagnosis-format.md)
-HELDOUT_FAMILIES = ("spiral", "pulses")
 
 
 class BlackBox(Protocol):
@@ -149,8 +146,7 @@ def diagnosis_split(dataset: Dataset, settings: DiagnosisSettings | None = None)
     """
     settings = settings or DiagnosisSettings()
     regression = resolve_settings(settings.regression, dataset.trajectories, dataset.rig)
-    return heldout_split(dataset.trajectories, settings.heldout,
-                         default_families=HELDOUT_FAMILIES, unknown="raise",
+    return heldout_split(dataset.trajectories, settings.heldout, unknown="raise",
                          min_samples=min_block_samples(regression, dataset.rig.sample_rate_hz),
                          source=str(dataset.root))
 
@@ -192,16 +188,9 @@ def diagnosis_needs(dataset: Dataset, settings: DiagnosisSettings
         return {runs[0].name: n}, why + (f" (the last {HELDOUT_FRACTION:.0%} of the one run "
                                          "is held out, at least half of it if that is shorter "
                                          f"than {MIN_HELDOUT_S:g} s)")
-    held = set(heldout_split(runs, settings.heldout, default_families=HELDOUT_FAMILIES,
-                             unknown="raise", source=str(dataset.root)).heldout)
+    held = set(heldout_split(runs, settings.heldout, unknown="raise",
+                             source=str(dataset.root)).heldout)
     return {tr.name: max(block, held_need) if tr.name in held else block for tr in runs}, why
-
-
-def split_runs(trajectories: Sequence[Trajectory], heldout: Sequence[str] | None = None
-               ) -> tuple[list[str], list[str]]:
-    """Training and held-out run (or time block) names, as :func:`diagnosis_split`."""
-    split = heldout_split(trajectories, heldout, default_families=HELDOUT_FAMILIES)
-    return list(split.train), list(split.heldout)
 
 
 @dataclass(frozen=True)
