@@ -26,14 +26,9 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from cdpr_pipeline.data.rig import Rig, WinchParams
+from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.sim.candidate_forms import TORQUE, Candidate, DataScale
 from cdpr_pipeline.sim.effects import EFFECTS, Effect
-
-
-def nominal_winch(rig: Rig) -> WinchParams:
-    """The rig's nominal winch (or axis) parameters (:attr:`Rig.nominal_winch`)."""
-    return rig.nominal_winch
 
 
 def candidate_effects(kind: str | None = None) -> list[str]:

@@ -174,14 +174,6 @@ def identification_split(dataset: Dataset, holdout: Sequence[str] | None = None,
                          source=str(dataset.root))
 
 
-def split_fit_holdout(dataset: Dataset, holdout: Sequence[str] | None = (),
-                      runs: Sequence[str] | None = None) -> tuple[list[str], list[str]]:
-    """Names of the runs (or blocks) to fit on and to hold out
-    (:func:`identification_split`)."""
-    split = identification_split(dataset, holdout, runs)
-    return list(split.train), list(split.heldout)
-
-
 def lowpass_regression(reg: WinchRegression, split: WaveletSplit | None) -> WinchRegression:
     """The wavelet low band of every column, run by run (runs are not joined)."""
     return reg if split is None else split_regression(reg, split)[0]

@@ -13,7 +13,7 @@ import numpy as np
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import Dataset
-from cdpr_pipeline.discovery.candidates import candidates_for, nominal_winch
+from cdpr_pipeline.discovery.candidates import candidates_for
 from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings
 from cdpr_pipeline.discovery.freeform import FreeFormSearch
 from cdpr_pipeline.sim.candidate_forms import DataScale
@@ -52,7 +52,7 @@ def candidate_effects(rig, signals, seed: int) -> list[list[Effect]]:
     one on."""
     omega = np.concatenate([s.omega for s in signals])
     scale = DataScale(float(np.sqrt(np.mean(omega ** 2))), omega.shape[1], "cdpr",
-                      nominal_winch(rig))
+                      rig.nominal_winch)
     rng = np.random.default_rng(seed)
     sets = []
     for cand in candidates_for(rig, scale, None, True):
