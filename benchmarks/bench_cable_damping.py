@@ -30,9 +30,9 @@ from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.sim.effects import CableElasticity
 from cdpr_pipeline.stages.simulate import rig_from_config
-from tests.discovery.foreign_cases import foreign_case
-from tests.discovery.lab_cases import fast_settings, lab_dataset
-from tests.independent_sim import draw_effect
+from cdpr_pipeline.testing.foreign_cases import foreign_case
+from cdpr_pipeline.testing.independent_sim import draw_effect
+from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset
 
 WITHIN = 0.25
 

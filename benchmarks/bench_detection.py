@@ -8,12 +8,13 @@ loop and black box off: they take no part in naming causes) must give the right 
 * ``lab``: the project's virtual lab (``cdpr_pipeline/sim``), the paper rig, the
   ``trajectory=diagnosis`` experiment (five 15 s runs, spiral held out); each effect's
   magnitude is then scaled down by factors until detection drops below 90 %;
-* ``independent``: the independent simulator of the tests (``tests/independent_sim``, no
-  code shared with ``cdpr_pipeline/sim``), a random rig per seed: cable robots (3 or 4
-  cables, 100-1000 Hz, five 15 s runs) and drive axes (1-6 axes, 100-2000 Hz, three
-  10 s runs), magnitudes per channel in absolute units; its datasets are written to disk
-  and loaded like a user's. Where the truth gives a number the cause can express, the
-  fitted magnitude is compared with it (``foreign_cases.parameter_errors``).
+* ``independent``: the independent simulator of the tests
+  (``cdpr_pipeline.testing.independent_sim``, no code shared with ``cdpr_pipeline/sim``), a
+  random rig per seed: cable robots (3 or 4 cables, 100-1000 Hz, five 15 s runs) and drive
+  axes (1-6 axes, 100-2000 Hz, three 10 s runs), magnitudes per channel in absolute units;
+  its datasets are written to disk and loaded like a user's. Where the truth gives a number
+  the cause can express, the fitted magnitude is compared with it
+  (``foreign_cases.parameter_errors``).
 
 A hit needs the verdict among the hidden labels (``unnamed`` for an effect outside the
 vocabulary), every hidden label among the causes, and for an effect outside the
@@ -45,6 +46,7 @@ JSON, and writes the tables into its section of docs/measurements.md.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import os
@@ -58,10 +60,11 @@ import numpy as np
 
 from benchmarks import measurements
 from cdpr_pipeline.config import compose_config
+from cdpr_pipeline.data.reading import motion_bandwidth_hz
 from cdpr_pipeline.discovery.study import run_case
-from cdpr_pipeline.sim.effects import EFFECTS
+from cdpr_pipeline.sim.effects import EFFECTS, CoggingTorque
 from cdpr_pipeline.stages.simulate import rig_from_config
-from tests.discovery.foreign_cases import (
+from cdpr_pipeline.testing.foreign_cases import (
     KINDS,
     OUTSIDE,
     VOCABULARY,
@@ -71,7 +74,10 @@ from tests.discovery.foreign_cases import (
     named_settings,
     parameter_errors,
     parameters_ok,
+    rng_for,
 )
+from cdpr_pipeline.testing.independent_sim import draw_effect
+from cdpr_pipeline.testing.lab_cases import lab_dataset
 
 
 def lab_cases(args, settings, record) -> None:
@@ -106,8 +112,6 @@ def _lab(case: dict) -> dict:
 def _narrow(settings):
     """``settings`` with a vocabulary that cannot express a winch torque (cable
     elasticity only) and no free-form search: nothing tried explains a periodic torque."""
-    import dataclasses
-
     return dataclasses.replace(settings, freeform=None, selection=dataclasses.replace(
         settings.selection, effects=["cable_elasticity"]))
 
@@ -122,11 +126,6 @@ def _special_grade(case: dict, expect: str) -> dict:
 
 def lab_special(args, settings, record) -> None:
     """The lab's issue-21 cases: ``unexplained`` and ``periodic_above_band`` (cogging)."""
-    from lab_cases import lab_dataset
-
-    from cdpr_pipeline.data.reading import motion_bandwidth_hz
-    from cdpr_pipeline.sim.effects import CoggingTorque
-
     cfg = compose_config("simulate", ["trajectory=diagnosis"])
     rig = rig_from_config(cfg.rig)
     counts, duration = dict(cfg.trajectory.counts), float(cfg.trajectory.duration_s)
@@ -176,11 +175,6 @@ def independent_cases(args, settings, record, tmp: Path) -> None:
 
 def independent_special(args, settings, record, tmp: Path) -> None:
     """The independent simulator's issue-21 cases (see the module docstring)."""
-    from foreign_cases import rng_for
-
-    from cdpr_pipeline.data.reading import motion_bandwidth_hz
-    from tests.independent_sim import draw_effect
-
     def upper_half(eff, rig, rng):
         idx = list(eff.channels)
         amplitude = np.array(eff.params["amplitude"], float)

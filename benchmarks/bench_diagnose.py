@@ -29,8 +29,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from benchmarks.measurements import record
 
+from benchmarks.measurements import record
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.sim.effects import make_effect
 from cdpr_pipeline.sim.lab import simulate_lab

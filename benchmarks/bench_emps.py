@@ -20,8 +20,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from benchmarks.measurements import record
 
+from benchmarks.measurements import record
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.convert import EMPS_PUBLISHED_RELATIVE_ERROR, convert_emps
 from cdpr_pipeline.data.io import load_dataset

@@ -1,5 +1,5 @@
 """Speed and verdicts of `cdpr diagnose` (default settings) on data it did not write:
-the independent generator of the tests (tests/independent_sim, no code shared with
+the independent generator of the tests (cdpr_pipeline.testing.independent_sim, no code shared with
 cdpr_pipeline/sim). Targets (issue 13): at most 20 s for five 15 s runs at 250 Hz with
 three winches, at most 60 s for a three-run six-axis recording, on 2 cores.
 
@@ -37,7 +37,7 @@ from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.discovery.fitting import one_blas_thread
 from cdpr_pipeline.stages.diagnose import settings_from_config
-from tests.independent_sim import (
+from cdpr_pipeline.testing.independent_sim import (
     random_axes_rig,
     random_rig,
     simulate_axes_dataset,
@@ -117,10 +117,10 @@ def main() -> None:
             for kind in args.kinds:
                 for effect in args.effects:
                     rows.append(_case(kind, effect, seed, Path(tmp)))
-    body = ("Independent generator (`tests/independent_sim`): a 3-cable robot, five 15 s runs "
-            "at 250 Hz; six drive axes, three 10 s runs at 250 Hz. `cdpr diagnose`'s "
-            "settings, black box off. Reference units: the diagnosis time over a fixed "
-            "workload's, measured before and after it in the same process "
+    body = ("Independent generator (`cdpr_pipeline.testing.independent_sim`): a 3-cable "
+            "robot, five 15 s runs at 250 Hz; six drive axes, three 10 s runs at 250 Hz. "
+            "`cdpr diagnose`'s settings, black box off. Reference units: the diagnosis "
+            "time over a fixed workload's, measured before and after it in the same process "
             f"(load average {load:.1f} at the start).\n\n" + "\n".join(rows))
     record("foreign-diagnose", "Speed of cdpr diagnose on data it did not write", body,
            command=invoked_as())

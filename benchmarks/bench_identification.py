@@ -37,8 +37,8 @@ from cdpr_pipeline.identification.identifiers import (
     generations_to_reach,
 )
 from cdpr_pipeline.identification.pipeline import (
+    identification_split,
     lowpass_regression,
-    split_fit_holdout,
     true_winch_params,
 )
 from cdpr_pipeline.identification.regressors import build_regression, dataset_regression
@@ -60,7 +60,7 @@ def main() -> None:
 
     data = load_dataset(args.data)
     truth = true_winch_params(args.data)
-    fit, _ = split_fit_holdout(data, ["spiral"])
+    fit = list(identification_split(data, ["spiral"]).train)
     start = time.perf_counter()
     full = dataset_regression(data.select(fit), data.rig)
     build_s = time.perf_counter() - start

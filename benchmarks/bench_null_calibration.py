@@ -3,7 +3,8 @@
 Effect-free datasets are drawn across both simulators and several rigs: the project's
 virtual lab (``cdpr_pipeline/sim``, the paper rig, the ``trajectory=diagnosis``
 experiment, a different seed each), the independent simulator's cable robots
-(``tests/independent_sim``: 3 and 4 cables at several sample rates, a random rig each)
+(``cdpr_pipeline.testing.independent_sim``: 3 and 4 cables at several sample rates, a
+random rig each)
 and its drive axes (1-6 axes, a random rig and rate each). Each is diagnosed with the
 command's configuration (closed loop and black box off) and every first-step candidate's
 statistics are recorded, with the thresholds the selection holds them to
@@ -41,7 +42,7 @@ from pathlib import Path
 from benchmarks.measurements import invoked_as, record
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.stages.simulate import rig_from_config
-from tests.discovery.foreign_cases import (
+from cdpr_pipeline.testing.foreign_cases import (
     add_settings_option,
     named_settings,
     null_datasets,

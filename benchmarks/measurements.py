@@ -10,7 +10,9 @@ Sections of other benchmarks are left as they are. The file is never edited by h
 
 The benchmarks are modules of the ``benchmarks`` package, run from the project root as
 ``python -m benchmarks.bench_NAME`` (the root is then on ``sys.path``, so they import this
-module and the tests' independent simulator without editing ``sys.path``).
+module without editing ``sys.path``). Besides ``benchmarks.*`` they import installed code
+only, ``cdpr_pipeline`` (the independent simulator and the study cases they share with the
+tests are :mod:`cdpr_pipeline.testing`); ``tests/test_layers.py`` checks it.
 """
 
 from __future__ import annotations

@@ -14,7 +14,12 @@ The order, lowest first (a layer may import its own and any lower one, never a h
 8. ``tracking``, ``outputs``: MLflow and the output folders;
 9. ``command``, ``pipeline``: running a command, the DVC pipeline;
 10. ``stages``: one command each;
-11. ``api``, ``cli``, ``cli_help`` and the package itself.
+11. ``api``, ``cli``, ``cli_help``, ``testing`` (the test oracle and the study cases the tests
+    and benchmarks share) and the package itself.
+
+The independent simulator (``testing.independent_sim``) is a test oracle: it imports nothing
+from the package outside itself. The benchmarks import installed code only (the package
+and ``benchmarks.*``, never ``tests``).
 
 Every import is read with :mod:`ast`, at module level (``TYPE_CHECKING`` blocks too) and
 inside functions. An import inside a function is allowed only where it defers a module
@@ -46,7 +51,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("tracking", "outputs"),
     ("command", "pipeline"),
     ("stages",),
-    ("api", "cli", "cli_help", ""),
+    ("api", "cli", "cli_help", "testing", ""),
 )
 RANK = {unit: i for i, layer in enumerate(LAYERS) for unit in layer}
 
@@ -140,20 +145,6 @@ def test_no_function_level_project_import_but_the_heavy_and_the_facades():
                       "means a definition belongs in a lower layer):\n" + "\n".join(lazy))
 
 
-def test_no_private_name_crosses_a_package():
-    """A ``_name`` is its package's own: another package that needs it needs a public
-    name (where a dataset is read, :mod:`cdpr_pipeline.data.reading`, is one)."""
-    crossing = []
-    for m, path in MODULES.items():
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            if (isinstance(node, ast.ImportFrom) and node.level == 0 and node.module
-                    and _project(node.module) and _unit(node.module) != _unit(m)):
-                crossing += [f"{path.relative_to(PACKAGE.parent)}:{node.lineno}: {m} imports "
-                             f"{node.module}.{a.name}" for a in node.names
-                             if a.name.startswith("_")]
-    assert not crossing, "private names imported across packages:\n" + "\n".join(crossing)
-
-
 def _loads_heavy(module: str, seen: set[str]) -> bool:
     """Whether importing ``module`` loads torch or Lightning (module-level imports)."""
     if module in seen or module not in MODULES:
@@ -201,3 +192,40 @@ def test_discovery_imports_without_torch():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "[]", f"importing discovery loaded {out}"
+
+
+ORACLE = "cdpr_pipeline.testing.independent_sim"
+
+
+def test_the_independent_simulator_shares_no_code_with_the_package():
+    """The oracle's evidence is that it is written apart: it writes ``cdpr-measured/1``
+    itself and imports nothing of ``cdpr_pipeline`` but its own modules."""
+    own = [m for m in MODULES if m == ORACLE or m.startswith(ORACLE + ".")]
+    assert len(own) >= 4, own
+    shared = [f"{MODULES[m].relative_to(PACKAGE.parent)}:{line}: {m} -> {imported}"
+              for m in own for imported, line, _ in IMPORTS[m]
+              if _project(imported) and not (imported == ORACLE
+                                             or imported.startswith(ORACLE + "."))]
+    assert not shared, "the independent simulator imports the package:\n" + "\n".join(shared)
+
+
+def test_the_benchmarks_import_installed_code_only():
+    """No benchmark imports the tests (``tests`` is not installed): what they share with
+    the tests lives in :mod:`cdpr_pipeline.testing`."""
+    root = PACKAGE.parent / "benchmarks"
+    found = []
+    for path in sorted(root.glob("*.py")):
+        for imported, line, _ in _imports(f"benchmarks.{path.stem}", path):
+            top = imported.split(".")[0]
+            # ``tests.x``, or a bare ``x`` that only a path hack would find in tests/
+            if top == "tests" or any(root.parent.glob(f"tests/**/{top}.py")):
+                found.append(f"benchmarks/{path.name}:{line}: {imported}")
+    assert not found, "benchmarks import test code:\n" + "\n".join(found)
+
+
+def test_nothing_in_the_package_imports_its_testing_helpers():
+    users = [f"{MODULES[m].relative_to(PACKAGE.parent)}:{line}: {m} -> {imported}"
+             for m, found in IMPORTS.items() if _unit(m) != "testing"
+             for imported, line, _ in found if _unit(imported) == "testing"
+             and _project(imported)]
+    assert not users, "the package imports cdpr_pipeline.testing:\n" + "\n".join(users)

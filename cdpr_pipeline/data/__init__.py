@@ -2,7 +2,7 @@
 
 from .errors import DataValidationError, Problem
 from .io import Dataset, load_dataset, read_rig, write_dataset
-from .rig import AxesRig, CdprRig, ControllerSpec, WinchParams
+from .rig import AxesRig, CdprRig, ControllerSpec, RecordedSignal, Rig, WinchParams
 from .trajectory import Trajectory
 from .validation import ValidationReport, validate_dataset
 
@@ -13,6 +13,8 @@ __all__ = [
     "DataValidationError",
     "Dataset",
     "Problem",
+    "RecordedSignal",
+    "Rig",
     "Trajectory",
     "ValidationReport",
     "WinchParams",

@@ -21,7 +21,7 @@ import numpy as np
 import yaml
 
 from .errors import DataValidationError, Problem
-from .rig import CdprRig, Rig
+from .rig import Rig
 from .trajectory import Trajectory, block_name
 from .validation import (
     DEFAULT_MIN_SAMPLES,
@@ -131,7 +131,6 @@ def read_rig(path: str | Path) -> Rig:
 
 
 def _to_trajectory(name: str, rig: Rig, cols: dict[str, np.ndarray]) -> Trajectory:
-    idx = range(1, rig.n + 1)
     used: set[str] = set()
 
     def take(names: Sequence[str]) -> np.ndarray | None:
@@ -141,17 +140,9 @@ def _to_trajectory(name: str, rig: Rig, cols: dict[str, np.ndarray]) -> Trajecto
         return np.column_stack([cols[c] for c in names])
 
     t = take(["t"])[:, 0]
-    torques = take([f"u{i}" for i in idx])
-    if isinstance(rig, CdprRig):
-        kw: dict[str, Any] = dict(
-            position=take(["x", "y", "z"]), desired=take(["xd", "yd", "zd"]),
-            lengths=take([f"l{i}" for i in idx]), velocity=take(["vx", "vy", "vz"]),
-            acceleration=take(["ax", "ay", "az"]))
-    else:
-        kw = dict(position=take([f"q{i}" for i in idx]),
-                  desired=take([f"qd{i}" for i in idx]))
+    kw: dict[str, Any] = {s.field: take(s.names(rig.n)) for s in rig.signals}
     extra = {k: v for k, v in cols.items() if k not in used}
-    return Trajectory(name=name, t=t, torques=torques, extra=extra, **kw)
+    return Trajectory(name=name, t=t, extra=extra, **kw)
 
 
 def load_dataset(
@@ -258,6 +249,10 @@ def _plain(value: Any) -> Any:
     return value
 
 
+#: the Trajectory fields a kind of rig may record (:attr:`Rig.signals`)
+_SIGNAL_FIELDS = ("position", "desired", "lengths", "torques", "velocity", "acceleration")
+
+
 def _table(rig: Rig, tr: Trajectory) -> list[tuple[str, np.ndarray]]:
     """Named columns in the order of the spec, then the extras."""
     rel = f"{TRAJ_DIR}/{tr.name}.csv"
@@ -278,22 +273,15 @@ def _table(rig: Rig, tr: Trajectory) -> list[tuple[str, np.ndarray]]:
                                                f"{labels or names + '1..'}")])
         cols.extend((label, array[:, j]) for j, label in enumerate(labels))
 
-    if isinstance(rig, CdprRig):
-        add(("x", "y", "z"), tr.position)
-        add(("xd", "yd", "zd"), tr.desired)
-        add("l", tr.lengths)
-        add("u", tr.torques)
-        add(("vx", "vy", "vz"), tr.velocity)
-        add(("ax", "ay", "az"), tr.acceleration)
-    else:
-        if tr.velocity is not None or tr.acceleration is not None or tr.lengths is not None:
-            # kind axes has no such columns; dropping them silently would lose data
-            raise DataValidationError([Problem(rel, None, None, "kind 'axes' has no velocity, "
-                                               "acceleration or length columns; pass them "
-                                               "in Trajectory.extra")])
-        add("q", tr.position)
-        add("qd", tr.desired)
-        add("u", tr.torques)
+    unrecorded = [f for f in _SIGNAL_FIELDS
+                  if rig.signal(f) is None and getattr(tr, f) is not None]
+    if unrecorded:
+        # the kind has no such columns; dropping them silently would lose data
+        raise DataValidationError([Problem(rel, None, None, f"kind {rig.kind!r} has no "
+                                           f"{' or '.join(unrecorded)} columns; pass them "
+                                           "in Trajectory.extra")])
+    for signal in rig.signals:
+        add(signal.columns, getattr(tr, signal.field))
     taken = {name for name, _ in cols}
     for name, values in tr.extra.items():
         if name in taken:

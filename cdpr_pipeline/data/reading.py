@@ -4,10 +4,11 @@ rules they follow (``conf/regression/*.yaml``).
 :class:`RegressionSettings` holds the derivative filter, the decimation, the Coulomb law,
 the zero-order hold of the recorded torques and which position sensors resolve standstill;
 :func:`resolve_settings` chooses every ``"auto"`` entry from the data and the rig, once per
-command. The held-torque rule (:func:`held_torque`) and the stick rule (:func:`sliding`)
-say which torque acts around a sample and where the friction is ``+-F_c``. Identification
-(:mod:`cdpr_pipeline.identification.regressors`), discovery and the models read data
-through these.
+command, into a :class:`ResolvedReading` (frozen, every choice made) that the command passes
+down: nothing below it chooses again. The held-torque rule (:func:`held_torque`) and the
+stick rule (:func:`sliding`) say which torque acts around a sample and where the friction
+is ``+-F_c``. Identification (:mod:`cdpr_pipeline.identification.regressors`), discovery
+and the models read data through these.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import numpy as np
 from scipy.ndimage import minimum_filter1d
 from scipy.signal import butter, periodogram, sosfiltfilt
 
-from cdpr_pipeline.data.rig import AxesRig, CdprRig, Rig
+from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.data.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -172,6 +173,57 @@ class RegressionSettings:
         return np.array(rest, bool)
 
 
+@dataclass(frozen=True)
+class ResolvedReading(RegressionSettings):
+    """How one command reads its dataset: :class:`RegressionSettings` with every choice
+    made (:func:`resolve_settings`), frozen.
+
+    A command resolves its settings once, at its top, from the whole dataset and its rig,
+    and passes this object down; a function given one reads with it as it is
+    (:func:`as_resolved`), so every part of the command reads the runs alike and each
+    choice is logged once.
+
+    Parameters
+    ----------
+    filter : DerivativeFilter
+        With its cut-off and edge trim in numbers (Hz, s).
+    decimate : int
+        Decimation factor (1: none).
+    sign_sharpness : float or None
+        ``tanh(k b)`` for the Coulomb column; None: the hard ``sign(b)``.
+    zero_order_hold : bool
+        Whether each recorded torque is held (:func:`held_torque`).
+    encoder_rest : bool or tuple of bool
+        Per channel (one bool: every channel), whether its position resolves standstill.
+    hold_fraction : float
+        Share of a sample period each recorded torque is held for, in ``(0, 1]``.
+
+    Raises
+    ------
+    ValueError
+        When an entry is still a choice left to the data (``"auto"``, ``"rig"``).
+    """
+
+    filter: DerivativeFilter
+    decimate: int
+    sign_sharpness: float | None
+    zero_order_hold: bool
+    encoder_rest: bool | tuple[bool, ...]
+    hold_fraction: float
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name, value in (("filter.cutoff_hz", self.filter.cutoff_hz),
+                            ("filter.trim_s", self.filter.trim_s), ("decimate", self.decimate),
+                            ("sign_sharpness", self.sign_sharpness),
+                            ("zero_order_hold", self.zero_order_hold),
+                            ("encoder_rest", self.encoder_rest),
+                            ("hold_fraction", self.hold_fraction)):
+            if isinstance(value, str):
+                raise ValueError(f"regression.{name} is {value!r} in resolved settings: "
+                                 "choose it from the data first (resolve_settings)")
+
+
 def motion_bandwidth_hz(trajectories: Sequence[Trajectory]) -> float:
     """The measured motion's bandwidth: the frequency below which
     :data:`BANDWIDTH_POWER_SHARE` of the velocity's power lies (median over runs).
@@ -200,9 +252,10 @@ def motion_bandwidth_hz(trajectories: Sequence[Trajectory]) -> float:
 
 
 def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajectory],
-                     rig: Rig) -> RegressionSettings:
+                     rig: Rig) -> ResolvedReading:
     """``settings`` with every ``"auto"``/``"rig"`` entry chosen from the data and the rig,
-    each choice logged with its reason.
+    each choice logged with its reason: what a command calls once, at its top, on its
+    whole dataset (settings resolved already come back as they are).
 
     The rules follow the IDIM practice of robot identification (Gautier; Janot et al.):
 
@@ -223,7 +276,7 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
     On the EMPS benchmark (1 kHz, 3.7 Hz motion bandwidth) these give the published
     protocol (Butterworth about 100 Hz, decimation by 10).
     """
-    if settings.resolved:
+    if isinstance(settings, ResolvedReading):
         return settings
     filt = settings.filter
     fs = float(rig.sample_rate_hz)
@@ -250,13 +303,11 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
         log.info("Coulomb law: %s (as rig.yaml states)",
                  "hard sign" if law is None else f"tanh({law:g} w)")
     hold = settings.zero_order_hold
-    rate = (rig.controller.rate_hz if isinstance(rig, CdprRig) and rig.controller
-            else (rig.controller or {}).get("rate_hz") if isinstance(rig, AxesRig)
-            else None)
+    rate = rig.controller_rate_hz
     if hold == AUTO:
         # the spec defines a cable robot's u as the commanded torque, which a digital
         # drive holds until the next command; an axis's u is the force applied
-        commanded = isinstance(rig, CdprRig)
+        commanded = rig.torque_commanded
         hold = rate is not None or commanded
         log.info("recorded torques %s", f"held over the controller period ({rate:g} Hz)"
                  if rate is not None else "held over the sample (a cable robot's u is the "
@@ -286,9 +337,20 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
         if isinstance(value, str):
             raise ValueError(f"regression.{name}: unknown setting {value!r} "
                              f"(a value, or {AUTO!r}/{RIG!r} where documented)")
-    return RegressionSettings(replace(filt, cutoff_hz=float(cutoff), trim_s=float(trim)),
-                              int(q), None if law is None else float(law), bool(hold), rest,
-                              float(fraction))
+    return ResolvedReading(replace(filt, cutoff_hz=float(cutoff), trim_s=float(trim)),
+                           int(q), None if law is None else float(law), bool(hold), rest,
+                           float(fraction))
+
+
+def as_resolved(settings: RegressionSettings | None, trajectories: Sequence[Trajectory],
+                rig: Rig) -> ResolvedReading:
+    """``settings`` as they are when a command resolved them already (a
+    :class:`ResolvedReading`), else :func:`resolve_settings` of them (the defaults when
+    None) on ``trajectories``: the convenience of a public function called on its own,
+    which then chooses from the runs it was given."""
+    if isinstance(settings, ResolvedReading):
+        return settings
+    return resolve_settings(settings or RegressionSettings(), trajectories, rig)
 
 
 def recorded_position(traj: Trajectory) -> np.ndarray:

@@ -3,12 +3,18 @@
 A rig file states what the user *believes* about the rig: geometry, masses, the nominal
 winch model and optionally the controller. The simulator may run a different *true*
 plant (hidden effects); the rig file never says so.
+
+Every kind of rig answers the questions of :class:`Rig` (its recorded signals, nominal
+model, channel names, units and controller); the rest of the package asks them instead
+of telling the kinds apart by class. :class:`CdprRig` and :class:`AxesRig` are the two
+implementations. What a kind means to a higher layer (its plant, its physics predictor)
+is an object of that layer, looked up by :attr:`Rig.kind`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -28,6 +34,130 @@ def coulomb_law_dict(sharpness: float | None) -> str | dict[str, float]:
     if sharpness is None or not np.isfinite(sharpness):
         return "sign"
     return {"tanh": float(sharpness)}
+
+
+@dataclass(frozen=True)
+class RecordedSignal:
+    """One signal of a run as the data format records it: the :class:`~cdpr_pipeline.
+    data.trajectory.Trajectory` field it fills and its columns.
+
+    ``columns`` is a tuple of column names, or a prefix: one column per channel,
+    ``<prefix>1..<prefix>n``.
+    """
+
+    field: str
+    columns: str | tuple[str, ...]
+    required: bool = True
+
+    @property
+    def per_channel(self) -> bool:
+        """Whether the signal has one column per channel (``columns`` is a prefix)."""
+        return isinstance(self.columns, str)
+
+    def names(self, n: int) -> list[str]:
+        """The column names on a rig of ``n`` channels."""
+        if isinstance(self.columns, str):
+            return [f"{self.columns}{i}" for i in range(1, n + 1)]
+        return list(self.columns)
+
+    def describe(self) -> str:
+        """The columns in words: ``xd, yd, zd`` or ``qd1..qdn``."""
+        if isinstance(self.columns, str):
+            return f"{self.columns}1..{self.columns}n"
+        return ", ".join(self.columns)
+
+
+class Rig(Protocol):
+    """What every kind of rig answers (``rig.yaml``'s ``kind``).
+
+    Attributes
+    ----------
+    kind : str
+        rig.yaml's ``kind``: the key under which higher layers keep what the kind means
+        to them (its plant, its predictor).
+    sample_rate_hz, controller, virtual, extra, coulomb_sharpness
+        As rig.yaml states them.
+    """
+
+    kind: str
+    sample_rate_hz: float
+    controller: Any
+    virtual: bool
+    extra: dict[str, Any]
+    coulomb_sharpness: float | None
+
+    @property
+    def n(self) -> int:
+        """Number of channels (cables or axes)."""
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """Channel labels ``1..n``."""
+
+    @property
+    def nominal_winch(self) -> WinchParams:
+        """The stated drive model of every channel, ``I q'' + F_v q' + F_c s(q') + d``."""
+
+    @property
+    def signals(self) -> tuple[RecordedSignal, ...]:
+        """The recorded signals of a run (besides ``t``), in the order of the columns
+        written."""
+
+    @property
+    def position_names(self) -> tuple[str, ...]:
+        """Names of the position coordinates a run records."""
+
+    @property
+    def channel_position(self) -> str:
+        """Column prefix of each channel's own position (``l`` cable length, ``q`` axis
+        position)."""
+
+    @property
+    def motion_columns(self) -> tuple[str, ...]:
+        """The position columns whose motion shows the rig's dynamics."""
+
+    @property
+    def motionless(self) -> str:
+        """What a run whose :attr:`motion_columns` never move shows, in words."""
+
+    @property
+    def channels_independent(self) -> bool:
+        """Whether each channel moves on its own (drive axes: one that never moves cannot
+        be identified), not through a shared body (a cable robot's platform)."""
+
+    @property
+    def count_text(self) -> str:
+        """The number of channels in words (``4 anchors``, ``1 axis``)."""
+
+    @property
+    def torque_unit(self) -> str | None:
+        """The unit of the torque columns ``u`` where the data format fixes it."""
+
+    @property
+    def shared_position_units(self) -> bool:
+        """Whether every position coordinate has one unit (cable robot: m)."""
+
+    @property
+    def controller_rate_hz(self) -> float | None:
+        """The stated controller rate, None when rig.yaml states none."""
+
+    @property
+    def torque_commanded(self) -> bool:
+        """Whether ``u`` is the commanded torque (held by a digital drive until the next
+        command), not the force or torque applied."""
+
+    def frame_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The box the positions must stay in, None for a rig without one."""
+
+    def signal(self, name: str) -> RecordedSignal | None:
+        """The recorded signal filling Trajectory field ``name``, None if the kind has
+        none."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """The rig.yaml content."""
+
+    def replace(self, **changes: Any) -> Rig:
+        """A copy with ``changes``."""
 
 
 @dataclass(frozen=True)
@@ -91,8 +221,34 @@ class ControllerSpec:
         }
 
 
+class _Signals:
+    """:meth:`Rig.signal` from :attr:`Rig.signals`."""
+
+    signals: tuple[RecordedSignal, ...]
+
+    def signal(self, name: str) -> RecordedSignal | None:
+        return next((s for s in self.signals if s.field == name), None)
+
+
+#: the recorded signals of a cable robot's run (the data spec's columns, in order)
+CDPR_SIGNALS = (
+    RecordedSignal("position", ("x", "y", "z")),
+    RecordedSignal("desired", ("xd", "yd", "zd")),
+    RecordedSignal("lengths", "l"),
+    RecordedSignal("torques", "u"),
+    RecordedSignal("velocity", ("vx", "vy", "vz"), required=False),
+    RecordedSignal("acceleration", ("ax", "ay", "az"), required=False),
+)
+#: the recorded signals of a run of drive axes
+AXES_SIGNALS = (
+    RecordedSignal("position", "q"),
+    RecordedSignal("desired", "qd", required=False),
+    RecordedSignal("torques", "u"),
+)
+
+
 @dataclass(frozen=True)
-class CdprRig:
+class CdprRig(_Signals):
     """Nominal description of a point-mass cable robot (``kind: cdpr``)."""
 
     sample_rate_hz: float
@@ -109,6 +265,17 @@ class CdprRig:
     coulomb_sharpness: float | None = None
 
     kind = "cdpr"
+    signals = CDPR_SIGNALS
+    position_names = ("x", "y", "z")
+    channel_position = "l"
+    motionless = ("the platform never moves: x, y, z and every cable length stay within "
+                  "their noise")
+    channels_independent = False
+    #: the data spec: u is a winch torque in N m
+    torque_unit = "N m"
+    shared_position_units = True
+    #: the data spec: a cable robot's u is the commanded torque
+    torque_commanded = True
 
     def __post_init__(self) -> None:
         object.__setattr__(
@@ -126,6 +293,22 @@ class CdprRig:
     @property
     def channels(self) -> tuple[str, ...]:
         return tuple(f"{i + 1}" for i in range(self.n))
+
+    @property
+    def nominal_winch(self) -> WinchParams:
+        return self.winch_nominal
+
+    @property
+    def motion_columns(self) -> tuple[str, ...]:
+        return (*self.position_names, *(f"l{i}" for i in range(1, self.n + 1)))
+
+    @property
+    def count_text(self) -> str:
+        return f"{self.n} anchors"
+
+    @property
+    def controller_rate_hz(self) -> float | None:
+        return None if self.controller is None else self.controller.rate_hz
 
     def frame_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Box the platform must stay in: the anchors' x/y extent, from the floor (or the
@@ -164,7 +347,7 @@ class CdprRig:
 
 
 @dataclass(frozen=True)
-class AxesRig:
+class AxesRig(_Signals):
     """Nominal description of independent drive axes (``kind: axes``)."""
 
     sample_rate_hz: float
@@ -177,6 +360,15 @@ class AxesRig:
     coulomb_sharpness: float | None = None
 
     kind = "axes"
+    signals = AXES_SIGNALS
+    channel_position = "q"
+    motionless = "no axis moves: every q stays within its noise"
+    channels_independent = True
+    #: m or rad per axis: the data format fixes no unit (rig.yaml's ``units`` may state it)
+    torque_unit = None
+    shared_position_units = False
+    #: an axis's u is the force or torque applied
+    torque_commanded = False
 
     @property
     def n(self) -> int:
@@ -185,6 +377,30 @@ class AxesRig:
     @property
     def channels(self) -> tuple[str, ...]:
         return tuple(f"{i + 1}" for i in range(self.n))
+
+    @property
+    def nominal_winch(self) -> WinchParams:
+        return self.nominal
+
+    @property
+    def position_names(self) -> tuple[str, ...]:
+        return tuple(self.axes)
+
+    @property
+    def motion_columns(self) -> tuple[str, ...]:
+        return tuple(f"q{i}" for i in range(1, self.n + 1))
+
+    @property
+    def count_text(self) -> str:
+        return f"{self.n} axis" if self.n == 1 else f"{self.n} axes"
+
+    @property
+    def controller_rate_hz(self) -> float | None:
+        return (self.controller or {}).get("rate_hz")
+
+    def frame_bounds(self) -> None:
+        """Drive axes have no frame: their range is what the runs record."""
+        return None
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -232,4 +448,7 @@ class AxesRig:
         return tuple(str(v) for v in raw)
 
 
-Rig = CdprRig | AxesRig
+#: the kinds of rig rig.yaml may state, by its ``kind``
+RIG_KINDS: dict[str, type[CdprRig] | type[AxesRig]] = {CdprRig.kind: CdprRig,
+                                                       AxesRig.kind: AxesRig}
+

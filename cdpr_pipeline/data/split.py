@@ -408,15 +408,14 @@ def heldout_split(runs: Sequence[Trajectory], heldout: Sequence[str] | None = No
                   train_runs: Sequence[str] | None = None,
                   fraction: float = HELDOUT_FRACTION, min_heldout_s: float = MIN_HELDOUT_S,
                   gap: int = 0, min_samples: int = 1,
-                  default_families: Sequence[str] = DEFAULT_HELDOUT_FAMILIES,
                   unknown: str = "raise", source: str = "dataset") -> Split:
     """``train``/``heldout`` for identification and diagnosis.
 
     With two or more runs, whole runs are held out: those named in ``heldout`` (run names
-    or families), by default those of ``default_families`` (``spiral``, ``pulses``), else
-    the last file. With one run, its last block is held out: ``fraction`` of it, but at
-    least ``min_heldout_s`` seconds as long as that leaves the first half to training;
-    ``gap`` samples between the blocks.
+    or families), by default those of :data:`DEFAULT_HELDOUT_FAMILIES` (``spiral``,
+    ``pulses``), else the last file. With one run, its last block is held out:
+    ``fraction`` of it, but at least ``min_heldout_s`` seconds as long as that leaves the
+    first half to training; ``gap`` samples between the blocks.
 
     Parameters
     ----------
@@ -432,8 +431,6 @@ def heldout_split(runs: Sequence[Trajectory], heldout: Sequence[str] | None = No
         Samples between the training and the held-out block of a single run.
     min_samples : int
         Fewest samples of a useful block.
-    default_families : sequence of str
-        Families held out when ``heldout`` is empty.
     unknown : {"raise", "warn"}
         What an entry of ``heldout`` that matches no run does: raise, or log a warning
         (the default applies when nothing matched).
@@ -471,7 +468,7 @@ def heldout_split(runs: Sequence[Trajectory], heldout: Sequence[str] | None = No
                         wanted)
     explicit = bool(held)
     if not held:
-        held = [tr.name for tr in runs if tr.family in default_families]
+        held = [tr.name for tr in runs if tr.family in DEFAULT_HELDOUT_FAMILIES]
         if len(held) == len(runs):
             held = []                     # only test families: hold out the last file
         held = held or names[-1:]

@@ -23,7 +23,16 @@ import pandas as pd
 import yaml
 
 from .errors import ROW_NOTE, DataValidationError, Problem, Severity
-from .rig import FORMAT, WINCH_KEYS, AxesRig, CdprRig, ControllerSpec, Rig, WinchParams
+from .rig import (
+    FORMAT,
+    RIG_KINDS,
+    WINCH_KEYS,
+    AxesRig,
+    CdprRig,
+    ControllerSpec,
+    Rig,
+    WinchParams,
+)
 from .trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -241,7 +250,7 @@ class _RigChecker:
             self.error("format", f"unknown format {_short(fmt)} (expected '{FORMAT}')", "format")
             return None
         kind = self.raw.get("kind", "cdpr")
-        if kind not in ("cdpr", "axes"):
+        if kind not in RIG_KINDS:
             self.error("kind", f"unknown kind {_short(kind)} (expected 'cdpr' or 'axes')", "kind")
             return None
         return kind
@@ -454,16 +463,17 @@ def read_rig_file(path: Path, file: str = RIG_FILE) -> tuple[Rig | None, list[Pr
 def _layout(rig: Rig) -> tuple[list[str], list[list[str]], re.Pattern[str], str]:
     """Required columns, optional all-or-none column groups, the channel pattern and what
     n counts (for messages)."""
-    idx = range(1, rig.n + 1)
-    if isinstance(rig, CdprRig):
-        required = ["t", "x", "y", "z", "xd", "yd", "zd", *(f"l{i}" for i in idx),
-                    *(f"u{i}" for i in idx)]
-        optional = [["vx", "vy", "vz"], ["ax", "ay", "az"]]
-        return required, optional, re.compile(r"^([lu])(\d+)$"), f"{rig.n} anchors"
-    required = ["t", *(f"q{i}" for i in idx), *(f"u{i}" for i in idx)]
-    optional = [[f"qd{i}" for i in idx]]
-    counted = f"{rig.n} axis" if rig.n == 1 else f"{rig.n} axes"
-    return required, optional, re.compile(r"^(qd|q|u)(\d+)$"), counted
+    required = ["t", *(c for s in rig.signals if s.required for c in s.names(rig.n))]
+    optional = [s.names(rig.n) for s in rig.signals if not s.required]
+    # the longest prefix first: qd1 is a reference column, not q with channel "d1"
+    prefixes = sorted(_channel_prefixes(rig), key=len, reverse=True)
+    return (required, optional, re.compile(rf"^({'|'.join(prefixes)})(\d+)$"),
+            rig.count_text)
+
+
+def _channel_prefixes(rig: Rig) -> list[str]:
+    """The column prefixes of the rig's per-channel signals (``l``, ``u``; ``q``, ...)."""
+    return [s.columns for s in rig.signals if s.per_channel]
 
 
 def _read_header(path: Path) -> list[str] | None:
@@ -581,8 +591,9 @@ class _FileChecker:
         self._check_limits(columns)
         if "t" in columns:
             self._check_time(columns["t"])
-        if isinstance(self.rig, CdprRig):
-            self._check_cdpr(columns)
+        kind_check = _KIND_CHECKS.get(self.rig.kind)
+        if kind_check is not None:
+            kind_check(self, columns)
         if self.failed:
             return None
         columns = self._fill_gaps(columns, known)
@@ -687,8 +698,8 @@ class _FileChecker:
         for name, values in columns.items():
             match = re.match(r"^(t|qd|q|u|v|a)[0-9xyz]*$", name)
             if match is None or (match.group(1) in ("q", "qd")
-                                 and isinstance(self.rig, CdprRig)):
-                continue
+                                 and match.group(1) not in _channel_prefixes(self.rig)):
+                continue    # q, qd: a column of another kind (a cable robot's extra)
             if match.group(1) in ("v", "a") and name[1:] not in ("x", "y", "z"):
                 continue  # an extra column such as 'alpha': not a velocity
             limit = PHYSICAL_LIMITS[match.group(1)]
@@ -702,10 +713,7 @@ class _FileChecker:
         """What the analysis needs of a run's numbers, judged over the dataset by
         :func:`_check_dataset_content`: which position channels move beyond their noise,
         and which torque channels are zero in every sample."""
-        if isinstance(self.rig, CdprRig):
-            channels = ["x", "y", "z", *(f"l{i}" for i in range(1, self.rig.n + 1))]
-        else:
-            channels = [f"q{i}" for i in range(1, self.rig.n + 1)]
+        channels = self.rig.motion_columns
         self.moving = {c: moves(columns[c]) for c in channels if c in columns}
         dt = np.diff(columns["t"])
         for c in channels:
@@ -794,6 +802,13 @@ class _FileChecker:
         return columns
 
 
+#: the checks of a run that only a kind of rig has, by rig.yaml's kind (a cable robot's
+#: positions stay in the anchor frame, its lengths follow the geometry)
+_KIND_CHECKS: dict[str, Callable[[_FileChecker, dict[str, np.ndarray]], None]] = {
+    "cdpr": _FileChecker._check_cdpr,
+}
+
+
 # --------------------------------------------------------------------------- dataset
 
 
@@ -818,20 +833,18 @@ def _check_dataset_content(motion: dict[str, dict[str, bool]], zero: dict[str, d
                     else "; the run is left out of the analysis"),
                 "error" if everywhere else "warning", "zero_torque"))
     static_runs = [rel for rel, m in motion.items() if m and not any(m.values())]
-    cdpr = isinstance(rig, CdprRig)
-    what = ("the platform never moves: x, y, z and every cable length stay within their "
-            "noise" if cdpr else "no axis moves: every q stays within its noise")
+    what = rig.motionless
     severity: Severity = "error" if len(static_runs) == len(motion) else "warning"
     advice = ("; a dataset needs motion to show dynamics (a static hold tells nothing "
               "about inertia or friction)" if severity == "error"
               else "; the run is left out of the analysis")
     for rel in static_runs:
-        report.add(Problem(rel, "x" if cdpr else "q1", None, what + advice, severity,
+        report.add(Problem(rel, rig.motion_columns[0], None, what + advice, severity,
                            "no_motion"))
-    if cdpr or severity == "error":
+    if not rig.channels_independent or severity == "error":
         return
     for axis in range(1, rig.n + 1):
-        name = f"q{axis}"
+        name = f"{rig.channel_position}{axis}"
         if not any(m.get(name, True) for m in motion.values()):
             report.add(Problem(next(iter(motion)), name, None, f"axis {name} never moves in "
                                "any run: its parameters cannot be identified",

@@ -26,14 +26,9 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from cdpr_pipeline.data.rig import CdprRig, Rig, WinchParams
+from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.sim.candidate_forms import TORQUE, Candidate, DataScale
 from cdpr_pipeline.sim.effects import EFFECTS, Effect
-
-
-def nominal_winch(rig: Rig) -> WinchParams:
-    """The rig's nominal winch (or axis) parameters."""
-    return rig.winch_nominal if isinstance(rig, CdprRig) else rig.nominal
 
 
 def candidate_effects(kind: str | None = None) -> list[str]:
@@ -47,9 +42,9 @@ def candidates_for(rig: Rig, scale: DataScale, names: list[str] | None = None,
                    refit_winches: bool = True) -> list[Candidate]:
     """Every variant of the named effects (all of the vocabulary by default) that
     applies to this kind of rig, as the effect classes define them."""
-    kind = "cdpr" if isinstance(rig, CdprRig) else "axes"
+    kind = rig.kind
     if scale.winch is None:
-        scale = replace(scale, winch=nominal_winch(rig))
+        scale = replace(scale, winch=rig.nominal_winch)
     known = candidate_effects()
     out: list[Candidate] = []
     for name in names or known:
@@ -72,7 +67,7 @@ def vocabulary_shapes(rig: Rig, scale: DataScale, names: list[str] | None = None
     """Free-form expressions with the shape of a candidate effect: the free-form search
     leaves such terms to the named candidates (spec: a term with a vocabulary effect's
     shape is reported under its name)."""
-    kind = "cdpr" if isinstance(rig, CdprRig) else "axes"
+    kind = rig.kind
     out: list[str] = []
     for name in names or candidate_effects(kind):
         cls = EFFECTS[name]

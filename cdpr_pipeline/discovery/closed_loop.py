@@ -14,9 +14,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from cdpr_pipeline.data.rig import CdprRig
+from cdpr_pipeline.data.rig import CdprRig, Rig
 from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.sim.plant import Plant
+from cdpr_pipeline.sim.plant import Plant, plant_kind
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import BatchSimulator, auto_substeps, implicit_friction
 from cdpr_pipeline.sim.trajectories import SampledDesired
@@ -26,9 +26,9 @@ log = logging.getLogger(__name__)
 _EXACT = Sensors(mocap_noise_m=0.0, encoder_counts_per_rev=0, torque_noise_nm=0.0)
 
 
-def can_resimulate(rig, trajectories: Sequence[Trajectory]) -> str | None:
+def can_resimulate(rig: Rig, trajectories: Sequence[Trajectory]) -> str | None:
     """None when closed-loop re-simulation is possible, else why not."""
-    if not isinstance(rig, CdprRig):
+    if not plant_kind(rig).closed_loop:
         return "only cable robots (kind: cdpr) are re-simulated"
     if rig.controller is None:
         return "rig.yaml has no controller"

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -23,17 +22,18 @@ from cdpr_pipeline.data.reading import (
     MAX_CUTOFF_FRACTION,
     TRIM_PERIODS,
     RegressionSettings,
-    resolve_settings,
+    as_resolved,
 )
 from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.split import HELDOUT_FRACTION, MIN_HELDOUT_S, Split, heldout_split
-from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.data.validation import check_run_lengths
 from cdpr_pipeline.discovery.bands import power_band_hz, row_noise
 from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
 from cdpr_pipeline.discovery.damping import with_fitted_damping
 from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
-from cdpr_pipeline.discovery.freeform import FreeFormSearch
+from cdpr_pipeline.discovery.freeform.search import FreeFormSearch
+from cdpr_pipeline.discovery.never_worse import never_worse
+from cdpr_pipeline.discovery.plots import BeforeAfterPlot, ClosedLoopPlot, ColumnPlot, Plots
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,
@@ -41,14 +41,12 @@ from cdpr_pipeline.discovery.residuals import (
     measured_rows,
     nominal_model,
     predict,
-    relative_sse,
     residuals,
     signal_scales,
 )
 from cdpr_pipeline.discovery.results import (
     Band,
     BlackBoxShare,
-    ChannelGain,
     ClosedLoopComparison,
     ClosedLoopErrors,
     Discrepancy,
@@ -71,10 +69,8 @@ from cdpr_pipeline.discovery.selection import (
 from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
 from cdpr_pipeline.discovery.validity import (
     NoiseModel,
-    block_bootstrap,
     correlation_tests,
     ljung_box_pvalue,
-    split_blocks,
 )
 from cdpr_pipeline.identification.pipeline import (
     check_torque_labels,
@@ -89,8 +85,6 @@ from cdpr_pipeline.wavelet.split import WaveletSplit, band_energies
 log = logging.getLogger(__name__)
 
 FORMAT = "cdpr-diagnosis/1"
-#: families held out by default (docs/diagnosis-format.md)
-HELDOUT_FAMILIES = ("spiral", "pulses")
 
 
 class BlackBox(Protocol):
@@ -149,12 +143,12 @@ def diagnosis_split(dataset: Dataset, settings: DiagnosisSettings | None = None)
     ``settings.heldout`` entries match a run name or family; by default families
     ``spiral`` or ``pulses`` are held out, else the last file. A single run holds out its
     last block (25 %, at least 3 s while half the run is left to train on); a block too
-    short for the regression's trims and 100 rows raises.
+    short for the regression's trims and 100 rows raises. ``settings.regression`` as
+    :func:`diagnose` reads with it: resolved by the command, else resolved here.
     """
     settings = settings or DiagnosisSettings()
-    regression = resolve_settings(settings.regression, dataset.trajectories, dataset.rig)
-    return heldout_split(dataset.trajectories, settings.heldout,
-                         default_families=HELDOUT_FAMILIES, unknown="raise",
+    regression = as_resolved(settings.regression, dataset.trajectories, dataset.rig)
+    return heldout_split(dataset.trajectories, settings.heldout, unknown="raise",
                          min_samples=min_block_samples(regression, dataset.rig.sample_rate_hz),
                          source=str(dataset.root))
 
@@ -196,16 +190,9 @@ def diagnosis_needs(dataset: Dataset, settings: DiagnosisSettings
         return {runs[0].name: n}, why + (f" (the last {HELDOUT_FRACTION:.0%} of the one run "
                                          "is held out, at least half of it if that is shorter "
                                          f"than {MIN_HELDOUT_S:g} s)")
-    held = set(heldout_split(runs, settings.heldout, default_families=HELDOUT_FAMILIES,
-                             unknown="raise", source=str(dataset.root)).heldout)
+    held = set(heldout_split(runs, settings.heldout, unknown="raise",
+                             source=str(dataset.root)).heldout)
     return {tr.name: max(block, held_need) if tr.name in held else block for tr in runs}, why
-
-
-def split_runs(trajectories: Sequence[Trajectory], heldout: Sequence[str] | None = None
-               ) -> tuple[list[str], list[str]]:
-    """Training and held-out run (or time block) names, as :func:`diagnosis_split`."""
-    split = heldout_split(trajectories, heldout, default_families=HELDOUT_FAMILIES)
-    return list(split.train), list(split.heldout)
 
 
 @dataclass(frozen=True)
@@ -216,7 +203,7 @@ class Diagnosis:
     closed loop, black box, total); it is not part of ``diagnosis.json``, which depends
     only on the data and the settings, but of ``metrics.json`` (``time_<phase>_s``,
     with the command's start-up CPU seconds and loading beside them). ``plots`` holds
-    the arrays of the report's figures.
+    the arrays of the report's figures (:class:`~cdpr_pipeline.discovery.plots.Plots`).
     """
 
     dataset: str
@@ -236,7 +223,7 @@ class Diagnosis:
     blackbox: BlackBoxShare | None
     sentence: str
     timings: dict[str, float] = field(compare=False)
-    plots: dict[str, Any] = field(compare=False, repr=False)
+    plots: Plots = field(compare=False, repr=False)
     extension: tuple[Effect, ...] = ()
     #: set when the stated model was grossly wrong and re-identified first
     unusable: Unusable | None = None
@@ -428,10 +415,10 @@ def _innovations(res: Residuals, channel: str, noise: dict[str, NoiseModel]) -> 
 
 def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
                   settings: DiagnosisSettings, noise: dict[str, NoiseModel]
-                  ) -> tuple[list[Discrepancy], dict[str, Any]]:
+                  ) -> tuple[list[Discrepancy], dict[str, ColumnPlot]]:
     """Per channel column of the nominal model: residual size, share, band, whiteness
-    (of the innovations), what it follows, and the correlation tests. Also returns plot
-    data, with what the extended model explains of each residual."""
+    (of the innovations), what it follows, and the correlation tests. Also returns each
+    column's plot data, with what the extended model explains of its residual."""
     res = residuals(nominal, nominal, signals)
     ext = residuals(extended, nominal, signals)
     out, plots = [], {}
@@ -461,8 +448,7 @@ def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
                                    float(np.sum(r ** 2) / total), bands,
                                    ljung_box_pvalue(innovations[:, i], lags),
                                    tuple(follows), corr, tests))
-            plots[name] = {"residual": r, "explained": r - ext.stacked(ch)[:, i],
-                           "signatures": sigs, "bands": bands, "tests": tests}
+            plots[name] = ColumnPlot(r, r - ext.stacked(ch)[:, i], sigs)
     return out, plots
 
 
@@ -471,89 +457,6 @@ def _full_rate_residual(model: Model, sig: RunSignals, channel: str) -> np.ndarr
     measured = sig.torque if channel == "torque" else sig.lengths
     r = measured - pred
     return r - r.mean(axis=0) if channel == "length" else r
-
-
-# ---------------------------------------------------------------------- gain
-def heldout_gain(before: Residuals, after: Residuals, held: list[RunSignals], channel: str,
-                 block_s: float, n_boot: int, seed: int,
-                 scales: dict[str, np.ndarray] | None = None,
-                 per_column: bool = True) -> HeldoutGain:
-    """Held-out RMSE of ``channel`` before and after, relative drop and its 95 % block
-    bootstrap interval; per channel column too (unless ``per_column`` is false).
-
-    The relative drop weights each column's squared error by ``scales``
-    (:func:`~cdpr_pipeline.discovery.residuals.signal_scales`; equal weights when None),
-    as the selection judged it; ``before`` and ``after`` are the plain RMSE."""
-    def stat(b, a):
-        return 1 - np.sqrt(a.sum() / max(b.sum(), 1e-300))
-
-    b, a = before.stacked(channel), after.stacked(channel)
-    w2 = np.ones(b.shape[1]) if scales is None else scales[channel] ** 2
-    blocks, per_col = [], {}
-    for sig, rb, ra in zip(held, before.by_run, after.by_run, strict=True):
-        rate = len(rb[channel]) / max(sig.t[-1] - sig.t[0], 1e-9)
-        length = max(2, int(round(block_s * rate)))
-        blocks += split_blocks((rb[channel] ** 2, ra[channel] ** 2), length)
-    est, lo, hi = (block_bootstrap(lambda x, y: stat(x @ w2, y @ w2), blocks, n_boot, 0.95,
-                                   seed) if len(blocks) > 1
-                   else (stat(b ** 2 @ w2, a ** 2 @ w2), -np.inf, np.inf))
-    for i, name in enumerate(channel_names(channel, b.shape[1]) if per_column else ()):
-        _, clo, chi = (block_bootstrap(lambda x, y, i=i: stat(x[:, i], y[:, i]), blocks, n_boot,
-                                       0.95, seed) if len(blocks) > 1 else (0, -np.inf, np.inf))
-        per_col[name] = ChannelGain(float(np.sqrt(np.mean(b[:, i] ** 2))),
-                                    float(np.sqrt(np.mean(a[:, i] ** 2))),
-                                    float(stat(b[:, i] ** 2, a[:, i] ** 2)),
-                                    (float(clo), float(chi)))
-    return HeldoutGain(channel, float(np.sqrt(np.mean(b ** 2))),
-                       float(np.sqrt(np.mean(a ** 2))), float(est), (float(lo), float(hi)),
-                       per_col, relative_to="each column's measured signal (RMS)"
-                       if scales is not None else "")
-
-
-def heldout_contributions(nominal: Model, effect_sets: Sequence[Sequence[Effect]],
-                          held: list[RunSignals], scales: dict[str, np.ndarray]
-                          ) -> np.ndarray:
-    """Each set of effects' held-out contribution to the model extended by all of them.
-
-    The value of a group of causes is the share of the nominal model's held-out error it
-    removes, per channel (each column relative to its measured signal, as the selection
-    judged it: :func:`~cdpr_pipeline.discovery.residuals.relative_sse`), summed over
-    channels, so a cause on the lengths and one on the torques count alike. Causes
-    overlap (a payload mass error and a lag both follow the acceleration's history), so
-    what one adds depends on the others already there: each set gets its Shapley value,
-    the mean of what it adds over every order the causes could be added in. The values
-    sum to the whole extension's value. ``2^k`` held-out residual evaluations for ``k``
-    sets (the selection names at most a few causes)."""
-    k = len(effect_sets)
-    base = residuals(nominal, nominal, held)
-    ref = {c: max(relative_sse(base, c, scales), 1e-300) for c in base.channels}
-    value = {}
-    for mask in range(2 ** k):
-        effects = [e for j in range(k) if mask >> j & 1 for e in effect_sets[j]]
-        res = residuals(nominal.with_effects(effects), nominal, held) if effects else base
-        value[mask] = sum(1 - relative_sse(res, c, scales) / ref[c] for c in ref)
-    out = np.zeros(k)
-    for j in range(k):
-        for mask in range(2 ** k):
-            if mask >> j & 1:
-                continue
-            size = bin(mask).count("1")
-            weight = math.factorial(size) * math.factorial(k - size - 1) / math.factorial(k)
-            out[j] += weight * (value[mask | 1 << j] - value[mask])
-    return out
-
-
-def rank_causes(nominal: Model, causes: Sequence[Judgement], held: list[RunSignals],
-                scales: dict[str, np.ndarray]) -> list[Judgement]:
-    """``causes`` strongest first, by held-out contribution
-    (:func:`heldout_contributions`), each with its contribution recorded."""
-    if not causes:
-        return []
-    shares = heldout_contributions(nominal, [c.effects for c in causes], held, scales)
-    ranked = [dataclasses.replace(c, contribution=float(v))
-              for c, v in zip(causes, shares, strict=True)]
-    order = np.argsort(-shares, kind="stable")
-    return [ranked[i] for i in order]
 
 
 def _validity(res: Residuals, held: list[RunSignals], channel: str, max_lag: int,
@@ -619,8 +522,9 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         (:func:`~cdpr_pipeline.identification.pipeline.check_torque_labels`).
     """
     settings = settings or DiagnosisSettings()
-    # filter, decimation and Coulomb law chosen once, from the whole dataset and its rig
-    settings = dataclasses.replace(settings, regression=resolve_settings(
+    # filter, decimation and Coulomb law chosen once, from the whole dataset and its rig:
+    # by the command (the stage), or here when called on its own
+    settings = dataclasses.replace(settings, regression=as_resolved(
         settings.regression, dataset.trajectories, dataset.rig))
     needs, why = diagnosis_needs(dataset, settings)
     check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "diagnose",
@@ -658,70 +562,21 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
 
     t0 = time.perf_counter()
 
-    # never worse: the causes are kept only while the extended model's held-out gain has
-    # a 95 % interval above zero; the weakest cause goes first until it has
+    # never worse: the causes are kept only while they hold on the held-out runs
     before_held = residuals(nominal, nominal, held)
     # each column's error relative to its measured signal, as the selection judged it
     scales = selection.scales or signal_scales(train, before_held.channels)
-    withdrawn: list[str] = []
-    # and every cause must still add to the others: causes were fitted jointly as they
-    # were added, so one found early can end with nothing left to explain
-    with_res = None
-    for c in sorted(causes, key=lambda c: c.bic_drop):
-        if len(causes) < 2:
-            break
-        others = [o for o in causes if o is not c]
-        without_res = residuals(nominal.with_effects([e for o in others for e in o.effects]),
-                                nominal, held)
-        if with_res is None:        # every cause's model: recomputed only after a removal
-            with_res = residuals(nominal.with_effects([e for o in causes for e in o.effects]),
-                                 nominal, held)
-        # on the channel where it adds most: a cause judged together with an earlier one
-        # re-fitted beside it can carry that one's channel (a payload error found after
-        # a drum radius error, judged on the lengths the drum's re-fit improved)
-        adds = {ch: 1 - relative_sse(with_res, ch, scales)
-                / max(relative_sse(without_res, ch, scales), 1e-300)
-                for ch in with_res.channels}
-        ch = max(adds, key=adds.get)
-        # its own held-out interval, not only its point estimate, must lie above zero
-        own = (heldout_gain(without_res, with_res, held, ch, settings.selection.block_s,
-                            settings.selection.n_boot, settings.selection.seed, scales,
-                            per_column=False)
-               if adds[ch] >= settings.selection.min_gain else None)
-        if own is None or own.ci95[0] <= 0:
-            causes.remove(c)
-            withdrawn.append(c.label)
-            with_res = without_res
-            log.info("never worse: %s withdrawn (adds %.1f %% to the other causes on the "
-                     "held-out %s%s)", c.label, 100 * adds[ch], ch,
-                     "" if own is None else
-                     f", 95 % CI of its RMSE drop {100 * own.ci95[0]:.1f} to "
-                     f"{100 * own.ci95[1]:.1f} %")
-    # spec: the verdict is the strongest cause, the largest held-out contribution; the
-    # selection's order (BIC at the step each was added) is not that
-    causes = rank_causes(nominal, causes, held, scales)
-    while True:
-        extension = [e for c in causes for e in c.effects]
-        extended = nominal.with_effects(extension)
-        channel = causes[0].channel if causes else "torque"
-        after_held = residuals(extended, nominal, held)
-        gain = heldout_gain(before_held, after_held, held, channel,
-                            settings.selection.block_s, settings.selection.n_boot,
-                            settings.selection.seed, scales)
-        if not causes or gain.ci95[0] > 0:
-            break
-        dropped = causes.pop()
-        withdrawn.append(dropped.label)
-        log.info("never worse: %s withdrawn (held-out gain %.1f %%, 95 %% CI %.1f to %.1f %%)",
-                 dropped.label, 100 * gain.relative, 100 * gain.ci95[0], 100 * gain.ci95[1])
-    gain = dataclasses.replace(gain, withdrawn=tuple(withdrawn))
-    causes, extended = _cable_damping(causes, nominal, train)
+    kept = never_worse(nominal, causes, held, before_held, scales, settings.selection)
+    withdrawn, after_held, gain, channel = kept.withdrawn, kept.after, kept.gain, kept.channel
+    # the stiffness was judged on the quasi-static stretch; its loss time constant is
+    # fitted afterwards from the stretch's lag (the held-out gain does not change)
+    causes, extended = _cable_damping(list(kept.causes), nominal, train)
     extension = [e for c in causes for e in c.effects]
     if unusable:
         unusable = dataclasses.replace(unusable, kept=any(c.label == first.label for c in causes))
 
     noise = fit_noise(extended, nominal, train)
-    found, plots = discrepancies(nominal, extended, signals, settings, noise)
+    found, columns = discrepancies(nominal, extended, signals, settings, noise)
     nominal_metrics = model_metrics(nominal, nominal, train, held)
     validity = ValidityComparison(
         channel, _validity(before_held, held, channel, settings.max_lag, noise),
@@ -734,7 +589,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     clock["validity"] = time.perf_counter() - t0
     log.info("never worse and validity: %.1f s", clock["validity"])
 
-    closed = ClosedLoopComparison(False)
+    closed, closed_plot = ClosedLoopComparison(False), None
     why_not = can_resimulate(rig, trajectories) if settings.closed_loop else "disabled"
     if why_not is None and split.blocks:
         # a block inside a run does not start at rest, where the re-simulation starts
@@ -743,8 +598,8 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         log.info("closed loop not re-simulated: %s", why_not)
     if why_not is None:
         t0 = time.perf_counter()
-        closed, rows, plots["closed_loop"] = _closed_loop(nominal, extended, rig, trajectories,
-                                                          held_names, bool(causes))
+        closed, rows, closed_plot = _closed_loop(nominal, extended, rig, trajectories,
+                                                 held_names, bool(causes))
         found += rows
         clock["closed loop"] = time.perf_counter() - t0
         log.info("closed loop: %.1f s", clock["closed loop"])
@@ -765,9 +620,10 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     failing = [k for k, v in validity.before.items() if failed_tests(v, alpha)]
     sentence = summary_sentence(causes, nominal, gain, unusable, withdrawn, unexplained,
                                 failing, settings.unexplained_noise_ratio)
-    plots["before_after"] = {"before": before_held.stacked(channel),
-                             "after": after_held.stacked(channel), "channel": channel,
-                             "t": np.concatenate([s.row_times() for s in held])}
+    plots = Plots(columns, BeforeAfterPlot(before_held.stacked(channel),
+                                           after_held.stacked(channel), channel,
+                                           np.concatenate([s.row_times() for s in held])),
+                  closed_plot)
     band = {"analysed_hz": analysed_band_hz(settings.regression, rig.sample_rate_hz),
             "derivative_cutoff_hz": float(settings.regression.filter.cutoff_hz),
             "decimate": int(settings.regression.decimate), "from": "motion"}
@@ -994,7 +850,7 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
 
 def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names,
                  extended_differs: bool
-                 ) -> tuple[ClosedLoopComparison, list[Discrepancy], dict[str, Any]]:
+                 ) -> tuple[ClosedLoopComparison, list[Discrepancy], ClosedLoopPlot]:
     """Both models re-simulated in closed loop: the comparison, one discrepancy row per
     column of the nominal model's errors, and the data of the report's figure."""
     sim_nom = resimulate(nominal, nominal, rig, trajectories, label="nominal model")
@@ -1019,6 +875,5 @@ def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names,
             tuple(float(v) for v in np.sqrt(np.mean(hb ** 2, axis=0))),
             tuple(float(v) for v in np.sqrt(np.mean(ha ** 2, axis=0))))
     first = held_names[0]
-    plot = {"run": first, "before": err_nom[first]["position"],
-            "after": err_ext[first]["position"]}
+    plot = ClosedLoopPlot(first, err_nom[first]["position"], err_ext[first]["position"])
     return ClosedLoopComparison(True, None, errors["position"], errors["torque"]), rows, plot

@@ -83,7 +83,7 @@ class FitContext:
         model's); every channel when the model has elastic cables (tension changes
         reach the lengths)."""
         model = self.nominal.with_effects([*self.base, *effects])
-        if getattr(model, "elastic", False) or not self._base_by_run:
+        if model.elastic or not self._base_by_run:
             return residuals(model, self.nominal, self.train)
         rows = runs_rows(model, self.nominal, self.train, channels)
         return Residuals([s.name for s in self.train], [

@@ -23,7 +23,7 @@ import numpy as np
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import Dataset
-from cdpr_pipeline.data.reading import RegressionSettings, resolve_settings
+from cdpr_pipeline.data.reading import ResolvedReading, resolve_settings
 from cdpr_pipeline.discovery.residuals import Model, measured_rows, nominal_model, residuals
 from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
 
@@ -34,7 +34,7 @@ PROTOCOLS = {"published": "emps", "held command": "commanded"}
 LIBRARY_WIDTHS = (0.03, 0.1, 0.3)
 
 
-def protocol_settings(dataset: Dataset, protocol: str) -> RegressionSettings:
+def protocol_settings(dataset: Dataset, protocol: str) -> ResolvedReading:
     """The regression settings of ``protocol`` (a key of :data:`PROTOCOLS`), with every
     ``auto`` entry chosen from ``dataset``."""
     import hydra.utils
@@ -50,7 +50,7 @@ class ProtocolData:
     signals."""
 
     protocol: str
-    settings: RegressionSettings
+    settings: ResolvedReading
     train: list[RunSignals]
     test: list[RunSignals]
     nominal: Model

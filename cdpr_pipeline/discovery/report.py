@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from cdpr_pipeline.discovery.diagnosis import Diagnosis, cause_record
+from cdpr_pipeline.discovery.diagnosis import Diagnosis, describe_cause, winch_reference
 
 _STYLE = """
 body{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto;color:#222}
@@ -57,14 +57,14 @@ def _explaining_plot(d: Diagnosis) -> str:
     if entry is None:
         return ""
     plt = _plt()
-    data = d.plots[entry.channel]
+    data = d.plots.columns[entry.channel]
     corr = entry.correlations
     key = entry.strongest_correlate()
-    x, r = data["signatures"][key], data["residual"]
+    x, r = data.signatures[key], data.residual
     fig, ax = plt.subplots(figsize=(7, 3.6))
     ax.plot(x, r, ".", ms=2, alpha=0.35, color="C0", label="nominal residual (all runs)")
     if d.causes:
-        ax.plot(x, data["explained"], ".", ms=1.5, alpha=0.5, color="C3",
+        ax.plot(x, data.explained, ".", ms=1.5, alpha=0.5, color="C3",
                 label="what the extended model explains")
     else:
         order = np.argsort(x)
@@ -72,8 +72,7 @@ def _explaining_plot(d: Diagnosis) -> str:
         ax.plot(x[order], np.convolve(r[order], np.ones(k) / k, mode="same"), "C3", lw=2,
                 label="running mean")
     ax.set_xlabel(key)
-    unit = "m" if entry.signal == "length" else "N m" if hasattr(d.rig, "anchors_m") \
-        else "force/torque units"
+    unit = "m" if entry.signal == "length" else d.rig.torque_unit or "force/torque units"
     ax.set_ylabel(f"{entry.channel} residual ({unit})")
     ax.set_title(f"{entry.channel}: residual against {key} (r = {corr[key]:+.2f})")
     ax.legend(fontsize=8)
@@ -123,30 +122,30 @@ def _validity_plot(d: Diagnosis) -> str:
 
 def _before_after_plot(d: Diagnosis) -> str:
     plt = _plt()
-    pa = d.plots["before_after"]
-    before, after = pa["before"], pa["after"]
+    pa = d.plots.before_after
+    before, after = pa.before, pa.after
     n = before.shape[1]
     fig, axes = plt.subplots(n, 1, figsize=(9, 1.6 * n + 0.6), sharex=True, squeeze=False)
     for i in range(n):
         ax = axes[i, 0]
         ax.plot(before[:, i], lw=0.8, color="C3", label="nominal")
         ax.plot(after[:, i], lw=0.8, color="C2", label="extended")
-        ax.set_ylabel(f"{pa['channel'][0]}{i + 1}", fontsize=8)
+        ax.set_ylabel(f"{pa.channel[0]}{i + 1}", fontsize=8)
     axes[0, 0].legend(fontsize=7)
     axes[-1, 0].set_xlabel("held-out row (statistics rate)")
     return _png(fig)
 
 
 def _closed_loop_plot(d: Diagnosis) -> str:
-    cl = d.plots.get("closed_loop")
+    cl = d.plots.closed_loop
     if cl is None:
         return ""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(9, 2.6))
-    for label, err, c in (("nominal", cl["before"], "C3"), ("extended", cl["after"], "C2")):
+    for label, err, c in (("nominal", cl.before, "C3"), ("extended", cl.after, "C2")):
         ax.plot(1000 * np.linalg.norm(err, axis=1), color=c, lw=0.9, label=label)
     ax.set_ylabel("|measured - simulated| (mm)")
-    ax.set_xlabel(f"sample of {cl['run']}")
+    ax.set_xlabel(f"sample of {cl.run}")
     ax.legend(fontsize=8)
     return _png(fig)
 
@@ -180,10 +179,9 @@ def _unexplained_parts(d: Diagnosis) -> list[str]:
 
 def render(d: Diagnosis) -> str:
     """The whole page as a string."""
-    causes = [cause_record(c, d.nominal, d.causes) for c in d.causes]
-    cause_rows = [[c["effect"], c["description"], ", ".join(c["channels"]),
-                   c["evidence"]["pvalue"], c["evidence"]["bic_drop"],
-                   c["evidence"]["heldout_rmse_drop_pct"]] for c in causes]
+    reference = winch_reference(d.nominal, d.causes)
+    cause_rows = [[c.effect, describe_cause(c, d.nominal, reference), ", ".join(c.channels),
+                   c.pvalue, c.bic_drop, 100 * c.heldout_rmse_drop] for c in d.causes]
     disc = [[e.signal, e.channel, e.rms, e.share_of_error,
              "-".join(f"{v:.3g}" for v in e.band_hz or ()),
              "" if e.whiteness_pvalue is None else e.whiteness_pvalue,

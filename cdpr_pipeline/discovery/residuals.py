@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdpr_pipeline.data.rig import CdprRig, Rig
+from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.discovery.signals import RunSignals
-from cdpr_pipeline.sim.plant import Drives, Plant, smooth_sign
+from cdpr_pipeline.sim.plant import PLANTS, Drives, Plant, nominal_plant, smooth_sign
 from cdpr_pipeline.sim.sensors import Sensors
 
 #: channel -> column prefix in the data contract
@@ -38,11 +38,9 @@ log = logging.getLogger(__name__)
 
 
 def nominal_model(rig: Rig, sign_sharpness: float | None) -> Model:
-    """The model exactly as rig.yaml states it."""
-    if isinstance(rig, CdprRig):
-        return Plant.from_rig(rig, sign_sharpness=np.inf if sign_sharpness is None
-                              else sign_sharpness)
-    return Drives(rig.nominal, sign_sharpness=sign_sharpness)
+    """The model exactly as rig.yaml states it (Coulomb law ``sign_sharpness``, None:
+    the hard sign)."""
+    return nominal_plant(rig, sign_sharpness)
 
 
 def channel_names(channel: str, n: int) -> list[str]:
@@ -53,7 +51,7 @@ def predict(model: Model, nominal: Model, sig: RunSignals,
             channels: frozenset[str] | None = None) -> dict[str, np.ndarray]:
     """Full-rate predictions (N, n) of every channel (or of ``channels``) for the
     measured motion ``sig``."""
-    if isinstance(model, Plant):
+    if model.cables:
         load = _load(model, sig, sig.acceleration)
         out = model.inverse_dynamics(sig.position, sig.acceleration, sig.theta, sig.omega,
                                      sig.alpha, sig.t, load=load)
@@ -211,7 +209,7 @@ def _linear_rows(model: Model, nominal: Model, sig: RunSignals,
     anchor geometry). A fit's evaluations mostly move one effect at a time: only what
     moves goes through the filter again.
     """
-    plant = isinstance(model, Plant)
+    plant = model.cables
     k = model.sign_sharpness
     winch = _memo(sig, "winch", None if k is None else float(k), lambda: [
         _Filtered(sig, c) for c in (sig.alpha, sig.omega, smooth_sign(sig.omega, k),
@@ -268,7 +266,7 @@ _CHECKED: dict[tuple, bool] = {}
 
 def _structure(model: Model, channels: frozenset[str] | None) -> tuple:
     return (type(model), tuple(type(e) for e in model.effects),
-            getattr(model, "elastic", False), bool(np.any(model.lags > 0)),
+            model.elastic, bool(np.any(model.lags > 0)),
             np.ndim(model.actuator_time_constant),      # one lag, or one per drive
             model.sign_sharpness is None or np.isinf(model.sign_sharpness),
             None if channels is None else tuple(sorted(channels)))
@@ -289,7 +287,7 @@ def residual_rows(model: Model, nominal: Model, sig: RunSignals,
 def runs_rows(model: Model, nominal: Model, signals: Sequence[RunSignals],
               channels: frozenset[str] | None = None) -> list[dict[str, np.ndarray]]:
     """:func:`residual_rows` of several runs of one model."""
-    if type(model) not in (Plant, Drives):
+    if type(model) not in PLANTS.values():
         return [_direct_rows(model, nominal, s, channels) for s in signals]
     keys = _effect_keys(model)
     structure = _structure(model, channels)

@@ -45,11 +45,10 @@ from cdpr_pipeline.discovery.fitting import (
     fit_candidate,
     fit_winches,
 )
-from cdpr_pipeline.discovery.freeform import (
-    WINCH_ANGLE,
+from cdpr_pipeline.discovery.freeform.periodicity import WINCH_ANGLE, Periodicity
+from cdpr_pipeline.discovery.freeform.search import (
     FreeFormResult,
     FreeFormSearch,
-    Periodicity,
     symbolic_torque,
 )
 from cdpr_pipeline.discovery.residuals import (
@@ -142,17 +141,22 @@ class Judgement:
     freeform: FreeFormResult | None = None
     #: its share of the final model's held-out gain, in shares of the nominal model's
     #: held-out error summed over channels (set by the diagnosis when it ranks causes:
-    #: :func:`~cdpr_pipeline.discovery.diagnosis.heldout_contributions`)
+    #: :func:`~cdpr_pipeline.discovery.never_worse.heldout_contributions`)
     contribution: float | None = None
 
     def failed(self, reason: str) -> Judgement:
         """The same judgement, not passed, for ``reason``."""
         return replace(self, passed=False, reason=reason)
 
+    @property
+    def heldout_rmse_drop(self) -> float:
+        """The held-out RMSE drop (a share) that its sum-of-squares drop
+        (:attr:`heldout_gain`) means."""
+        return 1 - np.sqrt(max(1 - self.heldout_gain, 0.0))
+
     def evidence(self) -> dict[str, Any]:
         return {"pvalue": self.pvalue, "lr": self.lr, "n_params": self.n_params,
-                "bic_drop": self.bic_drop, "heldout_rmse_drop_pct": 100 * (
-                    1 - np.sqrt(max(1 - self.heldout_gain, 0.0))),
+                "bic_drop": self.bic_drop, "heldout_rmse_drop_pct": 100 * self.heldout_rmse_drop,
                 "heldout_sse_drop_pct": 100 * self.heldout_gain,
                 "heldout_sse_drop_ci95_pct": [100 * self.ci[0], 100 * self.ci[1]],
                 "signal": self.channel, "variant": self.label,
@@ -499,7 +503,7 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
        ``unnamed`` cause if they pass the tests every candidate passes (they add
        significantly, and on held-out runs, beyond the named causes).
     """
-    kind = "axes" if not hasattr(nominal, "anchors") else "cdpr"
+    kind = nominal.kind
     search = _Search(nominal, train, heldout, settings, freeform,
                      _data_scale(train, kind, nominal), kind, log)
     candidates = candidates_for(rig, search.scale, settings.effects, settings.refit_winches)

@@ -60,9 +60,15 @@ from cdpr_pipeline.data.reading import (
     held_torque,
     sliding,
 )
-from cdpr_pipeline.data.rig import CdprRig, Rig
+from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.sim.plant import Plant, cable_geometry, internal_force_directions
+from cdpr_pipeline.sim.plant import (
+    Drives,
+    Plant,
+    cable_geometry,
+    internal_force_directions,
+    nominal_plant,
+)
 
 #: statistics rows per cut-off period: rows are thinned to ``2 * cutoff_hz`` (the
 #: low-pass band sampled at its Nyquist rate: band-limited white noise stays white)
@@ -341,14 +347,15 @@ def _rate(t: np.ndarray) -> float:
 
 
 def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
-                nominal: Plant | None = None) -> RunSignals:
-    """Prepare one measured run. ``nominal`` (``cdpr``) gives the encoder zero and radius
-    that turn lengths into winch angles."""
+                nominal: Plant | Drives | None = None) -> RunSignals:
+    """Prepare one measured run. ``nominal`` (the rig's stated model, built when not
+    given) gives a cable robot's encoder zero and radius that turn lengths into winch
+    angles; an axis's position is its angle."""
     filt = settings.filter
     torque = held_torque(np.asarray(traj.torques, float), settings.hold)
-    if isinstance(rig, CdprRig):
-        if nominal is None:
-            nominal = Plant.from_rig(rig)
+    if nominal is None:
+        nominal = nominal_plant(rig, rig.coulomb_sharpness)
+    if nominal.cables:
         theta_raw = (nominal.home_lengths - traj.lengths) / nominal.drum_radius
         theta, omega, alpha = filt.compact_derivatives(theta_raw, traj.t)
         pos, vel, acc = filt.compact_derivatives(traj.position, traj.t)
@@ -369,5 +376,5 @@ def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
 
 def dataset_signals(trajectories: Sequence[Trajectory], rig: Rig,
                     settings: RegressionSettings) -> list[RunSignals]:
-    nominal = Plant.from_rig(rig) if isinstance(rig, CdprRig) else None
+    nominal = nominal_plant(rig, rig.coulomb_sharpness)
     return [run_signals(tr, rig, settings, nominal) for tr in trajectories]

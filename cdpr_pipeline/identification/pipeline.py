@@ -14,8 +14,13 @@ import yaml
 
 from cdpr_pipeline.data.errors import DataValidationError, Problem
 from cdpr_pipeline.data.io import Dataset
-from cdpr_pipeline.data.reading import TRIM_PERIODS, RegressionSettings, resolve_settings
-from cdpr_pipeline.data.rig import WINCH_KEYS, CdprRig
+from cdpr_pipeline.data.reading import (
+    TRIM_PERIODS,
+    RegressionSettings,
+    ResolvedReading,
+    as_resolved,
+)
+from cdpr_pipeline.data.rig import WINCH_KEYS
 from cdpr_pipeline.data.split import Split, heldout_split
 from cdpr_pipeline.data.validation import check_run_lengths, run_file
 from cdpr_pipeline.identification.identifiers import Estimate, fit_metrics
@@ -32,14 +37,14 @@ from cdpr_pipeline.wavelet import WaveletSplit
 MIN_BLOCK_ROWS = 20
 
 
-def min_block_samples(settings: RegressionSettings, sample_rate_hz: float) -> int:
+def min_block_samples(settings: ResolvedReading, sample_rate_hz: float) -> int:
     """Fewest samples of a useful time block: both filter trims and ``MIN_BLOCK_ROWS``
     regression rows."""
     trim = int(round(settings.filter.trim_s * sample_rate_hz))
     return 2 * trim + MIN_BLOCK_ROWS * max(1, int(settings.decimate))
 
 
-def trim_words(settings: RegressionSettings, rate_hz: float) -> str:
+def trim_words(settings: ResolvedReading, rate_hz: float) -> str:
     """What a block of :func:`min_block_samples` is made of, in words (for messages)."""
     trim = int(round(settings.filter.trim_s * rate_hz))
     return (f"the derivative filter's edge trims ({trim} samples at each end: "
@@ -47,7 +52,7 @@ def trim_words(settings: RegressionSettings, rate_hz: float) -> str:
             f"{MIN_BLOCK_ROWS} regression rows after decimation by {settings.decimate}")
 
 
-def identification_needs(dataset: Dataset, settings: RegressionSettings
+def identification_needs(dataset: Dataset, settings: ResolvedReading
                          ) -> tuple[dict[str, int], str]:
     """Fewest samples per run that :func:`identify_dataset` can use, and why.
 
@@ -76,7 +81,7 @@ def check_reversals(reg: WinchRegression, dataset: Dataset, runs: Sequence[str])
         Naming the first fitted run's file and the position column of each channel.
     """
     problems = []
-    column = "l" if isinstance(dataset.rig, CdprRig) else "q"
+    column = dataset.rig.channel_position
     for i in range(reg.n):
         b = reg.phi[:, i, 1]
         up, down = int(np.sum(b > 0)), int(np.sum(b < 0))
@@ -118,7 +123,7 @@ def check_torque_labels(dataset: Dataset, settings: RegressionSettings) -> None:
     rig = dataset.rig
     if rig.n < 2:
         return
-    theta = (rig.winch_nominal if isinstance(rig, CdprRig) else rig.nominal).as_matrix()
+    theta = rig.nominal_winch.as_matrix()
     found: list[tuple[str, int, int, float, float]] = []
     for tr in dataset.trajectories:
         reg = build_regression(tr, rig, settings)
@@ -158,22 +163,15 @@ def identification_split(dataset: Dataset, holdout: Sequence[str] | None = None,
     names; empty: families ``spiral``/``pulses``, else the last file; a single run holds
     out its last block (25 %, at least 3 s while that leaves half the run to fit on).
     Names that match no run are logged and ignored, so ``holdout=[spiral]`` also runs on
-    a dataset without spirals. ``runs``: fit only on these.
+    a dataset without spirals. ``runs``: fit only on these. ``settings`` as the command
+    resolved them (:class:`~cdpr_pipeline.data.reading.ResolvedReading`), else resolved
+    here from ``dataset`` (the defaults when None).
     """
     # block lengths need the trim and decimation in numbers, not "auto"
-    settings = resolve_settings(settings or RegressionSettings(), dataset.trajectories,
-                                dataset.rig)
+    settings = as_resolved(settings, dataset.trajectories, dataset.rig)
     return heldout_split(dataset.trajectories, holdout, train_runs=runs, unknown="warn",
                          min_samples=min_block_samples(settings, dataset.rig.sample_rate_hz),
                          source=str(dataset.root))
-
-
-def split_fit_holdout(dataset: Dataset, holdout: Sequence[str] | None = (),
-                      runs: Sequence[str] | None = None) -> tuple[list[str], list[str]]:
-    """Names of the runs (or blocks) to fit on and to hold out
-    (:func:`identification_split`)."""
-    split = identification_split(dataset, holdout, runs)
-    return list(split.train), list(split.heldout)
 
 
 def lowpass_regression(reg: WinchRegression, split: WaveletSplit | None) -> WinchRegression:
@@ -242,7 +240,9 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
     the simulator's truth) when a truth is given. ``extra`` datasets (e.g. virtual runs
     of the same rig) are added, whole, to the fit. Fit and held-out runs come from
     :func:`identification_split` (``holdout``, ``runs``); with a single run they are
-    time blocks of it.
+    time blocks of it. ``settings``: as the command resolved them
+    (:class:`~cdpr_pipeline.data.reading.ResolvedReading`), else resolved here from
+    ``dataset``; ``extra`` datasets are read with the same.
 
     Raises
     ------
@@ -251,9 +251,10 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
         columns that look exchanged (:func:`check_torque_labels`), or a channel whose
         velocity never reverses in the fit (:func:`check_reversals`).
     """
-    # filter, decimation and Coulomb law chosen once from the whole dataset, so the fit
-    # and the held-out runs see the same regression
-    settings = resolve_settings(settings, dataset.trajectories, dataset.rig)
+    # filter, decimation and Coulomb law chosen once from the whole dataset (by the
+    # command, or here when called on its own), so the fit and the held-out runs see the
+    # same regression
+    settings = as_resolved(settings, dataset.trajectories, dataset.rig)
     needs, why = identification_needs(dataset, settings)
     check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "identify",
                       why, dataset.root)

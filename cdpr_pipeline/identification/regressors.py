@@ -18,17 +18,19 @@ are taken out of every column before the filters (:func:`_assemble`).
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.signal import decimate
 
 from cdpr_pipeline.data.reading import (
     RegressionSettings,
+    ResolvedReading,
+    as_resolved,
     clear_of_reach,
     held_torque,
-    resolve_settings,
     second_difference,
     sliding,
 )
@@ -168,7 +170,7 @@ class WinchRegression:
 
 
 def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
-              t: np.ndarray, settings: RegressionSettings,
+              t: np.ndarray, settings: ResolvedReading,
               internal: np.ndarray | None = None) -> WinchRegression:
     """Rows ``[a, b, c, 1] -> u - smooth_load`` with parallel filtering (the offset column
     is the filtered share of rows kept, 1 away from dropped samples).
@@ -236,9 +238,10 @@ def winch_regression(traj: Trajectory, rig: CdprRig, home_lengths: np.ndarray | 
     """Build the per-winch regression of one ``cdpr`` trajectory.
 
     ``home_lengths`` is any constant reference of the encoder lengths (it cancels in the
-    derivatives; the first sample when ``None``).
+    derivatives; the first sample when ``None``). ``settings`` not resolved yet (or
+    None: the defaults) are chosen from this run (:func:`dataset_regression`).
     """
-    settings = resolve_settings(settings or RegressionSettings(), [traj], rig)
+    settings = as_resolved(settings, [traj], rig)
     R = rig.drum_radius_m
     ref = traj.lengths[0] if home_lengths is None else home_lengths
     theta = (ref - traj.lengths) / R
@@ -252,8 +255,9 @@ def winch_regression(traj: Trajectory, rig: CdprRig, home_lengths: np.ndarray | 
 
 def axis_regression(traj: Trajectory, rig: AxesRig,
                     settings: RegressionSettings | None = None) -> WinchRegression:
-    """Build the per-axis regression ``u = I a + F_v b + F_c c + d`` of an ``axes`` run."""
-    settings = resolve_settings(settings or RegressionSettings(), [traj], rig)
+    """Build the per-axis regression ``u = I a + F_v b + F_c c + d`` of an ``axes`` run
+    (``settings`` as in :func:`winch_regression`)."""
+    settings = as_resolved(settings, [traj], rig)
     position = np.asarray(traj.position, float)
     return _assemble(position, np.asarray(traj.torques, float), np.zeros_like(position),
                      traj.t, settings)
@@ -261,22 +265,37 @@ def axis_regression(traj: Trajectory, rig: AxesRig,
 
 def build_regression(traj: Trajectory, rig: Rig,
                      settings: RegressionSettings | None = None) -> WinchRegression:
-    """The regression of one run of either kind."""
-    settings = resolve_settings(settings or RegressionSettings(), [traj], rig)
-    if isinstance(rig, CdprRig):
-        return winch_regression(traj, rig, None, settings)
-    return axis_regression(traj, rig, settings)
+    """The regression of one run of any kind (:data:`REGRESSIONS`).
+
+    Raises
+    ------
+    ValueError
+        Naming the kind, for a kind without a regression.
+    """
+    settings = as_resolved(settings, [traj], rig)
+    if rig.kind not in REGRESSIONS:
+        raise ValueError(f"kind {rig.kind!r}: no regression for this kind of rig (known: "
+                         f"{sorted(REGRESSIONS)})")
+    return REGRESSIONS[rig.kind](traj, rig, settings)
+
+
+#: the regression of a run, by rig.yaml's kind: ``(trajectory, rig, settings)``
+REGRESSIONS: dict[str, Callable[[Trajectory, Any, RegressionSettings], WinchRegression]] = {
+    CdprRig.kind: lambda traj, rig, settings: winch_regression(traj, rig, None, settings),
+    AxesRig.kind: axis_regression,
+}
 
 
 def dataset_regression(trajectories: Iterable[Trajectory], rig: Rig,
                        settings: RegressionSettings | None = None) -> WinchRegression:
     """Regressions of several runs stacked, with the run index of every row.
 
-    Settings left to the data are chosen from these runs; callers that build several
-    regressions of one dataset resolve them once on the whole dataset instead
-    (:func:`~cdpr_pipeline.data.reading.resolve_settings`) so that every part uses the
-    same filter."""
+    Settings left to the data are chosen from these runs; a command that builds several
+    regressions of one dataset resolves them once on the whole dataset instead
+    (:func:`~cdpr_pipeline.data.reading.resolve_settings`) and passes the
+    :class:`~cdpr_pipeline.data.reading.ResolvedReading` here, so that every part uses
+    the same filter."""
     trajectories = list(trajectories)
-    settings = resolve_settings(settings or RegressionSettings(), trajectories, rig)
+    settings = as_resolved(settings, trajectories, rig)
     return WinchRegression.concatenate(build_regression(tr, rig, settings)
                                        for tr in trajectories)

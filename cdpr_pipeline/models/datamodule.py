@@ -15,7 +15,7 @@ from torch.utils.data import DataLoader, Dataset, RandomSampler
 
 from cdpr_pipeline.data.io import Dataset as MeasuredDataset
 from cdpr_pipeline.data.io import load_dataset
-from cdpr_pipeline.data.split import Split, model_split, whole_run_split
+from cdpr_pipeline.data.split import Split, model_split
 from cdpr_pipeline.models.features import (
     FeatureLayout,
     RunArrays,
@@ -26,25 +26,6 @@ from cdpr_pipeline.models.features import (
 )
 
 log = logging.getLogger(__name__)
-
-
-def split_runs(names: Sequence[str], families: Sequence[str], val_fraction: float,
-               test_fraction: float, test_families: Sequence[str], seed: int) -> Split:
-    """Split whole runs (never samples within a run), stratified by family.
-
-    :func:`~cdpr_pipeline.data.split.whole_run_split`, which may leave validation or test
-    empty; :class:`TrajectoryDataModule` uses :func:`~cdpr_pipeline.data.split.model_split`,
-    which then cuts runs into time blocks.
-
-    Raises
-    ------
-    ValueError
-        If no training run is left.
-    """
-    split = whole_run_split(names, families, val_fraction, test_fraction, test_families, seed)
-    if not split["train"]:
-        raise ValueError("no training runs left after the split; lower val/test fractions")
-    return split
 
 
 class WindowDataset(Dataset):

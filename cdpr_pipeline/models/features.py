@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from cdpr_pipeline.data.rig import CdprRig, Rig
+from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.data.trajectory import Trajectory
 
 
@@ -63,11 +63,11 @@ class FeatureLayout:
     def for_rig(cls, rig: Rig, has_desired: bool = True) -> FeatureLayout:
         """Layout for a rig; ``has_desired=False`` when the runs carry no desired path
         (optional for ``axes`` data)."""
-        if isinstance(rig, CdprRig):
-            return cls(("x", "y", "z"), rig.n, rig.n, has_desired, float(rig.sample_rate_hz),
-                       shared_units=True)
-        names = tuple(rig.axes)
-        return cls(names, 0, rig.n, has_desired, float(rig.sample_rate_hz))
+        lengths = rig.signal("lengths")
+        n_lengths = 0 if lengths is None else len(lengths.names(rig.n))
+        return cls(tuple(rig.position_names), n_lengths, rig.n, has_desired,
+                   float(rig.sample_rate_hz),
+                   shared_units=rig.shared_position_units)
 
     @property
     def n_position(self) -> int:

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -58,7 +58,7 @@ from cdpr_pipeline.data.reading import (
     RegressionSettings,
     resolve_settings,
 )
-from cdpr_pipeline.data.rig import CdprRig, Rig
+from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.data.split import Split
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.discovery.residuals import Model, nominal_model, predict, residual_rows
@@ -217,20 +217,23 @@ def causal_estimate(x: np.ndarray, t: np.ndarray, window: int) -> tuple[np.ndarr
     return value, rate
 
 
-def _prepare(part: Trajectory, rig: Rig, settings: PhysicsSettings) -> _Piece:
-    n = part.n_samples
-    if isinstance(rig, CdprRig):
-        fs = 1.0 / float(np.median(np.diff(part.t)))
-        window = max(3, int(round(settings.state_window_s * fs)))
-        p, v = causal_estimate(part.position, part.t, window)
-        # the encoders count on the *stated* drum and home pose (the rig's calibration)
-        calib = Plant.from_rig(rig)
-        theta, omega = causal_estimate(
-            (calib.home_lengths - part.lengths) / calib.drum_radius, part.t, window)
-        return _Piece(part, np.arange(window, n), p, v, theta, omega)
+def _forward_piece(part: Trajectory, rig: Rig, settings: PhysicsSettings) -> _Piece:
+    """A cable robot's run: causal estimates of the platform and winch state."""
+    fs = 1.0 / float(np.median(np.diff(part.t)))
+    window = max(3, int(round(settings.state_window_s * fs)))
+    p, v = causal_estimate(part.position, part.t, window)
+    # the encoders count on the *stated* drum and home pose (the rig's calibration)
+    calib = Plant.from_rig(rig)
+    theta, omega = causal_estimate(
+        (calib.home_lengths - part.lengths) / calib.drum_radius, part.t, window)
+    return _Piece(part, np.arange(window, part.n_samples), p, v, theta, omega)
+
+
+def _inverse_piece(part: Trajectory, rig: Rig, settings: PhysicsSettings) -> _Piece:
+    """A run of drive axes: the identification's smooth signals, the edges trimmed."""
     sig = run_signals(part, rig, settings.regression)
     trim = int(round(settings.regression.filter.trim_s * sig.fs))
-    last = n - trim - (1 if settings.regression.zero_order_hold else 0)
+    last = part.n_samples - trim - (1 if settings.regression.zero_order_hold else 0)
     return _Piece(part, np.arange(trim, max(trim, last)), signals=sig)
 
 
@@ -353,24 +356,22 @@ def _axes_inverse(model: Model, piece: _Piece, settings: PhysicsSettings) -> np.
     return u[piece.valid]
 
 
-def _features(model: Model, piece: _Piece, pred: np.ndarray) -> np.ndarray:
-    """Causal inputs of the residual network per valid target sample ``k``: for ``cdpr``
-    what is known at ``k - 1`` (the physics step, the state estimate, the measured
-    position's deviation from it, the held torque); for ``axes`` the smooth motion at
-    ``k`` and the physics' ``u``."""
+def _forward_features(piece: _Piece, pred: np.ndarray) -> np.ndarray:
+    """Causal inputs of the residual network per valid target sample ``k`` of a cable
+    robot: what is known at ``k - 1`` (the physics step, the state estimate, the
+    measured position's deviation from it, the held torque)."""
+    e = piece.valid - 1
+    p = piece.position[e]
+    return np.concatenate([pred - p, p, piece.velocity[e], piece.traj.position[e] - p,
+                           piece.traj.torques[e]], axis=1)
+
+
+def _inverse_features(piece: _Piece, pred: np.ndarray) -> np.ndarray:
+    """Inputs of the residual network of drive axes: the smooth motion at ``k`` and the
+    physics' ``u``."""
     k = piece.valid
-    if isinstance(model, Plant):
-        e = k - 1
-        p = piece.position[e]
-        return np.concatenate([pred - p, p, piece.velocity[e], piece.traj.position[e] - p,
-                               piece.traj.torques[e]], axis=1)
     s = piece.signals
     return np.concatenate([s.theta[k], s.omega[k], s.alpha[k], pred], axis=1)
-
-
-def _measured(model: Model, piece: _Piece) -> np.ndarray:
-    y = piece.traj.position if isinstance(model, Plant) else piece.traj.torques
-    return y[piece.valid]
 
 
 # ---------------------------------------------------------------------- residual network
@@ -508,9 +509,7 @@ def _raw_relative_error(pieces: dict[str, list[_Piece]], preds: dict[str, list[n
 # ---------------------------------------------------------------------- the rows
 def channel_names(rig: Rig) -> list[str]:
     """The channels the physics rows predict: ``x, y, z`` (cdpr) or ``u1..un`` (axes)."""
-    if isinstance(rig, CdprRig):
-        return ["x", "y", "z"]
-    return [f"u{i + 1}" for i in range(rig.n)]
+    return predictor(rig).channel_names(rig)
 
 
 def physics_rows(dataset: Dataset, split: Any, model_files: Mapping[str, str | Path | None],
@@ -547,15 +546,13 @@ def physics_rows(dataset: Dataset, split: Any, model_files: Mapping[str, str | P
     """
     settings = settings or PhysicsSettings()
     rig = dataset.rig
-    names = channel_names(rig)
+    kind = predictor(rig)
+    names = kind.channel_names(rig)
     split = as_split(split)
-    if not isinstance(rig, CdprRig):
-        # filter and zero-order hold chosen once, from the whole dataset (as the diagnosis)
-        settings = replace(settings, regression=resolve_settings(
-            settings.regression, dataset.trajectories, rig))
+    settings = kind.resolved(settings, dataset)
     hybrid = settings.hybrid if settings.hybrid and settings.hybrid.net_factory else None
     warmup = hybrid.window - 1 if hybrid else 0
-    pieces = {part: [_prepare(tr, rig, settings)
+    pieces = {part: [kind.piece(tr, rig, settings)
                      for tr in (split.trajectories(part, dataset) if part in split else [])]
               for part in ("train", "test")}
     for pcs in pieces.values():
@@ -567,40 +564,123 @@ def physics_rows(dataset: Dataset, split: Any, model_files: Mapping[str, str | P
     cache: dict[str, tuple[Model, dict[str, list[np.ndarray]]]] = {}
     for name, path in model_files.items():
         model = physics_model(rig) if path is None else load_model_file(path, rig)
-        preds = {part: [_onestep(model, pc, settings) for pc in pcs]
+        preds = {part: [kind.onestep(model, pc, settings, len(names)) for pc in pcs]
                  for part, pcs in pieces.items()}
         cache[name] = (model, preds)
         metrics = _onestep_metrics(pieces, preds, train_scored, names)
-        if isinstance(model, Plant):
-            metrics |= _grouped("openloop_1s/test", pieces["test"],
-                                _cdpr_openloop(model, pieces["test"], settings), names) \
-                if pieces["test"] else {}
+        metrics |= kind.more_metrics(model, pieces, settings, names)
         metrics["time/train_s"] = 0.0
         info = {"model": "rig.yaml as stated" if path is None else str(path),
                 "coulomb": _law_text(model)}
-        if not isinstance(model, Plant):
-            info["relative_error_pct"] = _raw_relative_error(pieces, preds, train_scored)
-            info["filtered_relative_error_pct"] = {
-                part: _relative_error(model, pcs) for part, pcs in pieces.items()}
+        info |= kind.more_info(model, pieces, preds, train_scored)
         rows.append(PhysicsRow(name, "rig.yaml (nominal)" if path is None else str(path),
                                metrics, info))
         log.info("%s: one-step test RMSE %.3e", name,
                  metrics.get("onestep/test/all/overall/rmse", float("nan")))
     if hybrid is not None:
         if hybrid.base in cache:
-            rows.append(_hybrid_row(hybrid, cache[hybrid.base], pieces, train_scored, names,
-                                    model_files[hybrid.base]))
+            rows.append(_hybrid_row(kind, hybrid, cache[hybrid.base], pieces, train_scored,
+                                    names, model_files[hybrid.base]))
         else:
             log.info("no %s row: the hybrid is left out", hybrid.base)
     return rows
 
 
-def _onestep(model: Model, piece: _Piece, settings: PhysicsSettings) -> np.ndarray:
-    if piece.valid.size == 0:
-        return np.zeros((0, 3 if isinstance(model, Plant) else model.n))
-    if isinstance(model, Plant):
-        return _cdpr_onestep(model, piece, settings)
-    return _axes_inverse(model, piece, settings)
+@dataclass(frozen=True)
+class Predictor:
+    """What the physics rows predict for a kind of rig, and how (see the module
+    docstring): the strategy :func:`physics_rows` runs, one per kind
+    (:data:`PREDICTORS`).
+
+    Attributes
+    ----------
+    channels : callable
+        ``channels(rig)``: the names of the predicted channels.
+    piece : callable
+        ``piece(trajectory, rig, settings)``: a run prepared once for every model.
+    step : callable
+        ``step(model, piece, settings)``: the prediction at the piece's valid samples.
+    features : callable
+        ``features(piece, prediction)``: the hybrid's residual-network inputs.
+    dataset_settings : bool
+        Whether the regression settings are resolved once from the whole dataset (the
+        inverse dynamics reads the signals as the diagnosis does).
+    open_loop : bool
+        Whether the open-loop runs are scored too (``openloop_1s`` keys).
+    relative_errors : bool
+        Whether the identification-style relative errors are reported (a predictor of
+        the force or torque, which identification reconstructs).
+    """
+
+    channels: Callable[[Rig], list[str]]
+    piece: Callable[[Trajectory, Rig, PhysicsSettings], _Piece]
+    step: Callable[[Model, _Piece, PhysicsSettings], np.ndarray]
+    features: Callable[[_Piece, np.ndarray], np.ndarray]
+    dataset_settings: bool = False
+    open_loop: bool = False
+    relative_errors: bool = False
+
+    def channel_names(self, rig: Rig) -> list[str]:
+        return self.channels(rig)
+
+    def resolved(self, settings: PhysicsSettings, dataset: Dataset) -> PhysicsSettings:
+        """``settings`` with the regression's choices made from the whole dataset, where
+        the predictor reads the signals as the diagnosis does."""
+        if not self.dataset_settings:
+            return settings
+        # filter and zero-order hold chosen once, from the whole dataset (as the diagnosis)
+        return replace(settings, regression=resolve_settings(
+            settings.regression, dataset.trajectories, dataset.rig))
+
+    def onestep(self, model: Model, piece: _Piece, settings: PhysicsSettings, width: int
+                ) -> np.ndarray:
+        """:attr:`step`, or no rows of ``width`` channels where nothing is predicted."""
+        if piece.valid.size == 0:
+            return np.zeros((0, width))
+        return self.step(model, piece, settings)
+
+    def more_metrics(self, model: Model, pieces: dict[str, list[_Piece]],
+                     settings: PhysicsSettings, names: list[str]) -> dict[str, float]:
+        """The open-loop keys, for a predictor that runs the model open loop."""
+        if not self.open_loop or not pieces["test"]:
+            return {}
+        return _grouped("openloop_1s/test", pieces["test"],
+                        _cdpr_openloop(model, pieces["test"], settings), names)
+
+    def more_info(self, model: Model, pieces: dict[str, list[_Piece]],
+                  preds: dict[str, list[np.ndarray]], train_scored: list[_Piece]
+                  ) -> dict[str, Any]:
+        """The identification-style relative errors (:attr:`relative_errors`)."""
+        if not self.relative_errors:
+            return {}
+        return {"relative_error_pct": _raw_relative_error(pieces, preds, train_scored),
+                "filtered_relative_error_pct": {
+                    part: _relative_error(model, pcs) for part, pcs in pieces.items()}}
+
+
+#: the physics predictor of each kind of rig, by rig.yaml's kind
+PREDICTORS: dict[str, Predictor] = {
+    "cdpr": Predictor(lambda rig: ["x", "y", "z"], _forward_piece, _cdpr_onestep,
+                      _forward_features, open_loop=True),
+    "axes": Predictor(lambda rig: [f"u{i + 1}" for i in range(rig.n)], _inverse_piece,
+                      _axes_inverse, _inverse_features, dataset_settings=True,
+                      relative_errors=True),
+}
+
+
+def predictor(rig: Rig) -> Predictor:
+    """The physics predictor of the rig's kind.
+
+    Raises
+    ------
+    ValueError
+        Naming the kind, for a kind without one.
+    """
+    try:
+        return PREDICTORS[rig.kind]
+    except KeyError:
+        raise ValueError(f"kind {rig.kind!r}: no physics predictor for this kind of rig "
+                         f"(known: {sorted(PREDICTORS)})") from None
 
 
 def _onestep_metrics(pieces: dict[str, list[_Piece]], preds: dict[str, list[np.ndarray]],
@@ -628,12 +708,13 @@ def _law_text(model: Model) -> str:
     return "sign" if k is None or not np.isfinite(k) else f"tanh({k:g} w)"
 
 
-def _hybrid_row(hybrid: HybridSettings, base: tuple[Model, dict[str, list[np.ndarray]]],
+def _hybrid_row(kind: Predictor, hybrid: HybridSettings,
+                base: tuple[Model, dict[str, list[np.ndarray]]],
                 pieces: dict[str, list[_Piece]], train_scored: list[_Piece], names: list[str],
                 base_file: str | Path | None) -> PhysicsRow:
     model, preds = base
     start = time.perf_counter()
-    feats = {part: [_features(model, pc, p) for pc, p in zip(pcs, preds[part], strict=True)]
+    feats = {part: [kind.features(pc, p) for pc, p in zip(pcs, preds[part], strict=True)]
              for part, pcs in pieces.items()}
     resid = {part: [_target(pc) - p for pc, p in zip(pcs, preds[part], strict=True)]
              for part, pcs in pieces.items()}

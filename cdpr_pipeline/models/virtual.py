@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from cdpr_pipeline.data.io import write_dataset
-from cdpr_pipeline.data.rig import AxesRig, CdprRig
+from cdpr_pipeline.data.rig import AxesRig, CdprRig, Rig
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.models.features import RunArrays, run_arrays
 from cdpr_pipeline.models.forecast import Forecaster
@@ -48,8 +48,9 @@ def virtual_trajectories(forecaster: Forecaster, rig: CdprRig, counts: Mapping[s
                          centre_m: Sequence[float] | None = None,
                          ranges: TrajectoryRanges | None = None,
                          first_index: int = 0) -> list[Trajectory]:
-    """Roll out ``forecaster`` along newly drawn desired trajectories."""
-    if not isinstance(rig, CdprRig):
+    """Roll out ``forecaster`` along newly drawn desired trajectories (in the rig's
+    frame: a cable robot's)."""
+    if rig.frame_bounds() is None:
         raise ValueError("virtual trajectories are drawn for cable robots (kind: cdpr)")
     families = family_list(counts)
     if not families:
@@ -116,7 +117,8 @@ def reference_trajectories(forecaster: Forecaster, rig: AxesRig, runs: Sequence[
         If the runs carry no reference, or none holds an input window and a step of
         rollout.
     """
-    if not isinstance(rig, AxesRig):
+    if rig.frame_bounds() is not None:
+        # a rig with a frame gets newly drawn runs in it (virtual_trajectories)
         raise ValueError("reference trajectories are recorded references of drive axes "
                          "(kind: axes)")
     if not forecaster.layout.has_desired or any(tr.desired is None for tr in runs):
@@ -161,7 +163,7 @@ def _cut(tr: Trajectory, start: int, stop: int) -> Trajectory:
                       lengths=None if tr.lengths is None else tr.lengths[sl])
 
 
-def physically_valid(traj: Trajectory, rig: CdprRig | AxesRig, margin_m: float = 0.0,
+def physically_valid(traj: Trajectory, rig: Rig, margin_m: float = 0.0,
                      bounds: tuple[np.ndarray, np.ndarray] | None = None) -> bool:
     """Whether a virtual run stays finite, inside the anchor frame and on positive cable
     lengths (a diverged free run does not).
@@ -173,8 +175,9 @@ def physically_valid(traj: Trajectory, rig: CdprRig | AxesRig, margin_m: float =
     arrays = [traj.position, traj.torques] + ([traj.lengths] if traj.lengths is not None else [])
     if not all(np.isfinite(a).all() for a in arrays):
         return False
-    if isinstance(rig, CdprRig):
-        lo, hi = rig.frame_bounds()
+    frame = rig.frame_bounds()
+    if frame is not None:
+        lo, hi = frame
     elif bounds is not None:
         lo, hi = bounds
     else:
@@ -194,7 +197,7 @@ def position_bounds(runs: Sequence[Trajectory], widen: float = 0.5
     return lo - widen * span, hi + widen * span
 
 
-def write_virtual_dataset(out_dir: str | Path, rig: CdprRig | AxesRig,
+def write_virtual_dataset(out_dir: str | Path, rig: Rig,
                           trajectories: list[Trajectory], overwrite: bool = True) -> Path:
     """Write virtual runs with ``virtual: true`` in rig.yaml."""
     return write_dataset(out_dir, rig.replace(virtual=True), trajectories, overwrite=overwrite)

@@ -17,10 +17,10 @@ from typing import Any
 import yaml
 
 from cdpr_pipeline.data.errors import DataValidationError
-from cdpr_pipeline.data.rig import CdprRig, Rig
+from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.data.validation import parse_rig
 from cdpr_pipeline.sim.effects import EFFECTS, Effect
-from cdpr_pipeline.sim.plant import Drives, Plant
+from cdpr_pipeline.sim.plant import nominal_plant
 
 MODEL_FORMAT = "cdpr-model/1"
 
@@ -28,7 +28,7 @@ MODEL_FORMAT = "cdpr-model/1"
 def model_record(rig: Rig, effects: Sequence[Effect], **meta: Any) -> dict[str, Any]:
     """The YAML-able record of ``rig`` with ``effects``; ``meta`` is kept as is. The
     descriptions put per-winch sizes in relation to the rig's nominal parameters."""
-    nominal = Plant.from_rig(rig) if isinstance(rig, CdprRig) else Drives(rig.nominal)
+    nominal = nominal_plant(rig, rig.coulomb_sharpness)
     return {"format": MODEL_FORMAT, **meta, "rig": rig.to_dict(),
             "effects": [{"effect": e.name, "params": e.params(),
                          "description": e.describe(nominal)} for e in effects]}

@@ -22,6 +22,11 @@ Two cable models share one set of equations:
 Every hidden effect of the lab is a parameter of this one plant (via
 :meth:`cdpr_pipeline.sim.effects.Effect.apply`) or an extra winch torque computed by the
 effect itself, so generation, diagnosis and model extension share the physics.
+
+:class:`Plant` (``kind: cdpr``) and :class:`Drives` (``kind: axes``) are the two kinds of
+model; :data:`PLANTS` finds a rig's by its kind (:func:`nominal_plant`), and each says
+what it models (:attr:`Plant.cables`, :attr:`Plant.closed_loop`) so callers need not tell
+them apart by class.
 """
 
 from __future__ import annotations
@@ -29,11 +34,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from cdpr_pipeline.data.rig import CdprRig, WinchParams
+from cdpr_pipeline.data.rig import CdprRig, Rig, WinchParams
 
 if TYPE_CHECKING:  # pragma: no cover
     from cdpr_pipeline.sim.effects import Effect
@@ -143,6 +148,15 @@ class Plant:
         have already been folded into the fields above.
     """
 
+    #: rig.yaml's kind this plant models
+    kind: ClassVar[str] = "cdpr"
+    #: whether the channels are cables from anchors to a platform: the model predicts
+    #: cable lengths and its torques carry the cable tensions
+    cables: ClassVar[bool] = True
+    #: whether the simulator runs it in closed loop under the rig's controller (the
+    #: virtual lab, closed-loop re-simulation)
+    closed_loop: ClassVar[bool] = True
+
     anchors: np.ndarray
     drum_radius: np.ndarray
     mass: float
@@ -200,6 +214,13 @@ class Plant:
             home=np.asarray(home, dtype=float),
             sign_sharpness=sign_sharpness,
         )
+
+    @classmethod
+    def stated(cls, rig: CdprRig, sign_sharpness: float | None) -> Plant:
+        """The plant as rig.yaml states it, with Coulomb law ``tanh(k w)`` of
+        ``sign_sharpness`` (None: the hard sign)."""
+        return cls.from_rig(rig, sign_sharpness=np.inf if sign_sharpness is None
+                            else sign_sharpness)
 
     def with_effects(self, effects: Sequence[Effect]) -> Plant:
         """The true plant: this one altered by each effect in turn."""
@@ -446,6 +467,12 @@ class Drives:
     cables, ``u = I q'' + F_v q' + F_c s(q') + d`` plus effects, optionally behind a
     first-order actuator. Friction effects act on it exactly as on a winch."""
 
+    kind: ClassVar[str] = "axes"
+    cables: ClassVar[bool] = False
+    closed_loop: ClassVar[bool] = False
+    #: no cables to stretch (:attr:`Plant.elastic`)
+    elastic: ClassVar[bool] = False
+
     winch: WinchParams
     sign_sharpness: float | None = SIGN_SHARPNESS
     actuator_time_constant: float | np.ndarray = 0.0
@@ -464,6 +491,11 @@ class Drives:
         """The actuator lag of every axis (n,), 0 where an axis has none."""
         return actuator_lags(self.actuator_time_constant, self.n)
 
+    @classmethod
+    def stated(cls, rig: Rig, sign_sharpness: float | None) -> Drives:
+        """The axes as rig.yaml states them (:meth:`Plant.stated`)."""
+        return cls(rig.nominal_winch, sign_sharpness=sign_sharpness)
+
     def replace(self, **changes: Any) -> Drives:
         return replace(self, **changes)
 
@@ -481,6 +513,31 @@ class Drives:
         """Force/torque commands (N, n) that make the axes follow ``theta`` (positions)."""
         drive = self.winch.inertia * alpha + self.friction_torque(theta, omega)
         return {"torque": commanded_torque(drive, t, self.actuator_time_constant)}
+
+
+#: the model of each kind of rig, by rig.yaml's kind
+PLANTS: dict[str, type[Plant] | type[Drives]] = {Plant.kind: Plant, Drives.kind: Drives}
+
+
+def plant_kind(rig: Rig) -> type[Plant] | type[Drives]:
+    """The model class of the rig's kind.
+
+    Raises
+    ------
+    ValueError
+        Naming the kind, for a kind without a model.
+    """
+    try:
+        return PLANTS[rig.kind]
+    except KeyError:
+        raise ValueError(f"kind {rig.kind!r}: no model of this kind of rig (known: "
+                         f"{sorted(PLANTS)})") from None
+
+
+def nominal_plant(rig: Rig, sign_sharpness: float | None) -> Plant | Drives:
+    """The model exactly as rig.yaml states it, with the Coulomb law of
+    ``sign_sharpness`` (``tanh(k w)``; None: the hard sign)."""
+    return plant_kind(rig).stated(rig, sign_sharpness)
 
 
 def winch_rates(

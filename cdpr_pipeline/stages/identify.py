@@ -16,6 +16,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.errors import ConfigError
 from cdpr_pipeline.identification.pipeline import (
     Identification,
@@ -49,7 +50,9 @@ def identify(cfg: DictConfig) -> Identification:
                          f"{sorted(cfg.identification)}")
     data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
                         min_samples=cfg.data.min_samples)
-    settings = instantiate(cfg.regression)
+    # how the runs are read, chosen from the whole dataset once for the command (the
+    # fit, the held-out runs and the extra datasets are then read alike)
+    settings = resolve_settings(instantiate(cfg.regression), data.trajectories, data.rig)
     split = instantiate(cfg.wavelet) if cfg.get("wavelet") else None
     identifier = instantiate(cfg.identification[cfg.method])
     start = time.perf_counter()

@@ -113,7 +113,7 @@ def reconstruct(cfg: DictConfig) -> dict:
         (out / f"{name}.md").write_text(to_markdown(df))
         files += [out / f"{name}.csv", out / f"{name}.md"]
     # U* is a winch torque (cable robots) or the force or torque of a drive axis
-    unit = "N m" if data.rig.kind == "cdpr" else \
+    unit = data.rig.torque_unit or \
         str((data.rig.to_dict().get("units") or {}).get("u1", "N or N m"))
     files.append(_plot(np.arange(len(one)), one.target, preds_one, out / "reconstruction.png",
                        unit))

@@ -19,6 +19,7 @@ from cdpr_pipeline.errors import ConfigError, InputError
 from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.lab import LabRun, generate_dataset
 from cdpr_pipeline.sim.model_file import read_model
+from cdpr_pipeline.sim.plant import plant_kind
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +36,7 @@ def rig_from_config(cfg: DictConfig) -> CdprRig:
         rig, problems = parse_rig(raw, file="config rig")
         if rig is None or any(p.severity == "error" for p in problems):
             raise DataValidationError(problems)
-    if not isinstance(rig, CdprRig):
+    if not plant_kind(rig).closed_loop:
         raise ConfigError("the virtual lab simulates cable robots (kind: cdpr) only")
     return rig
 
@@ -63,7 +64,7 @@ def simulate(cfg: DictConfig) -> LabRun:
     replaces the rig and adds its effects to the configured ones."""
     if cfg.get("model_file"):
         rig, effects = read_model(cfg.model_file)
-        if not isinstance(rig, CdprRig):
+        if not plant_kind(rig).closed_loop:
             raise InputError(f"{cfg.model_file}: the virtual lab simulates cable robots only")
         log.info("model %s: %d effect(s)", cfg.model_file, len(effects))
         effects += effects_from_config(cfg.get("effects"), rig.n, cfg.seed)

@@ -11,7 +11,7 @@ from omegaconf import DictConfig
 from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.errors import DataValidationError, Problem
 from cdpr_pipeline.data.io import Dataset, load_dataset
-from cdpr_pipeline.data.reading import RegressionSettings, resolve_settings
+from cdpr_pipeline.data.reading import RegressionSettings, as_resolved, resolve_settings
 from cdpr_pipeline.data.validation import ValidationReport, check_run_lengths, validate_dataset
 from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnosis_needs
 from cdpr_pipeline.identification.pipeline import identification_needs
@@ -29,7 +29,8 @@ def validate(cfg: DictConfig) -> ValidationReport:
         try:   # what loading adds: runs cut at their gaps, each long enough
             data = load_dataset(cfg.data.path, allow_gaps=bool(cfg.data.allow_gaps),
                                 min_samples=int(cfg.data.min_samples))
-            found = analysis_needs(data, instantiate(cfg.regression))
+            found = analysis_needs(data, resolve_settings(instantiate(cfg.regression),
+                                                          data.trajectories, data.rig))
         except DataValidationError as exc:
             found = exc.problems
         for problem in found:
@@ -45,8 +46,9 @@ def validate(cfg: DictConfig) -> ValidationReport:
 def analysis_needs(dataset: Dataset, regression: RegressionSettings) -> list[Problem]:
     """A warning for each run too short for ``identify`` or ``diagnose`` with the
     regression settings given and the default selection (each command refuses such a
-    run with the same numbers)."""
-    regression = resolve_settings(regression, dataset.trajectories, dataset.rig)
+    run with the same numbers). ``regression`` as the command resolved it, else resolved
+    here from ``dataset``."""
+    regression = as_resolved(regression, dataset.trajectories, dataset.rig)
     rate = dataset.rig.sample_rate_hz
     found = []
     for command, (needs, why) in (

@@ -24,6 +24,7 @@ import json
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -33,7 +34,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset, read_rig
-from cdpr_pipeline.data.rig import AxesRig, CdprRig
+from cdpr_pipeline.data.rig import AxesRig, Rig
 from cdpr_pipeline.data.split import heldout_split
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.data.validation import moves
@@ -101,27 +102,63 @@ def _axes_runs(cfg: DictConfig, fc: Forecaster, rig: AxesRig
     return runs, list(data.trajectories)
 
 
-def _rollout(cfg: DictConfig, rig: CdprRig | AxesRig, path: str | Path) -> Rollout:
+def _drawn_runs(cfg: DictConfig, fc: Forecaster, rig: Rig) -> tuple[list[Trajectory], None]:
+    """Virtual runs of a cable robot along newly drawn desired trajectories (its frame
+    bounds a valid free run)."""
+    traj = cfg.trajectory
+    runs = virtual_trajectories(
+        fc, rig, OmegaConf.to_container(traj.counts), float(traj.duration_s),
+        int(cfg.seed), ramp_s=float(traj.ramp_s),
+        centre_m=None if traj.centre_m is None else list(traj.centre_m),
+        ranges=instantiate(traj.ranges))
+    return runs, None
+
+
+def _followed_runs(cfg: DictConfig, fc: Forecaster, rig: Rig
+                   ) -> tuple[list[Trajectory], tuple[np.ndarray, np.ndarray]]:
+    """Virtual runs of drive axes and the range their free runs must stay in."""
+    runs, recorded = _axes_runs(cfg, fc, rig)
+    return runs, position_bounds(recorded)
+
+
+@dataclass(frozen=True)
+class VirtualRuns:
+    """How a kind of rig gets its virtual runs (one per kind, :data:`VIRTUAL_RUNS`).
+
+    Attributes
+    ----------
+    make : callable
+        ``make(cfg, forecaster, rig)`` -> the runs and the range a free run must stay in
+        (None: the rig's frame).
+    where, where_long : str
+        The range in words, short and in full (messages).
+    """
+
+    make: Callable[[DictConfig, Forecaster, Rig],
+                   tuple[list[Trajectory], tuple[np.ndarray, np.ndarray] | None]]
+    where: str
+    where_long: str
+
+
+#: the virtual runs of each kind of rig, by rig.yaml's kind
+VIRTUAL_RUNS: dict[str, VirtualRuns] = {
+    "cdpr": VirtualRuns(_drawn_runs, "workspace", "workspace"),
+    "axes": VirtualRuns(_followed_runs, "recorded range widened by half",
+                        "recorded range widened by half of it"),
+}
+
+
+def _rollout(cfg: DictConfig, rig: Rig, path: str | Path) -> Rollout:
     """Roll the forecaster at ``path`` out along the stage's desired trajectories (the
     same ones for every predictor: they depend on ``seed`` only)."""
     fc = Forecaster.load(path)
     if not fc.layout.has_desired:
         raise StageNotApplicable(
             f"kind {rig.kind}: the runs have no desired trajectory (columns "
-            f"{'xd, yd, zd' if isinstance(rig, CdprRig) else 'qd1..qdn'}), so there is "
+            f"{rig.signal('desired').describe()}), so there is "
             "nothing to drive the predictor along")
-    traj = cfg.trajectory
     start = time.perf_counter()
-    if isinstance(rig, CdprRig):
-        runs = virtual_trajectories(
-            fc, rig, OmegaConf.to_container(traj.counts), float(traj.duration_s),
-            int(cfg.seed), ramp_s=float(traj.ramp_s),
-            centre_m=None if traj.centre_m is None else list(traj.centre_m),
-            ranges=instantiate(traj.ranges))
-        bounds = None
-    else:
-        runs, recorded = _axes_runs(cfg, fc, rig)
-        bounds = position_bounds(recorded)
+    runs, bounds = VIRTUAL_RUNS[rig.kind].make(cfg, fc, rig)
     # a run that never moves is refused by the data format (it shows no dynamics), so it
     # counts as unusable like a diverged one
     valid = [r for r in runs if physically_valid(r, rig, bounds=bounds)
@@ -140,8 +177,7 @@ def _free_run_rmse(train_dir: str | Path) -> float:
     return float(value) if value is not None and math.isfinite(value) else math.inf
 
 
-def choose_rollout(cfg: DictConfig, rig: CdprRig | AxesRig) -> tuple[Rollout, list[Rollout],
-                                                                       str]:
+def choose_rollout(cfg: DictConfig, rig: Rig) -> tuple[Rollout, list[Rollout], str]:
     """The predictor whose virtual runs are written (see the module docstring).
 
     Returns
@@ -185,7 +221,7 @@ def choose_rollout(cfg: DictConfig, rig: CdprRig | AxesRig) -> tuple[Rollout, li
         chosen = max(tried, key=lambda r: len(r.valid))
     counts = ", ".join(f"{r.name} {r.in_range}" for r in tried)
     if not chosen.valid:
-        where = "workspace" if isinstance(rig, CdprRig) else "recorded range widened by half"
+        where = VIRTUAL_RUNS[rig.kind].where
         raise StageNotApplicable(f"every free run of every predictor left the {where} "
                                  f"(runs in range: {counts}); no virtual run to write")
     if chosen is first:
@@ -208,12 +244,11 @@ def virtual(cfg: DictConfig) -> Path:
     if not cfg.forecaster:
         raise ConfigError("forecaster=PATH (a forecaster.pt written by `cdpr train`) is required")
     rig = read_rig(Path(cfg.data.path) / "rig.yaml")
-    if not isinstance(rig, (CdprRig, AxesRig)):
-        raise StageNotApplicable(f"kind {getattr(rig, 'kind', type(rig).__name__)}: "
-                                 "no virtual runs for this kind")
+    if rig.kind not in VIRTUAL_RUNS:
+        raise StageNotApplicable(f"kind {rig.kind}: no virtual runs for this kind")
     chosen, tried, why = choose_rollout(cfg, rig)
     runs, valid = chosen.runs, chosen.valid
-    where = "workspace" if isinstance(rig, CdprRig) else "recorded range widened by half of it"
+    where = VIRTUAL_RUNS[rig.kind].where_long
     dropped = sorted(set(r.name for r in runs) - set(r.name for r in valid))
     if dropped:
         if not cfg.drop_diverged:

@@ -18,6 +18,7 @@ from omegaconf import DictConfig
 
 from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
+from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.identification.pipeline import split_regression
 from cdpr_pipeline.identification.regressors import COLUMNS, dataset_regression
 from cdpr_pipeline.wavelet import WaveletSplit, band_energies
@@ -30,8 +31,9 @@ def decompose(cfg: DictConfig) -> dict:
     data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
                         min_samples=cfg.data.min_samples)
     split: WaveletSplit = instantiate(cfg.wavelet) if cfg.get("wavelet") else WaveletSplit()
-    reg = dataset_regression(data, data.rig, instantiate(cfg.regression)
-                             ).without_internal_forces()
+    # how the runs are read, chosen once from the whole dataset
+    settings = resolve_settings(instantiate(cfg.regression), data.trajectories, data.rig)
+    reg = dataset_regression(data, data.rig, settings).without_internal_forces()
     low, high = split_regression(reg, split)
     high_phi, high_target = high.phi, high.target
     n = reg.n

@@ -16,7 +16,7 @@ from cdpr_pipeline.data import DataValidationError, load_dataset, validate_datas
 from cdpr_pipeline.data.reading import DerivativeFilter, RegressionSettings, resolve_settings
 from cdpr_pipeline.data.validation import STATIC_RANGE_PER_SIGMA, moves
 from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnosis_needs
-from cdpr_pipeline.discovery.freeform import L0Regression
+from cdpr_pipeline.discovery.freeform.l0 import L0Regression
 from cdpr_pipeline.identification.pipeline import (
     MIN_BLOCK_ROWS,
     check_reversals,

@@ -18,7 +18,6 @@ from cdpr_pipeline.data.split import (
     whole_run_split,
 )
 from cdpr_pipeline.data.trajectory import Trajectory, family_of
-from cdpr_pipeline.models.datamodule import split_runs
 
 RATE = 100.0
 WINDOW = 32
@@ -48,13 +47,33 @@ def covered(split: Split, runs: list[Trajectory]) -> dict[str, list[tuple[str, i
 
 
 # -------------------------------------------------------------------- whole runs
-def test_whole_run_split_is_the_data_modules_and_unchanged_on_many_runs():
+def test_whole_run_split_is_by_whole_run_stratified_and_seeded():
+    names = [f"{i:03d}_{f}" for i, f in enumerate(["a"] * 10 + ["b"] * 10 + ["spiral"] * 4)]
+    fams = [n.split("_", 1)[1] for n in names]
+    s = whole_run_split(names, fams, 0.2, 0.1, ["spiral"], seed=3)
+    assert sorted(s.train + s.val + s.test) == sorted(names)
+    assert not set(s.train) & set(s.val) and not set(s.train) & set(s.test)
+    assert not set(s.val) & set(s.test)
+    assert all(n in s.test for n in names if n.endswith("spiral"))
+    for fam in "ab":
+        assert sum(n.endswith(fam) for n in s.val) == 2
+        assert sum(n.endswith(fam) for n in s.test) == 1
+    assert s == whole_run_split(names, fams, 0.2, 0.1, ["spiral"], seed=3)
+    assert s != whole_run_split(names, fams, 0.2, 0.1, ["spiral"], seed=4)
+
+
+def test_whole_run_split_keeps_one_validation_run_on_small_data():
+    names = ["000_a", "001_a", "002_b"]
+    s = whole_run_split(names, ["a", "a", "b"], 0.1, 0.0, [], seed=0)
+    assert len(s.val) == 1 and s.val[0] in names[:2] and "002_b" in s.train
+
+
+def test_model_split_is_the_whole_run_split_on_many_runs():
     names = [f"{i:03d}_{f}" for i, f in enumerate(["a"] * 10 + ["b"] * 10 + ["spiral"] * 4)]
     fams = [family_of(n) for n in names]
     runs = [run(n, 1.0) for n in names]
     s = model_split(runs, 0.2, 0.1, ["spiral"], seed=3, gap=WINDOW, min_samples=35)
     assert s == whole_run_split(names, fams, 0.2, 0.1, ["spiral"], 3)
-    assert s == split_runs(names, fams, 0.2, 0.1, ["spiral"], seed=3)
     assert s.mode == "runs" and not s.blocks and all(seg.whole for seg in s["train"])
     assert sorted(s.train + s.val + s.test) == sorted(names)
     assert {n for n in names if n.endswith("spiral")} <= set(s.test)

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import pytest
-from lab_cases import draw_seed, lab_dataset
+
+from cdpr_pipeline.testing.lab_cases import draw_seed, lab_dataset
 
 
 @pytest.fixture

@@ -22,9 +22,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from foreign_cases import foreign_case
-from lab_cases import fast_settings, lab_dataset
-from lab_cases import rng_for as lab_rng
 
 from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.discovery.damping import (
@@ -37,7 +34,10 @@ from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnose
 from cdpr_pipeline.discovery.residuals import nominal_model
 from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.sim.effects import CableElasticity
-from tests.independent_sim import draw_effect
+from cdpr_pipeline.testing.foreign_cases import foreign_case
+from cdpr_pipeline.testing.independent_sim import draw_effect
+from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset
+from cdpr_pipeline.testing.lab_cases import rng_for as lab_rng
 
 #: drawn time constants, s (module docstring)
 TAU_RANGE = (0.010, 0.030)

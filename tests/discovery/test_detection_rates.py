@@ -1,7 +1,7 @@
 """Slow suite: every drawable effect (and none) with several random seeds, on both
 simulators: the project's virtual lab (``cdpr_pipeline/sim``, the paper rig) and the
-independent one (``tests/independent_sim``: random cable robots and drive axes, written
-to disk and loaded like a user's data). Reports detection per effect and false alarms
+independent one (``cdpr_pipeline.testing.independent_sim``: random cable robots and drive
+axes, written to disk and loaded like a user's data). Reports detection per effect and false alarms
 per simulator, and requires, per simulator, at least 90 % detection over all effects and
 at most 10 % false alarms."""
 
@@ -9,12 +9,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from foreign_cases import KINDS, OUTSIDE, VOCABULARY, foreign_case, foreign_settings, grade
-from lab_cases import draw_seed
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.discovery.study import run_case
 from cdpr_pipeline.sim.effects import EFFECTS
+from cdpr_pipeline.testing.foreign_cases import (
+    KINDS,
+    OUTSIDE,
+    VOCABULARY,
+    foreign_case,
+    foreign_settings,
+    grade,
+)
+from cdpr_pipeline.testing.lab_cases import draw_seed
 
 SEEDS = 3
 

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from lab_cases import fast_settings, lab_dataset, rng_for
 
 from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.sim.effects import EFFECTS, Effect, make_effect
+from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset, rng_for
 
 VOCABULARY = sorted(n for n, c in EFFECTS.items() if c.in_vocabulary and c.drawable)
 OUTSIDE = sorted(n for n, c in EFFECTS.items() if not c.in_vocabulary and c.drawable)

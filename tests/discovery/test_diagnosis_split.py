@@ -6,25 +6,25 @@ from __future__ import annotations
 import json
 
 import pytest
-from lab_cases import fast_settings
 
 from cdpr_pipeline.data.io import Dataset
-from cdpr_pipeline.discovery.diagnosis import diagnose, diagnosis_split, split_runs
+from cdpr_pipeline.discovery.diagnosis import diagnose, diagnosis_split
 from cdpr_pipeline.stages.diagnose import write_outputs
+from cdpr_pipeline.testing.lab_cases import fast_settings
 
 
 def test_whole_runs_by_default_and_by_name(quiet_lab):
     names = quiet_lab.names
     spirals = [n for n in names if n.endswith("_spiral")]
-    train, held = split_runs(quiet_lab.trajectories)
-    assert held == spirals and train == [n for n in names if n not in spirals]
     split = diagnosis_split(quiet_lab, fast_settings())
-    assert not split.blocks and list(split.heldout) == held
+    train, held = list(split.train), list(split.heldout)
+    assert held == spirals and train == [n for n in names if n not in spirals]
+    assert not split.blocks
     assert split.as_dict() == {"train": train, "heldout": held}
-    train, held = split_runs(quiet_lab.trajectories, [names[0]])
-    assert held == [names[0]] and len(train) == len(names) - 1
+    split = diagnosis_split(quiet_lab, fast_settings(heldout=[names[0]]))
+    assert split.heldout == (names[0],) and len(split.train) == len(names) - 1
     with pytest.raises(ValueError, match="no run or family named"):
-        split_runs(quiet_lab.trajectories, ["nope"])
+        diagnosis_split(quiet_lab, fast_settings(heldout=["nope"]))
 
 
 @pytest.mark.parametrize("reading", ["fixed", "command"])

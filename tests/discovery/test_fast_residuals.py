@@ -10,7 +10,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-from lab_cases import candidate_effects
 from scipy.optimize import least_squares
 
 from cdpr_pipeline.data.reading import RegressionSettings, resolve_settings
@@ -18,6 +17,7 @@ from cdpr_pipeline.discovery import residuals as R
 from cdpr_pipeline.discovery.fitting import GroupedJacobian
 from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.sim.effects import SymbolicWinchTorque
+from cdpr_pipeline.testing.lab_cases import candidate_effects
 
 
 @pytest.fixture(scope="module")

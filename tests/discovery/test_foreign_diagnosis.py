@@ -1,8 +1,8 @@
 """Hidden-effect tests on data the project did not generate: the independent simulator
-(``tests/independent_sim``: its own physics, integrator, controller and writer, hard-sign
-Coulomb friction with true stick-slip, random rigs, magnitudes per channel in absolute
-units), written to disk and loaded like a user's recording, diagnosed with the command's
-own configuration (closed loop and black box off).
+(``cdpr_pipeline.testing.independent_sim``: its own physics, integrator, controller and
+writer, hard-sign Coulomb friction with true stick-slip, random rigs, magnitudes per
+channel in absolute units), written to disk and loaded like a user's recording, diagnosed
+with the command's own configuration (closed loop and black box off).
 
 Each test runs on both rig kinds and draws its seed at random (``CDPR_TEST_SEED`` replays
 one), and with it the rig (cable robot: 3 or 4 cables, 100-1000 Hz; drive axes: 1-6
@@ -17,7 +17,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from foreign_cases import FAST, KINDS, OUTSIDE, VOCABULARY, foreign_case, parameters_ok, rng_for
+
+from cdpr_pipeline.testing.foreign_cases import (
+    FAST,
+    KINDS,
+    OUTSIDE,
+    VOCABULARY,
+    foreign_case,
+    parameters_ok,
+    rng_for,
+)
 
 
 def _diagnosed(tmp_path, kind: str, effects: list[str], seed: int):
@@ -127,7 +136,7 @@ def _upper_half(name: str, key: str, base):
     ``key`` redrawn on the affected channels in the upper half of the generator's
     documented range, 0.55-0.8 of ``base(rig)``: these tests are about the name and the
     size found, the detection limit is ``benchmarks/bench_detection.py``'s."""
-    from tests.independent_sim import draw_effect
+    from cdpr_pipeline.testing.independent_sim import draw_effect
 
     def draw(rig, rng):
         eff = draw_effect(name, rig, rng)
@@ -232,7 +241,7 @@ def test_an_effect_on_a_light_axis_beside_heavy_ones_is_named(tmp_path, seed):
     speed (a bump 0.3 of it wide is largely a higher F_c and a lower F_v: seed 309 was
     named ``winch_parameter_error`` first and Stribeck second), asymmetric viscous
     friction 0.55-0.8 F_v."""
-    from tests.independent_sim import Effect
+    from cdpr_pipeline.testing.independent_sim import Effect
 
     rng = rng_for(seed)
     n = int(rng.integers(2, 5))

@@ -15,14 +15,14 @@ import dataclasses
 
 import numpy as np
 import pytest
-from foreign_cases import foreign_case, foreign_settings, parameters_ok
-from lab_cases import candidate_effects
 
 from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.discovery import residuals as R
 from cdpr_pipeline.discovery.signals import dataset_signals, internal_force_projection
 from cdpr_pipeline.sim.effects import ActuatorLag, StribeckFriction, SymbolicWinchTorque
 from cdpr_pipeline.sim.plant import cable_geometry
+from cdpr_pipeline.testing.foreign_cases import foreign_case, foreign_settings, parameters_ok
+from cdpr_pipeline.testing.lab_cases import candidate_effects
 
 
 def _geometry(n: int, samples: int, rng: np.random.Generator):
@@ -138,7 +138,7 @@ def test_a_stribeck_effect_on_one_winch_of_a_redundant_rig(tmp_path, seed):
     typical speed, the upper three quarters of 0.1-0.3):
     this test is about naming on a redundant rig, the detection limit is
     ``benchmarks/bench_detection.py``'s."""
-    from tests.independent_sim import Effect
+    from cdpr_pipeline.testing.independent_sim import Effect
 
     winch = int(np.random.default_rng([seed, 4]).integers(4))
 
@@ -170,7 +170,7 @@ def test_a_small_effect_beside_a_large_one_on_a_redundant_rig_is_found(tmp_path,
     F_v on the positive side, the one of smallest 0.3-0.5 of its own on the negative
     side (the generator's range is 0.3-0.8); both must be found, with their directions
     and sizes within the foreign tolerance."""
-    from tests.independent_sim import Effect
+    from cdpr_pipeline.testing.independent_sim import Effect
 
     def large_and_small(rig, rng):
         torque = rig.viscous * rig.typical_speed

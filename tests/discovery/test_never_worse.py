@@ -6,12 +6,95 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from lab_cases import draw_seed, fast_settings, lab_dataset, rng_for
 
+from cdpr_pipeline.data.reading import resolve_settings
+from cdpr_pipeline.data.split import heldout_split
 from cdpr_pipeline.discovery import diagnosis as diagnosis_module
+from cdpr_pipeline.discovery import never_worse as never_worse_module
 from cdpr_pipeline.discovery.diagnosis import diagnose
-from cdpr_pipeline.discovery.selection import Judgement, Selection
+from cdpr_pipeline.discovery.never_worse import never_worse
+from cdpr_pipeline.discovery.residuals import nominal_model, residuals, signal_scales
+from cdpr_pipeline.discovery.selection import Judgement, Selection, SelectionSettings
+from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.sim.effects import DrumRadiusError, PayloadMassError
+from cdpr_pipeline.testing.lab_cases import draw_seed, fast_settings, lab_dataset, rng_for
+
+
+# ------------------------------------------------------------------ the step on its own
+def _cause(effect, channel, bic_drop):
+    """A cause as the selection would name it (the step reads its effects, channel,
+    label and BIC drop)."""
+    return Judgement(effect.name, effect.name, (effect,), 1, {}, {}, bic_drop, 1e-9,
+                     bic_drop, channel, 0.5, (0.4, 0.6), (), passed=True)
+
+
+@pytest.fixture(scope="module")
+def payload_lab(paper_rig):
+    """A lab whose only hidden effect is a payload mass error (size drawn from its range,
+    10-30 %, either sign): its nominal model, held-out runs, their nominal residuals and
+    the columns' scales, and the true effect."""
+    seed = draw_seed()
+    rng = rng_for(seed)
+    true = PayloadMassError(float(rng.choice([-1, 1]) * rng.uniform(0.1, 0.3)))
+    data = lab_dataset(paper_rig, [true], seed, duration_s=6.0)
+    regression = resolve_settings(fast_settings().regression, data.trajectories, data.rig)
+    split = heldout_split(data.trajectories)
+    signals = {s.name: s for s in dataset_signals(data.trajectories, data.rig, regression)}
+    train = [signals[n] for n in split.train]
+    held = [signals[n] for n in split.heldout]
+    nominal = nominal_model(data.rig, regression.sign_sharpness)
+    before = residuals(nominal, nominal, held)
+    scales = signal_scales(train, before.channels)
+    drum = DrumRadiusError(float(rng.choice([-1, 1]) * rng.uniform(0.01, 0.03)))
+    return {"nominal": nominal, "held": held, "before": before, "scales": scales,
+            "true": true, "wrong": drum, "case": f"seed {seed}: {true}, wrong {drum}"}
+
+
+def _never_worse(lab, causes):
+    return never_worse(lab["nominal"], causes, lab["held"], lab["before"], lab["scales"],
+                       SelectionSettings())
+
+
+def test_never_worse_keeps_a_cause_that_helps(payload_lab):
+    """The true effect alone is kept, and the extended model is the nominal one with it."""
+    lab = payload_lab
+    helps = _cause(lab["true"], "torque", 1e4)
+    kept = _never_worse(lab, [helps])
+    assert [c.label for c in kept.causes] == ["payload_mass_error"], lab["case"]
+    assert kept.withdrawn == () and kept.gain.withdrawn == ()
+    assert kept.gain.ci95[0] > 0 and kept.gain.relative > 0.5, (lab["case"], kept.gain)
+    assert kept.channel == "torque" and kept.extension == [lab["true"]]
+    assert kept.causes[0].contribution > 0.5, lab["case"]
+    assert kept.after.sse("torque") < 0.25 * lab["before"].sse("torque")
+
+
+def test_never_worse_withdraws_a_cause_that_makes_held_out_worse(payload_lab):
+    """A drum radius error on a rig without one (1-3 %, either sign) makes the held-out
+    lengths worse: alone it is withdrawn by the gain's interval and the extended model is
+    the nominal one (no gain)."""
+    lab = payload_lab
+    harms = _cause(lab["wrong"], "length", 1e4)
+    kept = _never_worse(lab, [harms])
+    assert kept.causes == () and kept.extension == [], lab["case"]
+    assert kept.withdrawn == ("drum_radius_error",) == kept.gain.withdrawn
+    assert kept.gain.relative == 0.0 and kept.channel == "torque"
+
+
+@pytest.mark.parametrize("harm_first", [True, False])
+def test_never_worse_withdraws_the_harmful_cause_beside_a_helpful_one(payload_lab,
+                                                                       harm_first):
+    """The true effect and a harmful one together, either checked first (weaker by BIC):
+    the harmful one adds nothing to the other and goes, the true one stays."""
+    lab = payload_lab
+    helps = _cause(lab["true"], "torque", 2e4 if harm_first else 1e4)
+    harms = _cause(lab["wrong"], "length", 1e4 if harm_first else 2e4)
+    kept = _never_worse(lab, [harms, helps])
+    assert [c.label for c in kept.causes] == ["payload_mass_error"], lab["case"]
+    assert kept.withdrawn == ("drum_radius_error",), lab["case"]
+    assert kept.gain.ci95[0] > 0, lab["case"]
+
+
+# ------------------------------------------------------------------ in the diagnosis
 
 
 def test_a_cause_that_makes_held_out_runs_worse_is_withdrawn(paper_rig, monkeypatch):
@@ -103,7 +186,7 @@ def test_a_cause_whose_own_interval_reaches_zero_is_withdrawn(paper_rig, monkeyp
     import dataclasses
 
     data, drawn = _drum_and_payload(paper_rig, monkeypatch)
-    real_gain, own = diagnosis_module.heldout_gain, []
+    real_gain, own = never_worse_module.heldout_gain, []
 
     def uncertain_first(*args, **kwargs):
         gain = real_gain(*args, **kwargs)
@@ -114,7 +197,7 @@ def test_a_cause_whose_own_interval_reaches_zero_is_withdrawn(paper_rig, monkeyp
             return gain
         return dataclasses.replace(gain, ci95=(-0.01, gain.ci95[1]))
 
-    monkeypatch.setattr(diagnosis_module, "heldout_gain", uncertain_first)
+    monkeypatch.setattr(never_worse_module, "heldout_gain", uncertain_first)
     d = diagnose(data, fast_settings())
     case = f"{drawn}: {d.sentence}"
     assert own and own[0].relative > 0.05, case      # its point estimate passes

@@ -8,8 +8,9 @@ assumes (``benchmarks/bench_null_calibration.py`` writes the same as JSON)."""
 from __future__ import annotations
 
 import pytest
-from foreign_cases import foreign_settings, null_datasets, run_null, summarise
-from lab_cases import draw_seed
+
+from cdpr_pipeline.testing.foreign_cases import foreign_settings, null_datasets, run_null, summarise
+from cdpr_pipeline.testing.lab_cases import draw_seed
 
 #: datasets per simulator: lab, independent cable robots, independent drive axes
 COUNTS = (6, 8, 6)

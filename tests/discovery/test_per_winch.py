@@ -19,11 +19,12 @@ from collections import Counter
 
 import numpy as np
 import pytest
-from lab_cases import fast_settings, lab_dataset, rng_for
 
 from cdpr_pipeline.data.reading import RegressionSettings
 from cdpr_pipeline.discovery.diagnosis import diagnose
-from cdpr_pipeline.discovery.freeform import WINCH_ANGLE, GrammarGP, ShapeFilter, readable
+from cdpr_pipeline.discovery.freeform.grammar import GrammarGP
+from cdpr_pipeline.discovery.freeform.periodicity import WINCH_ANGLE
+from cdpr_pipeline.discovery.freeform.terms import ShapeFilter, readable
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.sim.effects import (
     EFFECTS,
@@ -38,6 +39,7 @@ from cdpr_pipeline.sim.effects import (
 )
 from cdpr_pipeline.sim.expressions import evaluate
 from cdpr_pipeline.sim.model_file import read_model, write_model
+from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset, rng_for
 
 VOCABULARY = {n for n, c in EFFECTS.items() if c.in_vocabulary}
 
@@ -233,7 +235,7 @@ def test_a_wrong_coulomb_friction_alone_is_a_winch_parameter_error(paper_rig, se
     count decides); size drawn from the effect's range, 20-40 % either way; the
     free-form library is handed a wide tanh (width drawn 0.1-0.2 rad/s, the law's is
     0.05), so the competitor is always on offer."""
-    from cdpr_pipeline.discovery.freeform import FreeFormSearch
+    from cdpr_pipeline.discovery.freeform.search import FreeFormSearch
 
     rng = rng_for(seed)
     cable = int(np.argmin(paper_rig.winch_nominal.coulomb)) + 1

@@ -2,7 +2,7 @@
 largest held-out contribution; issue 21, item 5).
 
 Each cause's contribution is its Shapley share of the extended model's held-out gain
-(:func:`~cdpr_pipeline.discovery.diagnosis.heldout_contributions`). The expected order
+(:func:`~cdpr_pipeline.discovery.never_worse.heldout_contributions`). The expected order
 comes from the *true* effects' contributions on the same held-out runs, not from the
 fitted ones. Magnitudes are drawn from the effects' documented ranges, seeds at random
 (``CDPR_TEST_SEED`` replays one).
@@ -14,18 +14,15 @@ import dataclasses
 
 import numpy as np
 import pytest
-from foreign_cases import foreign_settings
-from lab_cases import lab_dataset, rng_for
 
 from cdpr_pipeline.data.reading import resolve_settings
-from cdpr_pipeline.discovery.diagnosis import (
-    diagnose,
-    diagnosis_split,
-    heldout_contributions,
-)
+from cdpr_pipeline.discovery.diagnosis import diagnose, diagnosis_split
+from cdpr_pipeline.discovery.never_worse import heldout_contributions
 from cdpr_pipeline.discovery.residuals import nominal_model, signal_scales
 from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.sim.effects import ActuatorLag, PayloadMassError
+from cdpr_pipeline.testing.foreign_cases import foreign_settings
+from cdpr_pipeline.testing.lab_cases import lab_dataset, rng_for
 
 
 def _true_contributions(data, settings, effect_sets):

@@ -20,13 +20,13 @@ import dataclasses
 
 import numpy as np
 import pytest
-from foreign_cases import foreign_case, foreign_settings
-from lab_cases import lab_dataset, rng_for
 
 from cdpr_pipeline.data.reading import RegressionSettings, held_torque, resolve_settings
 from cdpr_pipeline.data.rig import AxesRig, WinchParams
 from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.sim.effects import ActuatorLag
+from cdpr_pipeline.testing.foreign_cases import foreign_case, foreign_settings
+from cdpr_pipeline.testing.lab_cases import lab_dataset, rng_for
 
 #: drawn lag range, s
 LAG_RANGE = (0.003, 0.012)
@@ -116,7 +116,7 @@ def test_lab_lags_come_out_unbiased(paper_rig, seed, ratio):
 def _drawn_lag(channels):
     """An independent-generator lag in :data:`LAG_RANGE` on ``channels`` (capped where
     the loop would not stay stable)."""
-    from tests.independent_sim import Effect
+    from cdpr_pipeline.testing.independent_sim import Effect
 
     def make(rig, rng):
         lag = np.zeros(rig.n)

@@ -16,16 +16,16 @@ import dataclasses
 
 import numpy as np
 import pytest
-from foreign_cases import FAST, foreign_case, foreign_settings
 
 from cdpr_pipeline.discovery.diagnosis import summary_sentence
 from cdpr_pipeline.discovery.results import HeldoutGain
+from cdpr_pipeline.testing.foreign_cases import FAST, foreign_case, foreign_settings
 
 ADEQUATE = "explains the measurements as well as anything tried"
 
 
 def _periodic_upper_half(rig, rng):
-    from tests.independent_sim import draw_effect
+    from cdpr_pipeline.testing.independent_sim import draw_effect
 
     eff = draw_effect("periodic_torque", rig, rng)
     idx = list(eff.channels)
@@ -89,7 +89,7 @@ def test_a_periodic_torque_above_the_motion_band_is_never_none(tmp_path, seed, r
     held-out gain (the band following the residual: ``follow_residual``), or
     ``unexplained``, and never a vocabulary name."""
     from cdpr_pipeline.data.reading import motion_bandwidth_hz
-    from tests.independent_sim import draw_effect
+    from cdpr_pipeline.testing.independent_sim import draw_effect
 
     runs, duration = FAST["cdpr"]
     quiet = foreign_case(tmp_path / "quiet", "cdpr", [], seed, n_runs=runs,

@@ -1,7 +1,7 @@
-"""Axes datasets from the independent generator (tests/independent_sim, no code shared
-with cdpr_pipeline/sim): 1 to 6 axes, 100 Hz to 2 kHz, inertias 1e-3 to 1e2, viscous up to
-1e4, one 40 s run. ``cdpr identify`` with nothing but ``data.path`` must find the inertia,
-viscous and Coulomb parameters the generator was given within 2 %.
+"""Axes datasets from the independent generator (cdpr_pipeline.testing.independent_sim, no
+code shared with cdpr_pipeline/sim): 1 to 6 axes, 100 Hz to 2 kHz, inertias 1e-3 to 1e2,
+viscous up to 1e4, one 40 s run. ``cdpr identify`` with nothing but ``data.path`` must find
+the inertia, viscous and Coulomb parameters the generator was given within 2 %.
 
 The generator's axes stick at hard-sign stops and its torques are held over a sample; the
 regression takes the samples where an axis sticks, stops, starts or reverses out of every
@@ -26,7 +26,7 @@ import pytest
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.stages.identify import identify
-from tests.independent_sim import random_axes_rig, simulate_axes_dataset
+from cdpr_pipeline.testing.independent_sim import random_axes_rig, simulate_axes_dataset
 
 #: (axes, rate Hz, inertia, viscous, sensor noise): the corners of the documented ranges;
 #: None is drawn

@@ -1,8 +1,8 @@
-"""Cable robots from the independent generator (tests/independent_sim, no code shared with
-cdpr_pipeline/sim): random anchors, mass, drum radius and sample rate (100 Hz to 1 kHz),
-hard-sign Coulomb friction with true stick-slip, its own controller, five 15 s runs.
-``cdpr identify`` with nothing but ``data.path`` must find every winch's inertia, viscous
-and Coulomb parameters.
+"""Cable robots from the independent generator (cdpr_pipeline.testing.independent_sim, no
+code shared with cdpr_pipeline/sim): random anchors, mass, drum radius and sample rate (100
+Hz to 1 kHz), hard-sign Coulomb friction with true stick-slip, its own controller, five 15
+s runs. ``cdpr identify`` with nothing but ``data.path`` must find every winch's inertia,
+viscous and Coulomb parameters.
 
 The tensions in the regression come from the *filtered* platform motion, so a stick or
 reversal's jump is spread over the derivative filter's reach, where the raw torque has
@@ -31,8 +31,8 @@ import pytest
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.stages.identify import identify
-from tests.discovery.foreign_cases import foreign_case
-from tests.discovery.lab_cases import draw_seed
+from cdpr_pipeline.testing.foreign_cases import foreign_case
+from cdpr_pipeline.testing.lab_cases import draw_seed
 
 #: assumed ratio of the true spread to the LSM standard deviation (measured for F_v on
 #: axes, ``test_foreign_axes``; assumed here for every parameter)

@@ -13,7 +13,7 @@ from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.reading import RegressionSettings
 from cdpr_pipeline.data.split import Split
 from cdpr_pipeline.identification.identifiers import LeastSquares
-from cdpr_pipeline.identification.pipeline import identify_dataset, split_fit_holdout
+from cdpr_pipeline.identification.pipeline import identification_split, identify_dataset
 from cdpr_pipeline.stages.identify import identify
 from cdpr_pipeline.stages.reconstruct import reconstruct
 from cdpr_pipeline.stages.simulate import simulate
@@ -34,7 +34,8 @@ def one_run(tmp_path_factory):
 def test_a_single_run_holds_out_its_last_block(one_run):
     data = load_dataset(one_run)
     assert data.names == ["000_flat_circle"]
-    fit, held = split_fit_holdout(data, ["spiral"])    # no spiral here: the default applies
+    split = identification_split(data, ["spiral"])    # no spiral here: the default applies
+    fit, held = list(split.train), list(split.heldout)
     # 25 % of 10 s is less than the 3 s the held-out block gets at least
     assert fit == ["000_flat_circle@0.0-7.003s"] and held == ["000_flat_circle@7.003-10.003s"]
     result = identify_dataset(data, LeastSquares(), RegressionSettings(), None)

@@ -1,31 +1,10 @@
-"""Whole-run splits, windows and train-only scaling of the data module."""
+"""Windows and train-only scaling of the data module."""
 
 import numpy as np
 import pytest
 
-from cdpr_pipeline.models.datamodule import TrajectoryDataModule, split_runs
+from cdpr_pipeline.models.datamodule import TrajectoryDataModule
 from cdpr_pipeline.models.features import Standardizer, run_features
-
-
-def test_split_is_by_whole_run_stratified_and_seeded():
-    names = [f"{i:03d}_{f}" for i, f in enumerate(["a"] * 10 + ["b"] * 10 + ["spiral"] * 4)]
-    fams = [n.split("_", 1)[1] for n in names]
-    s = split_runs(names, fams, 0.2, 0.1, ["spiral"], seed=3)
-    assert sorted(s.train + s.val + s.test) == sorted(names)
-    assert not set(s.train) & set(s.val) and not set(s.train) & set(s.test)
-    assert not set(s.val) & set(s.test)
-    assert all(n in s.test for n in names if n.endswith("spiral"))
-    for fam in "ab":
-        assert sum(n.endswith(fam) for n in s.val) == 2
-        assert sum(n.endswith(fam) for n in s.test) == 1
-    assert s == split_runs(names, fams, 0.2, 0.1, ["spiral"], seed=3)
-    assert s != split_runs(names, fams, 0.2, 0.1, ["spiral"], seed=4)
-
-
-def test_split_keeps_one_validation_run_on_small_data():
-    names = ["000_a", "001_a", "002_b"]
-    s = split_runs(names, ["a", "a", "b"], 0.1, 0.0, [], seed=0)
-    assert len(s.val) == 1 and s.val[0] in names[:2] and "002_b" in s.train
 
 
 def test_windows_and_train_only_scaling(small_lab):

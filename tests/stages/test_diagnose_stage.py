@@ -102,15 +102,16 @@ def test_diagnose_writes_the_spec_files(tmp_path, anchor_lab, cfg):
 
 def test_heldout_override_and_bad_names(tmp_path, anchor_lab):
     from cdpr_pipeline.data.io import load_dataset
-    from cdpr_pipeline.discovery.diagnosis import split_runs
+    from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnosis_split
 
-    runs = load_dataset(anchor_lab).trajectories
-    train, held = split_runs(runs, ["flat_eight", "003_oblique_eight"])
-    assert held == ["002_flat_eight", "003_oblique_eight"] and len(train) == 3
+    data = load_dataset(anchor_lab)
+    split = diagnosis_split(data, DiagnosisSettings(heldout=["flat_eight",
+                                                             "003_oblique_eight"]))
+    assert split.heldout == ("002_flat_eight", "003_oblique_eight") and len(split.train) == 3
     with pytest.raises(ValueError, match="no run or family named"):
-        split_runs(runs, ["nope"])
+        diagnosis_split(data, DiagnosisSettings(heldout=["nope"]))
     with pytest.raises(ValueError, match="every run is held out"):
-        split_runs(runs, [r.name for r in runs])
+        diagnosis_split(data, DiagnosisSettings(heldout=data.names))
 
 
 def test_foreign_rig_is_diagnosed(tmp_path, cfg):

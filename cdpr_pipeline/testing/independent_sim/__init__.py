@@ -1,11 +1,13 @@
-"""An independent data generator for ``cdpr-measured/1``: evidence the project's own
-simulator cannot give.
+"""An independent data generator for ``cdpr-measured/1``: a test oracle, evidence the
+project's own simulator cannot give.
 
-It shares no code with ``cdpr_pipeline`` (only numpy and yaml): its own physics
-formulation, integrator, controller, trajectories and writer. Import it as
-``tests.independent_sim`` with the project root on ``sys.path`` (pytest's rootdir,
-``python -m pytest``, or a benchmark that inserts the root), or as ``independent_sim``
-from inside ``tests/`` (how pytest itself imports the package's test module).
+It deliberately shares no code with :mod:`cdpr_pipeline.sim` (nor with the rest of
+``cdpr_pipeline``): its own physics formulation, integrator, controller, trajectories and
+``cdpr-measured/1`` writer, with only numpy and yaml. A bug in the project's simulator or
+reader therefore cannot hide itself by appearing on both sides of a test, and
+``tests/test_layers.py`` fails on any import of the project from here. It ships in the
+package (as ``numpy.testing`` does) so that the tests and the benchmarks import it as
+installed code: ``from cdpr_pipeline.testing.independent_sim import random_rig``.
 
 Kinds
 -----
@@ -19,7 +21,7 @@ Kinds
 
 Usage::
 
-    from tests.independent_sim import random_rig, simulate_dataset
+    from cdpr_pipeline.testing.independent_sim import random_rig, simulate_dataset
     rig = random_rig(seed=3, n_cables=4, rate_hz=250)
     truth = simulate_dataset("out/ds", rig, ["stribeck_friction"], n_runs=5,
                              duration_s=15, seed=3)

@@ -1,5 +1,5 @@
-"""Datasets from the independent simulator (``tests/independent_sim``, no code shared with
-``cdpr_pipeline/sim``), diagnosed the way a user's recording would be.
+"""Datasets from the independent simulator (:mod:`cdpr_pipeline.testing.independent_sim`, no
+code shared with ``cdpr_pipeline.sim``), diagnosed the way a user's recording would be.
 
 A case draws a random rig (``cdpr``: 3 or 4 cables, 100-1000 Hz; ``axes``: 1-6 axes,
 100-2000 Hz; everything else as the generator documents it) and hides effects at
@@ -10,12 +10,15 @@ The dataset is written in ``cdpr-measured/1`` to a directory, its truth beside i
 configuration (``conf/diagnose.yaml``) with the closed loop and the black box off (they
 take no part in naming causes).
 
-Seeds are drawn at random (:func:`~lab_cases.draw_seed`; ``CDPR_TEST_SEED`` replays one)
-and every case describes itself (:attr:`ForeignCase.describe`) for failure messages.
+Seeds are drawn at random (:func:`~cdpr_pipeline.testing.lab_cases.draw_seed`;
+``CDPR_TEST_SEED`` replays one) and every case describes itself
+(:attr:`ForeignCase.describe`) for failure messages.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,18 +26,23 @@ from typing import Any
 import numpy as np
 import yaml
 
+from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import Dataset, load_dataset
-from tests.discovery.lab_cases import fast_settings, lab_dataset
-from tests.independent_sim import (
+from cdpr_pipeline.discovery.diagnosis import diagnose
+from cdpr_pipeline.sim.effects import per_winch
+from cdpr_pipeline.stages.diagnose import settings_from_config
+from cdpr_pipeline.testing.independent_sim import (
     EFFECT_KINDS,
     OUTSIDE_VOCABULARY,
     SlackCableError,
+    draw_effect,
     random_axes_rig,
     random_rig,
     simulate_axes_dataset,
     simulate_dataset,
     truth_path,
 )
+from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset
 
 KINDS = ("cdpr", "axes")
 #: effects the pipeline has a name for, per rig kind
@@ -54,11 +62,6 @@ SLACK_RETRIES = 5
 def foreign_settings(**changes: Any):
     """``cdpr diagnose``'s configured settings (``conf/diagnose.yaml``, every ``auto``
     left to the data) with the closed loop and the black box off."""
-    import dataclasses
-
-    from cdpr_pipeline.config import compose_config
-    from cdpr_pipeline.stages.diagnose import settings_from_config
-
     cfg = compose_config("diagnose", ["blackbox.enabled=false", "discovery.closed_loop=false"])
     return dataclasses.replace(settings_from_config(cfg), **changes)
 
@@ -83,7 +86,7 @@ class ForeignCase:
     seed: int
     path: Path
     dataset: Dataset
-    truth: Any                      # tests.independent_sim.Truth
+    truth: Any                      # independent_sim.Truth
     diagnosis: Any = None
     record: dict | None = None
     seconds: float = 0.0
@@ -119,10 +122,6 @@ class ForeignCase:
         return yaml.safe_load(truth_path(self.path).read_text())
 
     def diagnose(self, settings=None) -> dict:
-        import time
-
-        from cdpr_pipeline.discovery.diagnosis import diagnose
-
         start = time.perf_counter()
         self.diagnosis = diagnose(self.dataset, settings or foreign_settings())
         self.seconds = time.perf_counter() - start
@@ -188,8 +187,6 @@ def _effects(rig: Any, names: list[Any], seed: int, channels: list[int] | None) 
     """Effects drawn the way the generator draws them from names, with ``channels``; an
     entry that is not a name is called with the rig and the random generator (a test's
     own draw within the documented range)."""
-    from tests.independent_sim import draw_effect
-
     rng = np.random.default_rng([int(seed), 0xEFF])
     return [draw_effect(name, rig, rng, channels=channels) if isinstance(name, str)
             else name(rig, rng) for name in names]
@@ -311,7 +308,6 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
         errors["delta_mass_kg"] = _rel(p["relative"] * rig.mass,
                                        float(eff.params["delta_mass_kg"]))
     elif name == "drum_radius_error":
-        from cdpr_pipeline.sim.effects import per_winch
         fitted = per_winch(p["relative"], p.get("cables"), rig.n)
         true = eff.params["delta_radius_m"] / rig.radius
         for c in chans:
@@ -320,7 +316,6 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
                 continue
             errors[f"relative[{c}]"] = _rel(fitted[c - 1], true[c - 1])
     elif name == "cable_elasticity":
-        from cdpr_pipeline.sim.effects import per_winch
         fitted = per_winch(p["ea_n"], p.get("cables"), rig.n, fill=np.inf)
         for c in chans:
             if not np.isfinite(fitted[c - 1]):
@@ -328,7 +323,6 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
                 continue
             errors[f"ea_n[{c}]"] = _rel(fitted[c - 1], float(eff.params["ea_n"][c - 1]))
     elif name == "position_dependent_load":
-        from cdpr_pipeline.sim.effects import per_winch
         n = rig.n
         a, b = per_winch(p["a"], p.get("cables"), n), per_winch(p["b"], p.get("cables"), n)
         named = set(p.get("cables") or range(1, n + 1))
@@ -391,10 +385,6 @@ def run_null(spec: dict, settings, tmp: Path, paper_rig) -> dict:
     """Simulate one effect-free dataset of :func:`null_datasets`, diagnose it, and
     return what the tests saw: the verdict and every first-step candidate's statistics
     (:func:`first_step`)."""
-    import time
-
-    from cdpr_pipeline.discovery.diagnosis import diagnose
-
     start = time.perf_counter()
     if spec["simulator"] == "lab":
         data = lab_dataset(paper_rig, [], spec["seed"])

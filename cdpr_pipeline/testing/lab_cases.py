@@ -13,6 +13,10 @@ import numpy as np
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import Dataset
+from cdpr_pipeline.discovery.candidates import candidates_for
+from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings
+from cdpr_pipeline.discovery.freeform import FreeFormSearch
+from cdpr_pipeline.sim.candidate_forms import DataScale
 from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.lab import simulate_lab
 
@@ -33,9 +37,6 @@ def lab_dataset(rig, effects: list[Effect], seed: int, duration_s: float | None 
 def fast_settings(**changes):
     """Diagnosis settings for tests: everything on but the closed loop and black box,
     a short GP budget."""
-    from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings
-    from cdpr_pipeline.discovery.freeform import FreeFormSearch
-
     base = {"freeform": FreeFormSearch(), "closed_loop": False}
     return DiagnosisSettings(**{**base, **changes})
 
@@ -49,12 +50,9 @@ def candidate_effects(rig, signals, seed: int) -> list[list[Effect]]:
     too), each at its start moved by two of its scales at random, then every other set
     together: models of every structure the fast residual path must match the direct
     one on."""
-    from cdpr_pipeline.discovery.candidates import candidates_for, nominal_winch
-    from cdpr_pipeline.sim.candidate_forms import DataScale
-
     omega = np.concatenate([s.omega for s in signals])
     scale = DataScale(float(np.sqrt(np.mean(omega ** 2))), omega.shape[1], "cdpr",
-                      nominal_winch(rig))
+                      rig.nominal_winch)
     rng = np.random.default_rng(seed)
     sets = []
     for cand in candidates_for(rig, scale, None, True):

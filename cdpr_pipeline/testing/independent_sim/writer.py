@@ -8,12 +8,15 @@ the pipeline reads can leak it.
 from __future__ import annotations
 
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
+
+from .effects import resolve_effects, true_model
 
 FORMAT = "cdpr-measured/1"
 VALUE_FORMAT = "%.10g"  # 10 significant digits: far below every noise level used here
@@ -130,7 +133,7 @@ class Truth:
 
     def to_dict(self) -> dict[str, Any]:
         return plain({
-            "generator": "tests.independent_sim",
+            "generator": "cdpr_pipeline.testing.independent_sim",
             "kind": self.kind,
             "seed": int(self.seed),
             "effects": [e.to_dict() for e in self.effects],
@@ -160,3 +163,20 @@ def write_simulated(out_dir: str | Path, kind: str, rig: Any, effects: list[Any]
     if write_truth:
         truth.write(truth_path(out))
     return truth
+
+
+def simulate_and_write(out_dir: str | Path, kind: str, rig: Any, effects: Any, n_runs: int,
+                       duration_s: float, seed: int, families: list[str] | None, noise: bool,
+                       write_truth: bool, overwrite: bool, *, simulate: Callable[..., Any],
+                       default_families: Callable[[int], list[str]]) -> Truth:
+    """What ``simulate_dataset`` and ``simulate_axes_dataset`` do for their kind: draw the
+    effects given by name, simulate every run with ``simulate`` (``simulate_runs`` or
+    ``simulate_axes_runs``; ``default_families(n_runs)`` when no families are given) and
+    write the dataset (:func:`write_simulated`)."""
+    families = list(families) if families is not None else default_families(n_runs)
+    if len(families) != n_runs:
+        raise ValueError(f"{len(families)} families for {n_runs} runs")
+    eff = resolve_effects(rig, effects, seed)
+    columns, runs, settings = simulate(rig, eff, families, duration_s, seed, noise)
+    return write_simulated(out_dir, kind, rig, eff, true_model(rig, eff), seed, columns,
+                           runs, settings, write_truth, overwrite)

@@ -2,7 +2,8 @@
 
 An :class:`Effect` carries one magnitude per channel (winch or axis) in absolute units;
 channels it does not touch hold the neutral value (zero). :func:`draw_effect` draws them
-within the ranges documented in the package docstring (``tests.independent_sim``), and
+within the ranges documented in the package docstring
+(:mod:`cdpr_pipeline.testing.independent_sim`), and
 :func:`true_model` folds a nominal rig and any number of effects into the true plant
 parameters (:class:`TrueModel`) that the simulators integrate.
 """
@@ -412,3 +413,12 @@ def lag_response(lag_s: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     decay = np.where(on, np.exp(-h / safe), 0.0)
     mean_keep = np.where(on, -(safe / h) * np.expm1(-h / safe), 0.0)
     return decay, mean_keep
+
+
+def resolve_effects(rig: Any, effects: Any, seed: int) -> list[Effect]:
+    """Effect objects as given; names are drawn with :func:`draw_effect`."""
+    rng = np.random.default_rng([int(seed), 0xEFF])
+    out = []
+    for eff in effects or ():
+        out.append(eff if isinstance(eff, Effect) else draw_effect(str(eff), rig, rng))
+    return out

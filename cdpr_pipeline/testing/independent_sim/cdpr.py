@@ -48,8 +48,8 @@ from typing import Any
 
 import numpy as np
 
-from .effects import Effect, TrueModel, draw_effect, lag_response, true_model
-from .writer import FORMAT, RunTruth, Truth, write_simulated
+from .effects import Effect, TrueModel, lag_response, true_model
+from .writer import FORMAT, RunTruth, Truth, simulate_and_write
 
 #: trajectory families (the part of the file name after the index)
 CDPR_FAMILIES = ("flat_circle", "oblique_circle", "flat_eight", "oblique_eight", "spiral",
@@ -168,7 +168,7 @@ class RigSpec:
                                "and min-norm tension feedforward",
                 "kp_nm_per_rad": kp.tolist(), "kd_nms_per_rad": kd.tolist(),
                 "min_tension_n": float(self.min_tension_n), "rate_hz": float(self.rate_hz)},
-            "generator": "tests.independent_sim",
+            "generator": "cdpr_pipeline.testing.independent_sim",
         }
 
     def describe(self) -> dict[str, Any]:
@@ -744,15 +744,6 @@ def simulate_runs(rig: RigSpec, effects: list[Effect], families: list[str], dura
     return columns, truth, settings
 
 
-def resolve_effects(rig: Any, effects: Any, seed: int) -> list[Effect]:
-    """Effect objects as given; names are drawn with :func:`draw_effect`."""
-    rng = np.random.default_rng([int(seed), 0xEFF])
-    out = []
-    for eff in effects or ():
-        out.append(eff if isinstance(eff, Effect) else draw_effect(str(eff), rig, rng))
-    return out
-
-
 def simulate_dataset(out_dir: str | Path, rig: RigSpec, effects: Any = (), n_runs: int = 5,
                      duration_s: float = 15.0, seed: int = 0, families: list[str] | None = None,
                      noise: bool = True, write_truth: bool = True,
@@ -786,10 +777,6 @@ def simulate_dataset(out_dir: str | Path, rig: RigSpec, effects: Any = (), n_run
     -------
     Truth
     """
-    families = list(families) if families is not None else default_families(n_runs)
-    if len(families) != n_runs:
-        raise ValueError(f"{len(families)} families for {n_runs} runs")
-    eff = resolve_effects(rig, effects, seed)
-    columns, runs, settings = simulate_runs(rig, eff, families, duration_s, seed, noise)
-    return write_simulated(out_dir, "cdpr", rig, eff, true_model(rig, eff), seed, columns,
-                           runs, settings, write_truth, overwrite)
+    return simulate_and_write(out_dir, "cdpr", rig, effects, n_runs, duration_s, seed,
+                              families, noise, write_truth, overwrite, simulate=simulate_runs,
+                              default_families=default_families)

@@ -15,8 +15,7 @@ import pytest
 import yaml
 
 from cdpr_pipeline.data import load_dataset
-
-from . import (
+from cdpr_pipeline.testing.independent_sim import (
     EFFECT_KINDS,
     AxesPlant,
     Effect,
@@ -24,7 +23,9 @@ from . import (
     random_axes_rig,
     random_rig,
     simulate_axes_dataset,
+    simulate_axes_runs,
     simulate_dataset,
+    simulate_runs,
     true_model,
     truth_path,
 )
@@ -177,7 +178,6 @@ def test_regression_identity_three_cables():
     states to rounding, tensions recomputed from the platform's equation, ``w'`` from the
     platform's motion; the viscous term at the sub-step's mean speed (the generator's
     trapezoid rule; at the sample instant itself it holds to ``O(h F_v w')``)."""
-    from . import simulate_runs
 
     rig = random_rig(11, n_cables=3, rate_hz=250)
     cols, runs, settings = simulate_runs(rig, [], ["flat_circle", "multisine"], 3.0, seed=1,
@@ -203,7 +203,6 @@ def test_energy_balance_over_a_run():
     """The integrator follows the equations over time, not just at one sub-step: the
     change of kinetic plus potential energy equals the motors' work minus what friction
     and the offset take (trapezoid in time; the scheme is first order, hence 0.5 %)."""
-    from . import simulate_runs
 
     rig = random_rig(13, n_cables=3, rate_hz=1000)
     _, runs, settings = simulate_runs(rig, [], ["oblique_eight"], 3.0, seed=1, noise=False)
@@ -248,7 +247,6 @@ def test_measured_data_identify_the_nominal_model(tmp_path):
 def test_four_cables_balance_platform_and_winches():
     """Four cables: the tensions the generator reports hold the platform's equation, and
     each winch's equation holds with winch accelerations recomputed from the platform."""
-    from . import simulate_runs
 
     rig = random_rig(12, n_cables=4, rate_hz=500)
     _, runs, settings = simulate_runs(rig, [], ["oblique_circle"], 3.0, seed=2, noise=False)
@@ -278,7 +276,6 @@ TORQUE_EFFECTS = ["stribeck_friction", "asymmetric_viscous_friction", "winch_par
 def test_torque_effect_has_its_stated_size(name):
     """The nominal regression's residual is exactly the effect's term, on the named
     winches only, and reaches the stated magnitude."""
-    from . import simulate_runs
 
     rig = random_rig(20, n_cables=3, rate_hz=250)
     effect = draw_effect(name, rig, np.random.default_rng(3), channels=[1] if name ==
@@ -330,7 +327,6 @@ def test_torque_effect_has_its_stated_size(name):
 
 
 def test_actuator_lag_delays_the_applied_torque():
-    from . import simulate_runs
 
     rig = random_rig(21, n_cables=4, rate_hz=500)
     lag = Effect("actuator_lag", (2,), {"time_constant_s": [0, 0, 0.008, 0]})
@@ -350,7 +346,6 @@ def test_the_applied_torque_is_the_exact_lag_of_the_held_command(kind):
     """Over each sample the command is held; the first sub-step applies the mean of the
     exact first-order response over that sub-step (not its end value, which leads the
     lag by half a sub-step: a 3 ms lag acting as 2.5 ms at 1 ms sub-steps)."""
-    from . import simulate_axes_runs, simulate_runs
 
     rng = np.random.default_rng()
     lag_s = float(rng.uniform(0.003, 0.012))
@@ -378,7 +373,6 @@ def test_the_applied_torque_is_the_exact_lag_of_the_held_command(kind):
 
 
 def test_geometric_effects_show_in_the_lengths():
-    from . import simulate_runs
 
     rig = random_rig(22, n_cables=4, rate_hz=250)
     shift = np.zeros((4, 3))
@@ -405,7 +399,6 @@ def test_geometric_effects_show_in_the_lengths():
 
 
 def test_cable_elasticity_stretch_matches_ea():
-    from . import simulate_runs
 
     rig = random_rig(23, n_cables=3, rate_hz=250)
     effect = draw_effect("cable_elasticity", rig, np.random.default_rng(0), channels=[0, 1, 2])
@@ -471,7 +464,6 @@ def test_axes_closed_loop_at_extreme_scales(tmp_path, kw):
 def test_axes_effect_identity():
     """Closed loop with hidden effects: ``tau = I a + F_v v+ + phi + d + extra(v+)`` holds
     on the true states (implicit damping: velocities at the end of the sub-step)."""
-    from . import simulate_axes_runs
 
     rig = random_axes_rig(6, n_axes=3, rate_hz=1000)
     effects = [draw_effect(n, rig, np.random.default_rng(i), channels=[i])
@@ -502,7 +494,6 @@ def test_axes_position_dependent_load_identity(tmp_path):
     """A rotary joint's gravity ``a sin q + b cos q`` and a prismatic axis's spring
     ``a q + b``: ``tau = I a + F_v v_damp + phi + d + load(q)`` on the true states, the
     drawn sizes within their documented ranges, the joint types in rig.yaml."""
-    from . import simulate_axes_runs
 
     rig = random_axes_rig(8, n_axes=2, rate_hz=1000, joint_types=["rotary", "prismatic"])
     assert 0.2 <= rig.amplitude[0] <= 1.0 and 0.02 <= rig.amplitude[1] <= 0.1
@@ -535,7 +526,6 @@ def test_axes_sample_intervals_follow_continuous_physics(rate):
     balance ``I dv + F_v dq + int(friction) + d T = u_k T`` holds (the trapezoid puts the
     viscous force at the mean speed: no half-step shift), with the friction at ``+-F_c``
     where the axis slides one way throughout and inside it where it sticks or reverses."""
-    from . import simulate_axes_runs
 
     rig = random_axes_rig(11, n_axes=3, rate_hz=rate)
     _, runs, _ = simulate_axes_runs(rig, [], ["mixed"], 10.0, seed=2, noise=False)

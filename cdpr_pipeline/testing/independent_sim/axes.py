@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from .effects import Effect, TrueModel, lag_response, true_model
-from .writer import FORMAT, RunTruth, Truth, write_simulated
+from .writer import FORMAT, RunTruth, Truth, simulate_and_write
 
 AXES_FAMILIES = ("multisine", "moves", "mixed")
 SUB_RATE_HZ = 1000.0  # sub-steps of at most 1 ms (torque error < 0.3 % of a 4x finer step)
@@ -137,7 +137,7 @@ class AxesRigSpec:
             "controller": {"type": "pd_with_feedforward", "kp": kp.tolist(),
                            "kd": kd.tolist(), "feedforward": "nominal",
                            "rate_hz": float(self.rate_hz)},
-            "generator": "tests.independent_sim",
+            "generator": "cdpr_pipeline.testing.independent_sim",
             **({"joint_types": list(self.joint_types)} if self.joint_types else {}),
         }
 
@@ -445,21 +445,15 @@ def simulate_axes_dataset(out_dir: str | Path, rig: AxesRigSpec, effects: Any = 
         Family per run; default :func:`default_axes_families`.
     noise : bool
         False: no torque noise and no encoder quantisation.
-    write_truth : bool
-        Also write ``<out_dir>.truth.yaml`` beside the dataset.
-    overwrite : bool
-        Replace an existing non-empty ``out_dir``.
+    write_truth, overwrite : bool
+        As for :func:`~.cdpr.simulate_dataset`: the truth beside the dataset, and whether
+        an existing non-empty ``out_dir`` is replaced.
 
     Returns
     -------
     Truth
     """
-    from .cdpr import resolve_effects
-
-    families = list(families) if families is not None else default_axes_families(n_runs)
-    if len(families) != n_runs:
-        raise ValueError(f"{len(families)} families for {n_runs} runs")
-    eff = resolve_effects(rig, effects, seed)
-    columns, runs, settings = simulate_axes_runs(rig, eff, families, duration_s, seed, noise)
-    return write_simulated(out_dir, "axes", rig, eff, true_model(rig, eff), seed, columns,
-                           runs, settings, write_truth, overwrite)
+    return simulate_and_write(out_dir, "axes", rig, effects, n_runs, duration_s, seed,
+                              families, noise, write_truth, overwrite,
+                              simulate=simulate_axes_runs,
+                              default_families=default_axes_families)

@@ -1,0 +1,281 @@
+"""The base of the hidden effects: :class:`Effect`, the registry :data:`EFFECTS` that its
+subclasses fill, :func:`make_effect`, and the helpers the effect families share
+(per-winch parameters, the candidates' arrays).
+
+The effects themselves live one family per module beside this one; the package
+(:mod:`cdpr_pipeline.sim.effects`) imports them all and describes the design.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from cdpr_pipeline.sim.candidate_forms import Candidate
+from cdpr_pipeline.sim.plant import Plant
+
+#: Effect classes by vocabulary name, filled by subclass registration.
+EFFECTS: dict[str, type[Effect]] = {}
+
+
+def _cable_mask(cables: Sequence[int] | None, n: int) -> np.ndarray:
+    """Boolean (n,) mask of the 1-based ``cables`` (all when None)."""
+    mask = np.zeros(n, dtype=bool)
+    if cables is None:
+        mask[:] = True
+        return mask
+    for c in cables:
+        if not 1 <= int(c) <= n:
+            raise ValueError(f"cable {c} does not exist on a {n}-cable rig")
+        mask[int(c) - 1] = True
+    return mask
+
+
+def _signed(rng: np.random.Generator, lo: float, hi: float) -> float:
+    return float(rng.choice([-1.0, 1.0]) * rng.uniform(lo, hi))
+
+
+def per_winch(value: float | Sequence[float], cables: Sequence[int] | None, n: int,
+              fill: float = 0.0) -> np.ndarray:
+    """The (n,) values of a per-winch parameter.
+
+    Parameters
+    ----------
+    value : float or sequence of float
+        One value for every affected winch, or one per affected winch: per entry of
+        ``cables`` (in its order), or per winch when ``cables`` is None.
+    cables : sequence of int or None
+        Affected winches, 1-based; None: every winch.
+    n : int
+        Number of winches.
+    fill : float
+        Value of the winches the effect does not touch (its neutral value).
+
+    Examples
+    --------
+    >>> per_winch([0.3, 0.5], [3, 1], 3).tolist()
+    [0.5, 0.0, 0.3]
+    """
+    _cable_mask(cables, n)     # validates the cable numbers
+    idx = np.arange(n) if cables is None else np.asarray([int(c) - 1 for c in cables], int)
+    out = np.full(n, float(fill))
+    v = np.asarray(value, dtype=float)
+    if v.ndim == 0 or v.shape == (len(idx),):
+        out[idx] = v
+        return out
+    raise ValueError(f"{v.size} values for {len(idx)} winch(es) "
+                     f"({'every winch' if cables is None else f'cables {list(cables)}'})")
+
+
+def _map(value: Any, fn) -> Any:
+    """``fn`` applied to a scalar, or to each entry of a per-winch list."""
+    if value is None:
+        return None
+    if np.ndim(value) == 0:
+        return fn(float(value))
+    return [fn(float(v)) for v in value]
+
+
+def _plain(value: Any) -> Any:
+    """Arrays, tuples and numpy scalars as plain lists and numbers (YAML-able fields that
+    compare with ``==``)."""
+    if isinstance(value, np.ndarray | tuple):
+        return [_plain(v) for v in (value.tolist() if isinstance(value, np.ndarray)
+                                    else value)]
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _affected(cables: Sequence[int] | None, values: Sequence[Any],
+              plant: Plant | None) -> list[int] | None:
+    """1-based numbers of the winches a per-winch description lists (None: every winch
+    of a rig not known here)."""
+    if cables is not None:
+        return [int(c) for c in cables]
+    count = max((len(v) for v in values if v is not None and np.ndim(v) == 1), default=0)
+    if count == 0 and plant is not None:
+        count = plant.n
+    return list(range(1, count + 1)) if count else None
+
+
+def _finite(values: np.ndarray) -> list[float | None]:
+    """A list for reports, None where a value is undefined (a zero nominal parameter)."""
+    return [float(v) if np.isfinite(v) else None for v in values]
+
+
+def _relative(size: np.ndarray, nominal: np.ndarray) -> np.ndarray:
+    """``size / nominal``, NaN where the nominal value is zero or under 1 % of the size
+    (a ratio to a parameter that is about zero, say a Coulomb level another cause
+    re-identified to nothing, tells nothing)."""
+    size, nominal = np.asarray(size, float), np.asarray(nominal, float)
+    ok = np.abs(nominal) > 0.01 * np.abs(size)
+    ok &= nominal != 0
+    return np.where(ok, size / np.where(ok, nominal, 1.0), np.nan)
+
+
+
+def _described_sizes(size: Any, ratio: Any, k: int, nominal: np.ndarray | None,
+                     offset: float = 0.0) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The ``k`` per-winch sizes of an effect given absolutely (``size``) or relative to a
+    nominal parameter (``ratio = offset + size / nominal``), for its description: each
+    form as given, the other one from the ``nominal`` values of the winches described
+    (None without them); a ratio to a nominal of about zero is NaN (:func:`_relative`)."""
+    size = None if size is None else per_winch(size, None, k)
+    ratio = None if ratio is None else per_winch(ratio, None, k)
+    if nominal is not None:
+        size = (ratio - offset) * nominal if size is None else size
+        if ratio is None:
+            relative = _relative(size, nominal)
+            ratio = offset + relative if offset else relative
+    return size, ratio
+
+@dataclass
+class Effect:
+    """Base class of all hidden effects."""
+
+    name: ClassVar[str] = ""
+    in_vocabulary: ClassVar[bool] = True
+    #: the physics in one line, for reports
+    expression: ClassVar[str] = ""
+    #: ``cdpr`` effects need cables; ``axes`` ones act on any drive
+    kinds: ClassVar[frozenset[str]] = frozenset({"cdpr", "axes"})
+    #: False for effects that are fitted, never drawn at random (no ``ranges``)
+    drawable: ClassVar[bool] = True
+    ranges: ClassVar[dict[str, tuple[float, float]]] = {}
+    signed: ClassVar[frozenset[str]] = frozenset()
+    log_uniform: ClassVar[frozenset[str]] = frozenset()
+    #: absolute size parameters that replace a relative one when given, e.g.
+    #: ``{"extra_static": "static_ratio"}``: a fit finds absolute sizes per winch (a
+    #: nominal parameter may be zero), the lab draws sizes relative to the nominal ones
+    replaces: ClassVar[dict[str, str]] = {}
+    #: diagnosis also tries this effect with the winch parameters re-identified jointly
+    refit_variant: ClassVar[bool] = False
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.name:
+            if cls.name in EFFECTS:
+                raise ValueError(f"effect name {cls.name!r} registered twice")
+            EFFECTS[cls.name] = cls
+
+    def __post_init__(self) -> None:
+        defaults = {f.name: f.default for f in dataclasses.fields(self)}
+        for absolute, relative in self.replaces.items():
+            if getattr(self, absolute) is None:
+                if getattr(self, relative) is None:
+                    raise ValueError(f"{self.name}: give {relative} or {absolute}")
+            elif getattr(self, relative) == defaults[relative]:
+                setattr(self, relative, None)      # the absolute size given wins
+            elif getattr(self, relative) is not None:
+                raise ValueError(f"{self.name}: give {relative} or {absolute}, not both")
+        for f in dataclasses.fields(self):
+            setattr(self, f.name, _plain(getattr(self, f.name)))
+
+    # -- physics hooks -----------------------------------------------------------
+    def apply(self, plant: Plant) -> Plant:
+        """The plant with this effect; by default the effect adds its winch torque."""
+        return plant.replace(effects=(*plant.effects, self))
+
+    def winch_torque(self, theta: np.ndarray, omega: np.ndarray, plant: Plant) -> np.ndarray | None:
+        """Extra torque resisting the winch, (B, n), or None."""
+        return None
+
+    # -- bookkeeping -------------------------------------------------------------
+    @property
+    def label(self) -> str:
+        """What a correct diagnosis calls this effect."""
+        return self.name if self.in_vocabulary else "unnamed"
+
+    def params(self) -> dict[str, Any]:
+        out = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, np.ndarray):
+                value = value.tolist()
+            elif isinstance(value, tuple):
+                value = list(value)
+            out[f.name] = value
+        return out
+
+    def describe(self, plant: Plant | None = None) -> str:
+        """What the effect does, in a sentence; with the nominal ``plant``, sizes are also
+        put in relation to its parameters."""
+        return f"{self.name}: {self.params()}"
+
+    def derived(self, plant: Plant) -> dict[str, Any]:
+        """Per-winch sizes on the nominal ``plant`` in both forms (absolute and relative to
+        its parameters), for reports; empty for effects without such sizes."""
+        return {}
+
+    def scaled(self, s: float) -> Effect:
+        """The effect with its strength scaled by ``s`` (1: unchanged; detection studies
+        shrink drawn effects to find the smallest one detected)."""
+        raise NotImplementedError(f"{self.name} has no strength to scale")
+
+    # -- what diagnosis fits -----------------------------------------------------
+    @classmethod
+    def candidates(cls, rig: Any, scale: Any) -> list[Any]:
+        """The variants diagnosis fits (:class:`~cdpr_pipeline.sim.candidate_forms.
+        Candidate`), for a rig and the data's :class:`~cdpr_pipeline.sim.
+        candidate_forms.DataScale`; none for effects outside the vocabulary."""
+        return []
+
+    @classmethod
+    def shapes(cls, speed_rms: float) -> list[str]:
+        """Free-form expressions (:mod:`cdpr_pipeline.sim.expressions`) with this effect's
+        shape: a free-form term like one of them is this effect, so the free-form search
+        leaves such terms to its candidates (``speed_rms`` places shape parameters)."""
+        return []
+
+    @classmethod
+    def sample(cls, rng: np.random.Generator, n_cables: int, **fixed: Any) -> Effect:
+        """An instance with magnitudes drawn from ``ranges``; ``fixed`` values win (an
+        absolute size given replaces the relative one, see ``replaces``)."""
+        drawn = cls.draw(rng, n_cables)
+        for absolute, relative in cls.replaces.items():
+            if fixed.get(absolute) is not None:
+                drawn[relative] = None
+        return cls(**{**drawn, **fixed})
+
+    @classmethod
+    def draw(cls, rng: np.random.Generator, n_cables: int) -> dict[str, Any]:
+        """Random parameters: every field named in ``ranges`` uniformly (log-uniformly if
+        in ``log_uniform``, with a random sign if in ``signed``). Effects with other random
+        choices (which cable, a direction) extend this."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        out: dict[str, Any] = {}
+        for key, (lo, hi) in cls.ranges.items():
+            if key not in names:
+                continue
+            if key in cls.log_uniform:
+                value = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+            else:
+                value = float(rng.uniform(lo, hi))
+            if key in cls.signed:
+                value *= float(rng.choice([-1.0, 1.0]))
+            out[key] = value
+        return out
+
+
+def make_effect(name: str, rng: np.random.Generator, n_cables: int, **fixed: Any) -> Effect:
+    """Build effect ``name``; parameters not given (or None) are drawn from its ranges."""
+    if name not in EFFECTS:
+        raise KeyError(f"unknown effect {name!r}; known: {sorted(EFFECTS)}")
+    fixed = {k: v for k, v in fixed.items() if v is not None}
+    return EFFECTS[name].sample(rng, n_cables, **fixed)
+
+
+# ------------------------------------------------------ shared by the families' candidates
+def _candidate(*args: Any, **kwargs: Any) -> Candidate:
+    return Candidate(*args, **kwargs)
+
+
+def _arr(*x: float) -> np.ndarray:
+    return np.asarray(x, dtype=float)

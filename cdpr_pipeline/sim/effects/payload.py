@@ -1,0 +1,40 @@
+"""The platform's mass off the nominal one."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from cdpr_pipeline.sim.effects.base import (
+    Effect,
+    _arr,
+    _candidate,
+)
+
+
+@dataclass
+class PayloadMassError(Effect):
+    """The platform is heavier or lighter than stated: ``m_true = m (1 + relative)``."""
+
+    name: ClassVar[str] = "payload_mass_error"
+    expression: ClassVar[str] = "U* -= R (K^T)^+ dm (a - g)"
+    kinds: ClassVar[frozenset[str]] = frozenset({"cdpr"})
+    ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative": (0.1, 0.3)}
+    signed: ClassVar[frozenset[str]] = frozenset({"relative"})
+    refit_variant: ClassVar[bool] = True
+
+    relative: float = 0.2
+
+    def apply(self, plant):
+        return plant.replace(mass=plant.mass * (1.0 + self.relative))
+
+    def scaled(self, s):
+        return type(self)(s * self.relative)
+
+    @classmethod
+    def candidates(cls, rig, scale):
+        return [_candidate(cls.name, cls.name, lambda x: [cls(float(x[0]))],
+                           [_arr(0.0)], _arr(-0.9), _arr(5.0), _arr(0.1), names=["relative"])]
+
+    def describe(self, plant=None):
+        return f"the platform mass is {100 * self.relative:+.1f} % off the nominal mass"

@@ -1,0 +1,81 @@
+"""A winch's own parameters differ from the nominal ones (one winch re-identified)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from cdpr_pipeline.sim.candidate_forms import TORQUE
+from cdpr_pipeline.sim.effects.base import (
+    Effect,
+    _arr,
+    _cable_mask,
+    _candidate,
+    _signed,
+)
+from cdpr_pipeline.sim.plant import Plant
+
+
+@dataclass
+class WinchParameterError(Effect):
+    """One winch's true I_m, F_v, F_c or d differ from the nominal ones (wear, heat, a
+    wrong data sheet). Scales multiply the nominal value; ``offset_delta`` adds to d."""
+
+    name: ClassVar[str] = "winch_parameter_error"
+    expression: ClassVar[str] = "U* = I_m a + F_v b + F_c c + d with re-identified I_m, F_v, F_c, d"
+    ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative_error": (0.2, 0.4)}
+
+    cable: int = 1
+    inertia_scale: float = 1.0
+    viscous_scale: float = 1.0
+    coulomb_scale: float = 1.0
+    offset_delta: float = 0.0
+
+    def apply(self, plant: Plant) -> Plant:
+        i = _cable_mask([self.cable], plant.n)
+        w = plant.winch
+        return plant.replace(winch=w.replace(
+            inertia=np.where(i, w.inertia * self.inertia_scale, w.inertia),
+            viscous=np.where(i, w.viscous * self.viscous_scale, w.viscous),
+            coulomb=np.where(i, w.coulomb * self.coulomb_scale, w.coulomb),
+            offset=np.where(i, w.offset + self.offset_delta, w.offset),
+        ))
+
+    @classmethod
+    def draw(cls, rng, n_cables):
+        which = str(rng.choice(["inertia_scale", "viscous_scale", "coulomb_scale"]))
+        return {"cable": int(rng.integers(1, n_cables + 1)),
+                which: 1.0 + _signed(rng, *cls.ranges["relative_error"])}
+
+    def scaled(self, s):
+        return type(self)(self.cable, *(1 + s * (getattr(self, k) - 1) for k in
+                                        ("inertia_scale", "viscous_scale", "coulomb_scale")),
+                          s * self.offset_delta)
+
+    @classmethod
+    def candidates(cls, rig, scale):
+        """Re-identify one winch (four parameters, linear), one variant per winch.
+        Inertia, viscous and Coulomb friction stay non-negative: a negative friction
+        coefficient is another effect being imitated, not a wrong data sheet. Sparse:
+        a wrong F_c alone is one parameter against a free-form term's two."""
+        return [_candidate(
+            cls.name, f"{cls.name}[winch {cable}]",
+            lambda x, c=cable: [cls(c, float(x[0]), float(x[1]), float(x[2]), float(x[3]))],
+            [_arr(1, 1, 1, 0)], _arr(0.0, 0.0, 0.0, -np.inf),
+            _arr(np.inf, np.inf, np.inf, np.inf), _arr(0.1, 0.1, 0.1, 0.1), linear=True,
+            names=["inertia_scale", "viscous_scale", "coulomb_scale", "offset_delta"],
+            affects=TORQUE, sparse=True) for cable in range(1, scale.n + 1)]
+
+    @classmethod
+    def shapes(cls, speed_rms):
+        # viscous, Coulomb and offset terms are a winch's own parameters
+        return ["omega", "sign_(omega)", "one(omega)"]
+
+    def describe(self, plant=None) -> str:
+        parts = [f"{k.split('_')[0]} x{v:.3f}" for k, v in self.params().items()
+                 if k.endswith("_scale") and v != 1.0]
+        if self.offset_delta:
+            parts.append(f"offset {self.offset_delta:+.3f} N m")
+        return f"winch {self.cable}: " + ", ".join(parts)
