@@ -8,7 +8,6 @@ import html
 
 import numpy as np
 import pytest
-from lab_cases import draw_seed, fast_settings, lab_dataset, rng_for
 
 from cdpr_pipeline.discovery import diagnosis as diagnosis_module
 from cdpr_pipeline.discovery.diagnosis import diagnose
@@ -16,6 +15,7 @@ from cdpr_pipeline.discovery.plots import Plots
 from cdpr_pipeline.discovery.report import render
 from cdpr_pipeline.discovery.selection import Judgement, Selection
 from cdpr_pipeline.sim.effects import PayloadMassError
+from cdpr_pipeline.testing.lab_cases import draw_seed, fast_settings, lab_dataset, rng_for
 
 
 def test_the_report_renders_the_causes_and_figures_of_the_typed_diagnosis(paper_rig,
