@@ -720,9 +720,10 @@ def failed_tests(v: ResidualValidity, alpha: float) -> list[str]:
 def unexplained_residual(res: Residuals, held: list[RunSignals], nominal: Model,
                          validity: dict[str, ResidualValidity], settings: DiagnosisSettings,
                          channel: str = "torque") -> Unexplained | None:
-    """The held-out columns of ``channel`` that the nominal model gets materially wrong:
-    a validity test fails (one of the five correlation tests, or Ljung-Box whiteness at
-    ``alpha`` over the columns, Bonferroni) and the column's RMS error is at least
+    """The held-out columns of ``channel`` that the nominal model gets materially wrong,
+    where at least one of them fails a validity test (one of the five correlation tests,
+    or Ljung-Box whiteness at ``alpha`` over the columns, Bonferroni): material means
+    the column's RMS error is at least
     ``settings.unexplained_noise_ratio`` times the measurement noise its rows carry
     (:func:`~cdpr_pipeline.discovery.bands.row_noise`) and at least
     ``settings.unexplained_min_error_pct`` of its measured signal's RMS. None when no
@@ -747,13 +748,18 @@ def unexplained_residual(res: Residuals, held: list[RunSignals], nominal: Model,
     for i, name in enumerate(channel_names(channel, r.shape[1])):
         failed = failed_tests(validity[name], alpha)
         rel = 100 * float(rms[i] / max(np.sqrt(np.mean(measured[:, i] ** 2)), 1e-300))
-        if not failed or rel < threshold or noise_ratio[i] < settings.unexplained_noise_ratio:
+        if rel < threshold or noise_ratio[i] < settings.unexplained_noise_ratio:
             continue
         columns.append(UnexplainedColumn(
             name, rel, float(np.sum(r[:, i] ** 2)) / total,
             power_band_hz(np.concatenate([x[channel][:, i] for x in res.by_run]), rate),
             tuple(failed), float(noise_ratio[i])))
-    if not columns:
+    # the verdict needs a material column that fails a test; where the error sits is
+    # every material column: one whose error the prewhitening's AR noise model (fitted
+    # to a residual holding that same error) whitens still holds it (independent cable
+    # robot, seed 698269289: a 4-per-turn torque on u3 at 100x the noise passed every
+    # test on 119 rows, and the columns named held 42 % of the error)
+    if not any(c.failed_tests for c in columns):
         return None
     found = Unexplained(channel, tuple(columns), threshold, alpha,
                         settings.unexplained_noise_ratio,

@@ -13,12 +13,21 @@ the residual sits.
 from __future__ import annotations
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from cdpr_pipeline.discovery.diagnosis import summary_sentence
+from cdpr_pipeline.data.reading import resolve_settings
+from cdpr_pipeline.discovery.bands import row_noise
+from cdpr_pipeline.discovery.diagnosis import (
+    DiagnosisSettings,
+    summary_sentence,
+    unexplained_residual,
+)
+from cdpr_pipeline.discovery.residuals import Residuals, nominal_model
 from cdpr_pipeline.discovery.results import HeldoutGain
+from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.testing.foreign_cases import FAST, foreign_case, foreign_settings
 
 ADEQUATE = "explains the measurements as well as anything tried"
@@ -66,6 +75,41 @@ def test_what_nothing_tried_explains_is_unexplained_and_located(tmp_path, seed):
     summary = record["summary"]
     assert "unexplained" in summary and ADEQUATE not in summary
     assert all(c in summary for c in u["channels"])
+
+
+def _validity(fails: bool) -> SimpleNamespace:
+    """What :func:`~cdpr_pipeline.discovery.diagnosis.failed_tests` reads of a column's
+    validity: every correlation test passed, Ljung-Box failed or not."""
+    return SimpleNamespace(tests=SimpleNamespace(tests={}),
+                           ljung_box_pvalue=0.0 if fails else 0.5)
+
+
+def test_where_it_sits_is_every_material_column(quiet_lab, seed):
+    """Held-out torque errors of 30-300 times the noise on two winches (drawn), the
+    third at the noise: one failing a validity test makes the verdict; both are where
+    the error sits, also the one whose test the prewhitening passed (independent seed
+    698269289: such a column was left out and the columns named held 42 % of it)."""
+    rng = np.random.default_rng(seed)
+    settings = DiagnosisSettings(closed_loop=False)
+    rig = quiet_lab.rig
+    regression = resolve_settings(settings.regression, quiet_lab.trajectories, rig)
+    settings = dataclasses.replace(settings, regression=regression)
+    held = dataset_signals(quiet_lab.trajectories[-1:], rig, regression)
+    noise = row_noise(held)
+    size = noise * np.array([rng.uniform(30, 300), 1.0, rng.uniform(30, 300)])
+    t = held[0].row_times()
+    rows = size * np.sin(2 * np.pi * rng.uniform(0.3, 2.0, 3) * t[:, None])
+    res = Residuals([held[0].name], [{"torque": rows}])
+    validity = {"u1": _validity(True), "u2": _validity(False), "u3": _validity(False)}
+    found = unexplained_residual(res, held, nominal_model(rig, regression.sign_sharpness),
+                                 validity, settings)
+    assert [c.channel for c in found.columns] == ["u1", "u3"], seed
+    assert found.share_of_error > 0.99, seed
+    assert found.columns[0].failed_tests == ("ljung_box",)
+    assert found.columns[1].failed_tests == ()
+    # no material column fails a test: not unexplained
+    assert unexplained_residual(res, held, None, {c: _validity(False) for c in validity},
+                                settings) is None
 
 
 def test_none_never_claims_adequacy_when_tests_failed():
