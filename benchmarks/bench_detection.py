@@ -125,10 +125,9 @@ def _special_grade(case: dict, expect: str) -> dict:
 
 def lab_special(args, settings, record) -> None:
     """The lab's issue-21 cases: ``unexplained`` and ``periodic_above_band`` (cogging)."""
-    from lab_cases import lab_dataset
-
     from cdpr_pipeline.data.reading import motion_bandwidth_hz
     from cdpr_pipeline.sim.effects import CoggingTorque
+    from tests.discovery.lab_cases import lab_dataset
 
     cfg = compose_config("simulate", ["trajectory=diagnosis"])
     rig = rig_from_config(cfg.rig)
@@ -179,9 +178,8 @@ def independent_cases(args, settings, record, tmp: Path) -> None:
 
 def independent_special(args, settings, record, tmp: Path) -> None:
     """The independent simulator's issue-21 cases (see the module docstring)."""
-    from foreign_cases import rng_for
-
     from cdpr_pipeline.data.reading import motion_bandwidth_hz
+    from tests.discovery.foreign_cases import rng_for
     from tests.independent_sim import draw_effect
 
     def upper_half(eff, rig, rng):
