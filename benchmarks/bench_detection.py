@@ -157,8 +157,8 @@ def independent_cases(args, settings, record, tmp: Path) -> None:
     per seed, full magnitude."""
     for kind in args.kinds:
         names = ["none", *VOCABULARY[kind], *OUTSIDE[kind]]
-        if args.effects:
-            names = [n for n in names if n in args.effects or n == "none"]
+        if args.effects:        # "none" among them for the effect-free datasets
+            names = [n for n in names if n in args.effects]
         for name in names:
             for k in range(args.seeds):
                 seed = args.first_seed + k
