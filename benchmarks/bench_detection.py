@@ -41,8 +41,9 @@ The cases issue 21 added (``--special``, on by default), per seed:
 Prints a table (detection per effect per simulator, false alarms per simulator), writes
 JSON, and writes the tables into its section of docs/measurements.md (``detection``, or
 ``detection-lab`` / ``detection-independent`` for one simulator alone). Parts run in
-parallel (``--kinds``, ``--effects``, ``--only-special``/``--no-special``, each with its
-own ``--out``) are summarised together with ``--merge part1.json part2.json ...``.
+parallel (``--kinds``, ``--effects``, ``--only-special``/``--no-special``,
+``--first-seed``/``--seeds``, each with its own ``--out``) are summarised together
+with ``--merge part1.json part2.json ...``.
 """
 
 from __future__ import annotations
@@ -285,7 +286,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results/detection.json"))
     parser.add_argument("--merge", type=Path, nargs="+", default=None,
                         help="summarise the cases of these earlier outputs (parts run in "
-                             "parallel, same seeds and settings) instead of running")
+                             "parallel, same settings, seeds together contiguous) instead "
+                             "of running")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     if args.merge:
@@ -332,19 +334,24 @@ def main() -> None:
 
 def merge(args: argparse.Namespace) -> None:
     """Summarise the cases of earlier outputs (``--merge``): parts of one benchmark run
-    in parallel, with the same seeds and settings."""
+    in parallel, with the same settings and together one contiguous range of seeds."""
     parts = [json.loads(p.read_text()) for p in args.merge]
-    for key in ("seeds", "settings", "simulator"):
+    for key in ("settings", "simulator"):
         if len({json.dumps(p.get(key)) for p in parts}) > 1:
             raise ValueError(f"--merge: the parts differ in {key} "
                              f"({[p.get(key) for p in parts]})")
-    seeds = parts[0]["seeds"]
+    # parts may split the seeds of an effect (--first-seed, --seeds): they must make
+    # one contiguous range
+    seeds = sorted({s for p in parts for s in p["seeds"]})
+    if seeds != list(range(seeds[0], seeds[0] + len(seeds))):
+        raise ValueError(f"--merge: the parts' seeds {seeds} are not one contiguous range")
     args.first_seed, args.seeds = seeds[0], len(seeds)
     args.settings, args.simulator = parts[0]["settings"], parts[0]["simulator"]
     # a case run by two parts (each part of --effects runs the effect-free seeds) once
     unique: dict = {}
     for c in (c for p in parts for c in p["cases"]):
-        unique.setdefault((c["simulator"], c["kind"], c["effect"], c["scale"], c["seed"]), c)
+        unique.setdefault((c["simulator"], c["kind"], c["effect"], c["scale"],
+                           c.get("seed")), c)
     cases = list(unique.values())
     summary = summarise(cases)
     args.out.parent.mkdir(parents=True, exist_ok=True)
