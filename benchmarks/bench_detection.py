@@ -40,7 +40,11 @@ The cases issue 21 added (``--special``, on by default), per seed:
         [--settings cli|fast] [--out results/detection.json]
 
 Prints a table (detection per effect per simulator, false alarms per simulator), writes
-JSON, and writes the tables into its section of docs/measurements.md.
+JSON, and writes the tables into its section of docs/measurements.md (``detection``, or
+``detection-lab`` / ``detection-independent`` for one simulator alone). Parts run in
+parallel (``--kinds``, ``--effects``, ``--only-special``/``--no-special``,
+``--first-seed``/``--seeds``, each with its own ``--out``) are summarised together
+with ``--merge part1.json part2.json ...``.
 """
 
 from __future__ import annotations
@@ -154,8 +158,8 @@ def independent_cases(args, settings, record, tmp: Path) -> None:
     per seed, full magnitude."""
     for kind in args.kinds:
         names = ["none", *VOCABULARY[kind], *OUTSIDE[kind]]
-        if args.effects:
-            names = [n for n in names if n in args.effects or n == "none"]
+        if args.effects:        # "none" among them for the effect-free datasets
+            names = [n for n in names if n in args.effects]
         for name in names:
             for k in range(args.seeds):
                 seed = args.first_seed + k
@@ -276,8 +280,15 @@ def main() -> None:
                         help="run the issue-21 cases alone")
     add_settings_option(parser)
     parser.add_argument("--out", type=Path, default=Path("results/detection.json"))
+    parser.add_argument("--merge", type=Path, nargs="+", default=None,
+                        help="summarise the cases of these earlier outputs (parts run in "
+                             "parallel, same settings, seeds together contiguous) instead "
+                             "of running")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
+    if args.merge:
+        merge(args)
+        return
     settings = named_settings(args.settings)
 
     cases: list[dict] = []
@@ -307,12 +318,51 @@ def main() -> None:
     summary = summarise(cases)
     results = {"benchmark": "detection rates of cdpr diagnose", "settings": args.settings,
                "seeds": list(range(args.first_seed, args.first_seed + args.seeds)),
+               "simulator": args.simulator, "command": measurements.invoked_as(),
                "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
                            "load_avg_at_end": os.getloadavg(),
                            "wall_s": time.perf_counter() - start},
                "cases": cases, "summary": summary}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=1, default=str))
+    report(summary, args, measurements.invoked_as())
+
+
+def merge(args: argparse.Namespace) -> None:
+    """Summarise the cases of earlier outputs (``--merge``): parts of one benchmark run
+    in parallel, with the same settings and together one contiguous range of seeds."""
+    parts = [json.loads(p.read_text()) for p in args.merge]
+    for key in ("settings", "simulator"):
+        if len({json.dumps(p.get(key)) for p in parts}) > 1:
+            raise ValueError(f"--merge: the parts differ in {key} "
+                             f"({[p.get(key) for p in parts]})")
+    # parts may split the seeds of an effect (--first-seed, --seeds): they must make
+    # one contiguous range
+    seeds = sorted({s for p in parts for s in p["seeds"]})
+    if seeds != list(range(seeds[0], seeds[0] + len(seeds))):
+        raise ValueError(f"--merge: the parts' seeds {seeds} are not one contiguous range")
+    args.first_seed, args.seeds = seeds[0], len(seeds)
+    args.settings, args.simulator = parts[0]["settings"], parts[0]["simulator"]
+    # a case run by two parts (each part of --effects runs the effect-free seeds) once
+    unique: dict = {}
+    for c in (c for p in parts for c in p["cases"]):
+        unique.setdefault((c["simulator"], c["kind"], c["effect"], c["scale"],
+                           c.get("seed")), c)
+    cases = list(unique.values())
+    summary = summarise(cases)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(
+        {"benchmark": "detection rates of cdpr diagnose", "settings": args.settings,
+         "seeds": seeds, "simulator": args.simulator, "merged": [str(p) for p in args.merge],
+         "parts": [{k: p.get(k) for k in ("command", "machine")} for p in parts],
+         "cases": cases, "summary": summary}, indent=1, default=str))
+    report(summary, args, "; ".join(p["command"] for p in parts)
+           + f" (in parallel), then {measurements.invoked_as()}")
+
+
+def report(summary: dict, args: argparse.Namespace, command: str) -> None:
+    """Print the tables and write them into the benchmark's section of
+    docs/measurements.md."""
     for sim, s in summary.items():
         print(f"\n{sim} simulator: detection rate per effect (scale 1 unless stated)")
         print(f"  {'effect':38s} {'detected':>10s} {'misnamed':>9s} {'params ok':>9s} "
@@ -330,8 +380,12 @@ def main() -> None:
               f"{'n/a' if fa is None else f'{100 * fa:.0f} %'} of {s['null_datasets']} "
               "effect-free datasets")
     print(f"\nwritten {args.out}")
-    measurements.record("detection", "Detection and false alarms of cdpr diagnose",
-                        summary_markdown(summary, args), command=measurements.invoked_as())
+    # one section per simulator run alone, so that the lab's and the independent
+    # simulator's figures can be measured apart without overwriting each other
+    name = "detection" if args.simulator == "both" else f"detection-{args.simulator}"
+    title = "Detection and false alarms of cdpr diagnose" + (
+        "" if args.simulator == "both" else f" ({args.simulator} simulator)")
+    measurements.record(name, title, summary_markdown(summary, args), command=command)
 
 
 def summary_markdown(summary: dict, args: argparse.Namespace) -> str:

@@ -381,6 +381,15 @@ class _Search:
                 ff = _judge_freeform(self.freeform, f_ctx, f_judge, self.scale, self.kind,
                                      n_tests, shapes=self.shapes)
                 step.append(ff)
+            # a sparse candidate (a winch re-identification) ranks by the parameters the
+            # data need, as in the comparison with free-form terms: a wrong offset alone
+            # is one parameter, not four (counted as four, a prismatic load's a q + b
+            # took an offset error's place with an insignificant slope)
+            current = fixed + _build(parts)
+            if any(self.sparse(j) for j in step):
+                base_bic = self.bic(current, 0)
+                step = [self.lean(j, current, base_bic) if self.sparse(j) else j
+                        for j in step]
             self.steps.append(step)
             self._log(step)
             passed = sorted((j for j in step if j.passed), key=lambda j: -j.bic_drop)
@@ -454,6 +463,21 @@ class _Search:
                   for size, (_, x) in sorted(best.items())]
         _, size, x = min(scored, key=lambda t: t[:2])
         return list(cand.build(x)), size
+
+    @staticmethod
+    def sparse(j: Judgement) -> bool:
+        """Whether ``j`` passed and is a sparse candidate :meth:`parsimonious` thins."""
+        cand = j.candidate
+        return j.passed and cand is not None and cand.sparse and cand.linear \
+            and not cand.refit_winches
+
+    def lean(self, j: Judgement, current: list[Effect], base_bic: float) -> Judgement:
+        """``j`` (:meth:`sparse`) with the BIC drop of its leanest form
+        (:meth:`parsimonious`) on top of ``current`` (whose :meth:`bic` is ``base_bic``)
+        when that is higher: it counts the parameters the data need."""
+        own, size = self.parsimonious(j, current)
+        drop = base_bic - self.bic(current + own, size)
+        return replace(j, bic_drop=float(drop)) if drop > j.bic_drop else j
 
     def log_n(self) -> float:
         """log of the number of training residual values (rows x columns x channels)."""

@@ -73,7 +73,11 @@ def test_one_long_run_without_effect_gives_none(tmp_path, seed, kind):
 #: held-out interval reaches zero; per-winch sizes 30-120 % off on some winch of 4-cable
 #: and sub-150 Hz rigs), a quadratic drag on a 4-cable robot with an extra
 #: winch_parameter_error or Stribeck name, a winch parameter error on some of several
-#: axes found as an unnamed term, an axis lag with an extra winch_parameter_error. A miss
+#: axes found as an unnamed term, an axis lag with an extra winch_parameter_error (errors
+#: in the variables: the lag's column is the time derivative of the torque the measured
+#: motion implies, whose acceleration noise differentiated once more dominates on a
+#: light axis at a low rate, so the lag comes out short and a winch re-fit takes the
+#: rest; seed 4, 249 Hz: 9.0 ms found 1.0 ms, and 1.8 ms even fitted alone). A miss
 #: of one of these is reported as XFAIL with the case printed; every other miss of the
 #: two tests below fails, as do the null tests and the dedicated tests (drum radius,
 #: elasticity, drag, position-periodic force, light axis, internal force).
@@ -283,17 +287,19 @@ def test_cable_elasticity_is_named_with_each_cables_stiffness(tmp_path, seed):
     assert ok, f"{why}: {case.describe()}"
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "known limit: a prismatic load's constant c is collinear with the axis offset d, and "
-    "in about 1 draw in 5 (CDPR_TEST_SEED=10, 1881452263) a winch_parameter_error that "
-    "re-fits the offset is named beside the load, or ranked first; see docs/method.md"))
 def test_a_position_dependent_load_is_named_with_its_size(tmp_path, seed):
     """An unbalanced rotary load's gravity ``a sin q + b cos q`` or a prismatic axis's
     spring ``k (q - q0)`` (joint types drawn per axis and stated in rig.yaml's
     ``joint_types``), drawn by the independent generator on one, some or all axes:
     named ``position_dependent_load`` with the load within 15 % of its size over each
     affected axis's stroke (``foreign_cases.TOLERANCE``), and never taken for a wrong
-    offset (``winch_parameter_error``) or a friction law."""
+    offset (``winch_parameter_error``) or a friction law.
+
+    An extra ``winch_parameter_error`` came in about 1 draw in 5 (seeds 10, 1881452263):
+    not the constant's collinearity with the offset, but the generator taking the load
+    at each sub-step's start, half a step behind the position, a damping ``-k h / 2``
+    (0.5-0.8 % of the axis's F_v) the diagnosis rightly found; the generator now takes
+    it at the mid position (0 of 12 draws, seeds 1-11 and 1881452263)."""
     rng = rng_for(seed)
     n = int(rng.integers(1, 5))
     types = [["prismatic", "rotary"][int(k)] for k in rng.integers(0, 2, n)]
@@ -306,3 +312,32 @@ def test_a_position_dependent_load_is_named_with_its_size(tmp_path, seed):
     ok, why = parameters_ok(case, record["causes"][0])
     assert ok, f"{why}: {case.describe()}"
     assert record["gain"]["ci95"][0] > 0, case.describe()
+
+
+def test_a_wrong_offset_is_not_taken_for_a_load(tmp_path, seed):
+    """A wrong offset ``d`` on one axis (the generator's documented size, 0.3-0.6 of the
+    axis's F_c, either sign) is a constant that a prismatic load ``a q + b`` also
+    expresses, with a slope the data do not need. Ranked by BIC with all four of a
+    winch re-identification's parameters against the load's two, the load was named
+    in its place (benchmark seed 1002); a re-identification now counts the parameters
+    the data need (``_Search.lean``): named ``winch_parameter_error`` on that axis with
+    the offset's size, and no load."""
+    from tests.independent_sim import Effect
+
+    rng = rng_for(seed)
+    n = int(rng.integers(1, 5))
+    axis = int(rng.integers(n))
+
+    def draw(rig, rng):
+        params = {k: np.zeros(rig.n) for k in ("inertia", "viscous", "coulomb", "offset")}
+        params["offset"][axis] = rng.choice([-1.0, 1.0]) * rng.uniform(0.3, 0.6) \
+            * rig.coulomb[axis]
+        return Effect("winch_parameter_error", (axis,), params)
+
+    case = foreign_case(tmp_path, "axes", [draw], seed, n_runs=3, duration_s=10.0, n=n)
+    record = case.diagnose()
+    assert record["verdict"] == "winch_parameter_error", case.describe()
+    assert {c["effect"] for c in record["causes"]} == {"winch_parameter_error"}, \
+        case.describe()
+    ok, why = parameters_ok(case, record["causes"][0])
+    assert ok, f"{why}: {case.describe()}"
