@@ -17,8 +17,6 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-import pytest
-
 import cdpr_pipeline
 from cdpr_pipeline.data.rig import AxesRig, CdprRig
 from cdpr_pipeline.sim.plant import Drives, Plant
