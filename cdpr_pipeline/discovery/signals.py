@@ -36,20 +36,6 @@ reach of the derivative filter (the half-width holding 95 % of its impulse respo
 about one cut-off period: :func:`~cdpr_pipeline.data.reading.filter_reach`)
 of a sample whose friction is unknown. The identification's regression of a cable robot
 does the same, for the same reason (its tensions come from the filtered motion).
-
-A smooth law ``tanh(k w)`` (the virtual lab's, ``k = 20 s/rad``) is no exception. The
-friction acts at the *true* speed, whose reversal is a kink (the friction turns and the
-acceleration jumps with it); the zero-phase filter rounds the kink, so near the zero
-crossing the filtered speed is off by a little, and the law's slope there (``k F_s``)
-makes that a torque pulse at every reversal, signed like the crossing, growing with the
-square of the friction. That is the shape of ``tau du/dt``: with a Stribeck friction
-(``F_s`` up to 2.5 ``F_c``) an ``actuator_lag`` of 0.5-1 ms was named beside it on 6 of 6
-lab seeds. Samples whose filtered speed lies in the law's transition are therefore left
-out like a hard sign's reversals (with two samples on either side, as the hard sign's
-rule has them), but not their neighbours within the filter's reach:
-there is no stick, and outside its transition the law is flat, so the speed's small
-error there costs nothing (with the reach, a quarter of a second around each reversal,
-a Stribeck bump of 0.5 rad/s went unseen: lab seed 1003, verdict none).
 """
 
 from __future__ import annotations
@@ -60,7 +46,6 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 from scipy.fft import next_fast_len
-from scipy.ndimage import minimum_filter1d
 from scipy.signal import butter, cheby1, sosfilt, sosfilt_zi, sosfreqz
 
 try:  # the compiled kernel of scipy.signal.sosfilt
@@ -88,10 +73,6 @@ from cdpr_pipeline.sim.plant import (
 #: statistics rows per cut-off period: rows are thinned to ``2 * cutoff_hz`` (the
 #: low-pass band sampled at its Nyquist rate: band-limited white noise stays white)
 ROWS_PER_CUTOFF = 2.0
-#: ``k |w|`` below which a smooth Coulomb law ``tanh(k w)`` is in its transition
-#: (``tanh`` under 0.99 of its limit): a reversal, whose friction the filtered speed
-#: does not give (:func:`friction_known`)
-SMOOTH_LAW_TRANSITION = float(np.arctanh(0.99))
 #: low-pass of the platform acceleration behind the *static* cable-stretch model. The
 #: length residual carries the motion-capture noise of the position; an acceleration
 #: differentiated from the same noisy position within the same band would correlate
@@ -300,10 +281,7 @@ def friction_known(position: np.ndarray, speed: np.ndarray, settings: Regression
     """(N, n) weights, 1 where a hard-sign Coulomb law gives the friction (the winch or
     axis slides one way through the sample's triangle, as the recorded ``position``
     shows) and the filtered derivatives are not spread from a sample where it does not,
-    0 elsewhere; None when nothing is dropped. Under a smooth law ``tanh(k w)`` the
-    samples dropped are those whose filtered speed lies in the law's transition
-    (:data:`SMOOTH_LAW_TRANSITION`: a reversal) and the two on either side, without
-    the reach.
+    0 elsewhere; None for a smooth law or when nothing is dropped.
 
     The rule is the identification's
     (:func:`~cdpr_pipeline.data.reading.sliding`), applied only to
@@ -314,26 +292,12 @@ def friction_known(position: np.ndarray, speed: np.ndarray, settings: Regression
     within the derivative filter's reach
     (:func:`~cdpr_pipeline.data.reading.clear_of_reach`; module docstring)."""
     if settings.sign_sharpness is not None:
-        # a smooth law tanh(k w) gives the friction of the *true* speed, which near a
-        # reversal the filtered speed misses: the law's steep transition there turns
-        # the filter's error into a torque pulse at every reversal (module docstring)
-        outside = np.abs(np.asarray(speed, float)) * float(settings.sign_sharpness) \
-            >= SMOOTH_LAW_TRANSITION
-        # as :func:`sliding` asks of a hard sign: the two samples on either side too (a
-        # sample's reading spans its triangle and the hold, the transition a few
-        # samples at a fast reversal, whose torque pulse must not be cut in half)
-        keep = minimum_filter1d(outside.astype(np.uint8), size=5, axis=0,
-                                mode="nearest").astype(bool)
-    else:
-        position = np.asarray(position, float)
-        keep = sliding(position, speed)
-        keep[:, ~settings.rest_channels(position)] = True
+        return None
+    position = np.asarray(position, float)
+    keep = sliding(position, speed)
+    keep[:, ~settings.rest_channels(position)] = True
     if keep.all():
         return None
-    if settings.sign_sharpness is not None:
-        # no stick, so nothing for the filter to spread: outside the transition the
-        # law is flat and a first-order error of the filtered speed costs nothing
-        return keep.astype(float)
     return clear_of_reach(keep, settings.filter, fs).astype(float)
 
 

@@ -27,6 +27,7 @@ from cdpr_pipeline.testing.foreign_cases import (
     parameters_ok,
     rng_for,
 )
+from cdpr_pipeline.testing.independent_sim import Effect
 
 
 def _diagnosed(tmp_path, kind: str, effects: list[str], seed: int):
@@ -245,7 +246,6 @@ def test_an_effect_on_a_light_axis_beside_heavy_ones_is_named(tmp_path, seed):
     speed (a bump 0.3 of it wide is largely a higher F_c and a lower F_v: seed 309 was
     named ``winch_parameter_error`` first and Stribeck second), asymmetric viscous
     friction 0.55-0.8 F_v."""
-    from cdpr_pipeline.testing.independent_sim import Effect
 
     rng = rng_for(seed)
     n = int(rng.integers(2, 5))
@@ -322,7 +322,6 @@ def test_a_wrong_offset_is_not_taken_for_a_load(tmp_path, seed):
     in its place (benchmark seed 1002); a re-identification now counts the parameters
     the data need (``_Search.lean``): named ``winch_parameter_error`` on that axis with
     the offset's size, and no load."""
-    from tests.independent_sim import Effect
 
     rng = rng_for(seed)
     n = int(rng.integers(1, 5))
