@@ -37,6 +37,11 @@ CUTOFF_PER_BANDWIDTH = 25.0
 BANDWIDTH_POWER_SHARE = 0.99
 #: highest cut-off as a fraction of the sample rate (0.4 fs: 80 % of Nyquist)
 MAX_CUTOFF_FRACTION = 0.4
+#: the speed's cut-off per derivative cut-off under a smooth Coulomb law
+#: (:attr:`DerivativeFilter.speed_cutoff_hz`): on the lab rig (300 Hz, 8.3 Hz cut-off,
+#: tanh(20 w)) a Stribeck friction then gets no spurious lag, while 3-10 ms lags keep
+#: their size; at 7x and more the speed's noise through the law costs lags their evidence
+SMOOTH_LAW_SPEED_FACTOR = 4.0
 #: edge trim in periods of the cut-off: a zero-phase Butterworth's edge transient has
 #: decayed after a few periods of its cut-off
 TRIM_PERIODS = 5.0
@@ -59,11 +64,23 @@ class DerivativeFilter:
         Filter order (applied forwards and backwards: zero phase, double order).
     trim_s : float
         Seconds dropped at both ends, where filtering edge effects live.
+    speed_cutoff_hz : float, None or "auto"
+        Cut-off of the speed alone (the first derivative), when it must be wider than
+        ``cutoff_hz``; None: ``cutoff_hz``; never below it. ``"auto"``
+        (:func:`resolve_settings`): :data:`SMOOTH_LAW_SPEED_FACTOR` times the cut-off
+        under a smooth Coulomb law ``tanh(k w)``, None under a hard sign. A smooth law
+        reads the speed through its steep transition at every reversal, where the
+        friction's jump puts a kink in the speed; a filter at the motion's cut-off rounds
+        that kink, the filtered speed crosses zero late, and the law turns the delay into
+        a torque pulse shaped like ``tau u'`` (a spurious sub-millisecond
+        ``actuator_lag`` beside a Stribeck friction). The acceleration keeps ``cutoff_hz``:
+        the speed's wider band adds noise only where the law saturates it.
     """
 
     cutoff_hz: float | str = 15.0
     order: int = 4
     trim_s: float | str = 0.3
+    speed_cutoff_hz: float | str | None = None
 
     def smooth(self, x: np.ndarray, fs: float) -> np.ndarray:
         if isinstance(self.cutoff_hz, str):
@@ -71,14 +88,26 @@ class DerivativeFilter:
                              "data first (resolve_settings)")
         return sosfiltfilt(_butter_sos(self.order, self.cutoff_hz, fs), x, axis=0)
 
+    def speed(self, x: np.ndarray, xf: np.ndarray, t: np.ndarray, fs: float) -> np.ndarray:
+        """The first derivative (central differences) of ``x``, whose filtered version at
+        ``cutoff_hz`` is ``xf``: through :attr:`speed_cutoff_hz` where that is wider."""
+        wide = self.speed_cutoff_hz
+        if isinstance(wide, str):
+            raise ValueError("the derivative filter's speed cut-off is 'auto': choose it "
+                             "from the data first (resolve_settings)")
+        if wide is None or not float(wide) > float(self.cutoff_hz):
+            return np.gradient(xf, t, axis=0)
+        smooth = sosfiltfilt(_butter_sos(self.order, float(wide), fs), x, axis=0)
+        return np.gradient(smooth, t, axis=0)
+
     def derivatives(self, x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                                                                   np.ndarray]:
-        """Filtered signal, first and second time derivative (central differences)."""
+        """Filtered signal, first and second time derivative (central differences; the
+        second of the signal filtered at ``cutoff_hz``)."""
         fs = 1.0 / float(np.median(np.diff(t)))
         xf = self.smooth(x, fs)
-        v = np.gradient(xf, t, axis=0)
-        a = np.gradient(v, t, axis=0)
-        return xf, v, a
+        a = np.gradient(np.gradient(xf, t, axis=0), t, axis=0)
+        return xf, self.speed(x, xf, t, fs), a
 
     def compact_derivatives(self, x: np.ndarray, t: np.ndarray
                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -89,7 +118,7 @@ class DerivativeFilter:
         average over twice that window."""
         step = float(np.median(np.diff(t)))
         xf = self.smooth(x, 1.0 / step)
-        return xf, np.gradient(xf, t, axis=0), second_difference(xf, step)
+        return xf, self.speed(x, xf, t, 1.0 / step), second_difference(xf, step)
 
 
 @dataclass(frozen=True)
@@ -148,8 +177,9 @@ class RegressionSettings:
     def resolved(self) -> bool:
         """Whether nothing is left to choose from the data."""
         return not any(isinstance(v, str) for v in (
-            self.filter.cutoff_hz, self.filter.trim_s, self.decimate, self.sign_sharpness,
-            self.zero_order_hold, self.encoder_rest, self.hold_fraction))
+            self.filter.cutoff_hz, self.filter.trim_s, self.filter.speed_cutoff_hz,
+            self.decimate, self.sign_sharpness, self.zero_order_hold, self.encoder_rest,
+            self.hold_fraction))
 
     @property
     def hold(self) -> float:
@@ -214,7 +244,9 @@ class ResolvedReading(RegressionSettings):
     def __post_init__(self) -> None:
         super().__post_init__()
         for name, value in (("filter.cutoff_hz", self.filter.cutoff_hz),
-                            ("filter.trim_s", self.filter.trim_s), ("decimate", self.decimate),
+                            ("filter.trim_s", self.filter.trim_s),
+                            ("filter.speed_cutoff_hz", self.filter.speed_cutoff_hz),
+                            ("decimate", self.decimate),
                             ("sign_sharpness", self.sign_sharpness),
                             ("zero_order_hold", self.zero_order_hold),
                             ("encoder_rest", self.encoder_rest),
@@ -266,6 +298,8 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
       ``0.8 fs / (2 q)``, stays at ``0.4 x`` the cut-off (10x the motion bandwidth) and the
       rows left are about as many as the filtered signal carries information;
     - edge trim: :data:`TRIM_PERIODS` periods of the cut-off;
+    - speed cut-off: :data:`SMOOTH_LAW_SPEED_FACTOR` times the cut-off under a smooth
+      Coulomb law (:attr:`DerivativeFilter.speed_cutoff_hz`), the cut-off under a hard sign;
     - Coulomb law: rig.yaml's ``coulomb_law`` (hard ``sign`` when absent, the spec);
     - zero-order hold of the recorded torques when rig.yaml states a digital controller
       rate (the command is held over a control period), and always for a cable robot,
@@ -323,6 +357,15 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
                      500 * fraction / fs)
     if not isinstance(fraction, str) and not 0.0 < float(fraction) <= 1.0:
         raise ValueError(f"regression.hold_fraction: {fraction!r} is not in (0, 1]")
+    speed = filt.speed_cutoff_hz
+    if speed == AUTO:
+        speed = (None if law is None else
+                 min(SMOOTH_LAW_SPEED_FACTOR * float(cutoff), MAX_CUTOFF_FRACTION * fs))
+        if speed is not None:
+            log.info("speed cut-off: %.3g Hz (%g x the cut-off, at most %g x the sample rate): "
+                     "the smooth Coulomb law reads the speed through its steep transition "
+                     "at reversals, which the motion's cut-off would round", speed,
+                     SMOOTH_LAW_SPEED_FACTOR, MAX_CUTOFF_FRACTION)
     rest = settings.encoder_rest
     if rest == AUTO:
         seen = [shows_standstill(np.asarray(recorded_position(tr), float))
@@ -331,13 +374,15 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
         log.info("position sensors resolving standstill (encoders): %s", ", ".join(
             f"{i + 1}: {'yes' if r else 'no'}" for i, r in enumerate(np.atleast_1d(rest))))
     for name, value in (("filter.cutoff_hz", cutoff), ("filter.trim_s", trim),
+                        ("filter.speed_cutoff_hz", speed),
                         ("decimate", q), ("sign_sharpness", law),
                         ("zero_order_hold", hold), ("encoder_rest", rest),
                         ("hold_fraction", fraction)):
         if isinstance(value, str):
             raise ValueError(f"regression.{name}: unknown setting {value!r} "
                              f"(a value, or {AUTO!r}/{RIG!r} where documented)")
-    return ResolvedReading(replace(filt, cutoff_hz=float(cutoff), trim_s=float(trim)),
+    return ResolvedReading(replace(filt, cutoff_hz=float(cutoff), trim_s=float(trim),
+                                   speed_cutoff_hz=None if speed is None else float(speed)),
                            int(q), None if law is None else float(law), bool(hold), rest,
                            float(fraction))
 

@@ -61,7 +61,10 @@ from cdpr_pipeline.discovery.residuals import (
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.discovery.validity import block_bootstrap, split_blocks
 from cdpr_pipeline.sim.candidate_forms import SLOW_SHARE, Candidate, DataScale
-from cdpr_pipeline.sim.effects import Effect
+from cdpr_pipeline.sim.effects import Effect, WinchParameterError
+
+#: the vocabulary name of a winch re-identification
+WINCH_PARAMETER_ERROR = WinchParameterError.name
 
 
 @dataclass
@@ -390,6 +393,16 @@ class _Search:
                 base_bic = self.bic(current, 0)
                 step = [self.lean(j, current, base_bic) if self.sparse(j) else j
                         for j in step]
+            # the winch re-identifications that pass on their own, also as one cause: a
+            # variant acting on every winch at once (a load on every axis) would
+            # otherwise take winches one re-identification at a time explains exactly
+            # (a 6-axis rig with wrong parameters on five axes named a load, a Stribeck
+            # friction and free-form terms beside them)
+            together = _winches_together([j.candidate for j in step if j.passed and
+                                          j.effect == WINCH_PARAMETER_ERROR and
+                                          j.candidate is not None])
+            if together is not None:
+                step.append(_judge_joint(parts, together, ctx, judge, n_tests))
             self.steps.append(step)
             self._log(step)
             passed = sorted((j for j in step if j.passed), key=lambda j: -j.bic_drop)
@@ -405,7 +418,7 @@ class _Search:
             freeform = freeform and best.effect != "unnamed"    # one free-form part
             # the same variant again adds nothing (winches are re-identified one by one)
             candidates = [c for c in candidates if c.label != best.label
-                          or best.effect == "winch_parameter_error"]
+                          or best.effect == WINCH_PARAMETER_ERROR]
         return causes
 
     def refit(self, judgement: Judgement, kept: list[Effect], n_tests: int) -> Judgement:
@@ -610,6 +623,27 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
                      time.perf_counter() - start - seconds_candidates, search.scales)
 
 
+def _winches_together(cands: list[Candidate]) -> Candidate | None:
+    """One candidate re-identifying the winches of several one-winch re-identifications
+    (``winch_parameter_error[winch k]``) together, None for fewer than two. It counts
+    all their parameters (not only those the data need: not :attr:`Candidate.sparse`,
+    whose best-subset search would take ``2^(4k)`` fits)."""
+    if len(cands) < 2:
+        return None
+    cands = sorted(cands, key=lambda c: c.label)
+    sizes = np.cumsum([0, *(c.n_params for c in cands)])
+
+    def build(x: np.ndarray) -> list[Effect]:
+        return [e for k, c in enumerate(cands) for e in c.build(x[sizes[k]:sizes[k + 1]])]
+
+    cat = lambda attr: np.concatenate([getattr(c, attr) for c in cands])  # noqa: E731
+    winches = ", ".join(c.label.split("[winch ")[-1].rstrip("]") for c in cands)
+    return replace(cands[0], label=f"{WINCH_PARAMETER_ERROR}[winches {winches}]",
+                   build=build, starts=[np.concatenate([c.starts[0] for c in cands])],
+                   lower=cat("lower"), upper=cat("upper"), x_scale=cat("x_scale"),
+                   names=[n for c in cands for n in c.names], sparse=False)
+
+
 def _build(parts: Sequence[tuple[Candidate, np.ndarray]]) -> list[Effect]:
     return [e for cand, x in parts for e in cand.build(x)]
 
@@ -713,7 +747,7 @@ def _merge(causes: list[Judgement]) -> list[Judgement]:
     """One entry per effect name (several winches re-identified become one cause)."""
     out: dict[str, Judgement] = {}
     for j in causes:
-        if j.effect in out and j.effect == "winch_parameter_error":
+        if j.effect in out and j.effect == WINCH_PARAMETER_ERROR:
             first = out[j.effect]
             out[j.effect] = replace(first, effects=first.effects + j.effects,
                                     channels=tuple(sorted(set(first.channels)

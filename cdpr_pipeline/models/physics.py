@@ -159,7 +159,7 @@ class PhysicsSettings:
     """
 
     regression: RegressionSettings = field(default_factory=lambda: RegressionSettings(
-        DerivativeFilter(AUTO, 4, AUTO), AUTO, RIG, AUTO))
+        DerivativeFilter(AUTO, 4, AUTO, AUTO), AUTO, RIG, AUTO))
     state_window_s: float = 0.08
     substeps: int | None = None
     first_end: int = 0

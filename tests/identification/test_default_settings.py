@@ -27,7 +27,7 @@ from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.resources import emps_path
 from cdpr_pipeline.stages.identify import identify
 
-AUTO = RegressionSettings(DerivativeFilter("auto", 4, "auto"), "auto", "rig", "auto")
+AUTO = RegressionSettings(DerivativeFilter("auto", 4, "auto", "auto"), "auto", "rig", "auto")
 
 
 def _axis_run(fs: float, freqs: list[float], seconds: float = 40.0, noise: float = 0.0,
@@ -59,16 +59,50 @@ def test_resolved_settings_follow_the_rate_and_the_motion(caplog):
     assert s.decimate == int(1000.0 // s.filter.cutoff_hz)
     assert s.filter.trim_s == pytest.approx(5 / s.filter.cutoff_hz)
     assert s.sign_sharpness is None and s.zero_order_hold is False
+    assert s.filter.speed_cutoff_hz is None         # a hard sign: the speed at the cut-off
     assert "cut-off" in caplog.text and "decimation" in caplog.text
     # a stated law and a stated controller rate are taken from the rig
     rig2 = AxesRig(1000.0, ("q1",), rig.nominal, controller={"rate_hz": 1000.0},
                    coulomb_sharpness=35.0)
     s2 = resolve_settings(AUTO, [run], rig2)
     assert s2.sign_sharpness == 35.0 and s2.zero_order_hold is True
+    # a smooth law reads the speed through a band four times wider (at most 0.4 fs)
+    assert s2.filter.speed_cutoff_hz == pytest.approx(min(4 * s2.filter.cutoff_hz, 400.0))
+    assert s2.filter.cutoff_hz == pytest.approx(s.filter.cutoff_hz)
+    assert s2.decimate == s.decimate and s2.filter.trim_s == s.filter.trim_s
     # the cut-off never reaches Nyquist: a slow rate caps it at 0.4 fs
     slow = _axis_run(20.0, [2.0])
     s3 = resolve_settings(AUTO, [slow], AxesRig(20.0, ("q1",), rig.nominal))
     assert s3.filter.cutoff_hz == pytest.approx(8.0) and s3.decimate == 2
+
+
+def test_the_wider_speed_band_finds_a_reversal_where_it_is():
+    """A friction jump at a reversal puts a kink in the speed (deceleration ``a1`` before
+    zero speed, acceleration ``a2`` after it, drawn). Filtered at the motion's cut-off
+    the speed crosses zero off the reversal by a share of the filter's width; the speed
+    band four times wider (``speed_cutoff_hz``) brings it three to four times closer, while
+    the acceleration stays that of the narrow band."""
+    rng = np.random.default_rng()
+    fs, cutoff = 300.0, float(rng.uniform(5.0, 15.0))
+    a1, a2 = float(rng.uniform(0.5, 2.0)), float(rng.uniform(3.0, 6.0))
+    t0 = float(rng.uniform(-0.5, 0.5)) / fs                  # the reversal, between samples
+    t = np.arange(-3.0, 3.0, 1.0 / fs)
+    x = np.where(t < t0, 0.5 * a1 * (t - t0) ** 2, 0.5 * a2 * (t - t0) ** 2)[:, None]
+
+    def crossing(v):
+        k = int(np.flatnonzero((v[:-1] < 0) & (v[1:] >= 0))[0])
+        return t[k] - v[k] * (t[k + 1] - t[k]) / (v[k + 1] - v[k])
+
+    narrow = DerivativeFilter(cutoff, 4, 0.0)
+    wide = DerivativeFilter(cutoff, 4, 0.0, 4 * cutoff)
+    _, v_narrow, acc_narrow = narrow.compact_derivatives(x, t)
+    _, v_wide, acc_wide = wide.compact_derivatives(x, t)
+    late_narrow = abs(crossing(v_narrow[:, 0]) - t0)
+    late_wide = abs(crossing(v_wide[:, 0]) - t0)
+    assert late_narrow > 1e-3, (cutoff, a1, a2)               # milliseconds: a lag's size
+    # (300 draws: 0.26-0.35 of the narrow band's delay)
+    assert late_wide < late_narrow / 2, (cutoff, a1, a2, late_narrow, late_wide)
+    np.testing.assert_array_equal(acc_wide, acc_narrow)
 
 
 def test_unresolved_filter_refuses_to_run():

@@ -125,9 +125,12 @@ def test_reconstruct_tables_four_and_five(small_lab, tracking, tmp_path):
         "residual.max_windows=512", "residual.window=16"]))
     t4 = result["table4"]
     assert set(t4) == {"lsm_full_band", "lsm_identified", "lsm_plus_network"}
-    # identified by LSM on the full band: the first two columns are the same model
+    # both least squares on the full band, but the identification also fitted the extra
+    # data whole (its held-out spiral too): close, not the same model
     np.testing.assert_allclose(t4["lsm_full_band"]["mse"], t4["lsm_identified"]["mse"],
-                               rtol=1e-2)
+                               rtol=5e-2)
+    assert np.all(np.array(t4["lsm_identified"]["mse"])
+                  <= np.array(t4["lsm_full_band"]["mse"]) * (1 + 1e-3))
     for row in t4.values():
         assert len(row["mse"]) == 3 and all(v > 0 for v in row["ppl"])
     for name in ("table4.md", "table5.md", "reconstruction.png", "reconstruction.json"):
