@@ -73,8 +73,8 @@ def test_one_long_run_without_effect_gives_none(tmp_path, seed, kind):
 #: few ms on some winches of a cable robot (named winch_parameter_error, or none when its
 #: held-out interval reaches zero; per-winch sizes 30-120 % off on some winch of 4-cable
 #: and sub-150 Hz rigs), a quadratic drag on a 4-cable robot with an extra
-#: winch_parameter_error or Stribeck name, a winch parameter error on some of several
-#: axes found as an unnamed term, an axis lag with an extra winch_parameter_error (errors
+#: winch_parameter_error or Stribeck name, an axis lag with an extra
+#: winch_parameter_error (errors
 #: in the variables: the lag's column is the time derivative of the torque the measured
 #: motion implies, whose acceleration noise differentiated once more dominates on a
 #: light axis at a low rate, so the lag comes out short and a winch re-fit takes the
@@ -82,8 +82,11 @@ def test_one_long_run_without_effect_gives_none(tmp_path, seed, kind):
 #: of one of these is reported as XFAIL with the case printed; every other miss of the
 #: two tests below fails, as do the null tests and the dedicated tests (drum radius,
 #: elasticity, drag, position-periodic force, light axis, internal force).
+#: (A winch parameter error on several axes, named a load, Stribeck friction or
+#: free-form terms in 4 of 4 many-axis draws, is no gap since one-axis
+#: re-identifications are also judged together: 10 of 10 draws, seeds 1-10.)
 KNOWN_GAPS = {("cdpr", "actuator_lag"), ("cdpr", "quadratic_drag"),
-              ("axes", "winch_parameter_error"), ("axes", "actuator_lag")}
+              ("axes", "actuator_lag")}
 #: ... and on redundant (4-cable) robots only: winch offsets along the internal-force
 #: direction are what the per-row internal force also explains, so a winch parameter
 #: error's offsets there are poorly determined (seed 171: one offset 134 % off, one
