@@ -7,6 +7,7 @@ import os
 
 import numpy as np
 
+from cdpr_pipeline.data.reading import DerivativeFilter, clear_of_reach
 from cdpr_pipeline.sim import simulator
 from cdpr_pipeline.sim.lab import simulate_lab
 from cdpr_pipeline.sim.plant import Plant
@@ -35,7 +36,7 @@ def test_hard_sign_rig_is_simulated_and_its_smoothing_is_numerical_only(paper_ri
     seed = int(os.environ.get("CDPR_TEST_SEED", np.random.default_rng().integers(2**31)))
     coarse = _run(rig, seed)
     assert np.isinf(coarse.nominal.sign_sharpness)       # the model stays the stated one
-    # twice as sharp (and twice the sub-steps): once moving, the recorded motion agrees
+    # twice as sharp (and twice the sub-steps): once moving, the recorded motion agrees (RMS)
     # far below the motion-capture noise (0.1 mm) and the torques within the torque
     # sensor's noise level (0.01 N m; a winch passing through zero speed briefly differs
     # by a few mN m), so the numerical smoothing is invisible in the data. (At rest a hard
@@ -45,18 +46,29 @@ def test_hard_sign_rig_is_simulated_and_its_smoothing_is_numerical_only(paper_ri
     sharp = _run(rig, seed)
     a, b = coarse.results[0], sharp.results[0]
     moving = slice(a.t.size // 2, None)
-    # half the motion-capture noise: over 16 seeds the median was 0.5 um and 15 were
-    # under 1 um, but one (554843020, a CI run) reached 21 um, over the former 20 um
-    # bound; that outlier is not yet explained (a zero-speed passage, as for the torques,
-    # is the likely place)
-    assert np.abs(a.truth["position"] - b.truth["position"])[:, moving].max() < 5e-5, seed
+    # RMS under half the motion-capture noise (0.1 mm RMS). The largest difference is
+    # no such bound: at a reversal where a winch sticks, when it breaks away again
+    # depends on the integrator's resolution, and the controller takes about 0.2 s to
+    # close the difference (seed 1206689043: the runs' sides differed for 4 samples, 69 um
+    # after it; seed 851992038: 126 um). Over 63 seeds the moving half's RMS difference
+    # had a median of 1 um and at most 14 um (those two seeds), its maximum a median of
+    # 4 um.
+    moved = (a.truth["position"] - b.truth["position"])[:, moving]
+    assert np.sqrt(np.mean(moved ** 2)) < 5e-5, seed
     # a sample that falls on a reversal sees the friction jump by 2 F_c between two
     # sub-steps, and which side it lands on is the integrator's choice in any resolution
     # (seed 1528360198, a CI run: one such sample differed by 0.825 N m = 2 F_c of
     # winch 2 and alone made the RMS 0.028; the 20 samples after it differed by 0.07 ->
-    # 0.01 N m). Those samples are left out, as the diagnosis leaves out reversals.
+    # 0.01 N m). Those samples are left out, as the diagnosis leaves out reversals, and
+    # so are the samples within the derivative filter's reach of them, as the diagnosis
+    # leaves them out on a cable robot (``reading.clear_of_reach``): the controller's
+    # answer to the reversal's timing decays over about that reach (seed 1137623896:
+    # 0.14 N m after a reversal, 0.01 N m 20 samples later; the reach of the lab tests'
+    # 15 Hz filter at 300 Hz is 22 samples).
     same_side = np.sign(a.truth["omega"]) == np.sign(b.truth["omega"])
-    du = np.where(same_side, a.measured["torques"] - b.measured["torques"], np.nan)
+    fs = float(rig.sample_rate_hz)
+    settled = np.stack([clear_of_reach(s, DerivativeFilter(15.0), fs) for s in same_side])
+    du = np.where(settled, a.measured["torques"] - b.measured["torques"], np.nan)
     assert np.sqrt(np.nanmean(du[:, moving] ** 2)) < 1e-2, seed
     assert np.mean(~same_side[:, moving]) < 0.01, seed       # only a few reversal samples
     assert np.abs(a.truth["position"] - b.truth["position"]).max() < 1e-3, seed
