@@ -625,23 +625,17 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
 
 def _winches_together(cands: list[Candidate]) -> Candidate | None:
     """One candidate re-identifying the winches of several one-winch re-identifications
-    (``winch_parameter_error[winch k]``) together, None for fewer than two. It counts
-    all their parameters (not only those the data need: not :attr:`Candidate.sparse`,
-    whose best-subset search would take ``2^(4k)`` fits)."""
+    (``winch_parameter_error[winch k]``) together (:func:`_joint` of them, each from its
+    start), None for fewer than two. It counts all their parameters (not only those the
+    data need: not :attr:`Candidate.sparse`, whose best-subset search would take
+    ``2^(4k)`` fits)."""
     if len(cands) < 2:
         return None
     cands = sorted(cands, key=lambda c: c.label)
-    sizes = np.cumsum([0, *(c.n_params for c in cands)])
-
-    def build(x: np.ndarray) -> list[Effect]:
-        return [e for k, c in enumerate(cands) for e in c.build(x[sizes[k]:sizes[k + 1]])]
-
-    cat = lambda attr: np.concatenate([getattr(c, attr) for c in cands])  # noqa: E731
-    winches = ", ".join(c.label.split("[winch ")[-1].rstrip("]") for c in cands)
-    return replace(cands[0], label=f"{WINCH_PARAMETER_ERROR}[winches {winches}]",
-                   build=build, starts=[np.concatenate([c.starts[0] for c in cands])],
-                   lower=cat("lower"), upper=cat("upper"), x_scale=cat("x_scale"),
-                   names=[n for c in cands for n in c.names], sparse=False)
+    winches = ", ".join(str(e.cable) for c in cands for e in c.build(c.starts[0]))
+    together = _joint([(c, np.asarray(c.starts[0], float)) for c in cands[:-1]], cands[-1])
+    return replace(together, label=f"{WINCH_PARAMETER_ERROR}[winches {winches}]",
+                   sparse=False)
 
 
 def _build(parts: Sequence[tuple[Candidate, np.ndarray]]) -> list[Effect]:

@@ -37,6 +37,16 @@ def _diagnosed(tmp_path, kind: str, effects: list[str], seed: int):
     return case
 
 
+def _assert_named(case, record: dict, name: str, alone: bool = False) -> None:
+    """The verdict is ``name`` (with no other cause when ``alone``) and its fitted sizes
+    are within the tolerance (``foreign_cases.parameters_ok``)."""
+    assert record["verdict"] == name, case.describe()
+    if alone:
+        assert {c["effect"] for c in record["causes"]} == {name}, case.describe()
+    ok, why = parameters_ok(case, record["causes"][0])
+    assert ok, f"{why}: {case.describe()}"
+
+
 def _one_hidden(tmp_path, kind: str, names: list[str], seed: int):
     """One effect drawn from ``names`` by the seed, hidden and diagnosed."""
     name = names[rng_for(seed).integers(len(names))]
@@ -207,9 +217,7 @@ def test_a_drum_radius_error_is_named_on_its_drum(tmp_path, seed):
     case = foreign_case(tmp_path, "cdpr", ["drum_radius_error"], seed, n_runs=4,
                         duration_s=10.0, n=n, channels=[drum])
     record = case.diagnose()
-    assert record["verdict"] == "drum_radius_error", case.describe()
-    ok, why = parameters_ok(case, record["causes"][0])
-    assert ok, f"{why}: {case.describe()}"
+    _assert_named(case, record, "drum_radius_error")
 
 
 def test_a_position_periodic_force_on_a_linear_axis_gets_no_name(tmp_path, seed):
@@ -285,9 +293,7 @@ def test_cable_elasticity_is_named_with_each_cables_stiffness(tmp_path, seed):
     case = foreign_case(tmp_path, "cdpr", ["cable_elasticity"], seed, n_runs=4,
                         duration_s=10.0)
     record = case.diagnose()
-    assert record["verdict"] == "cable_elasticity", case.describe()
-    ok, why = parameters_ok(case, record["causes"][0])
-    assert ok, f"{why}: {case.describe()}"
+    _assert_named(case, record, "cable_elasticity")
 
 
 def test_a_position_dependent_load_is_named_with_its_size(tmp_path, seed):
@@ -309,11 +315,7 @@ def test_a_position_dependent_load_is_named_with_its_size(tmp_path, seed):
     case = foreign_case(tmp_path, "axes", ["position_dependent_load"], seed, n_runs=3,
                         duration_s=10.0, n=n, rig_options={"joint_types": types})
     record = case.diagnose()
-    assert record["verdict"] == "position_dependent_load", case.describe()
-    assert {c["effect"] for c in record["causes"]} == {"position_dependent_load"}, \
-        case.describe()
-    ok, why = parameters_ok(case, record["causes"][0])
-    assert ok, f"{why}: {case.describe()}"
+    _assert_named(case, record, "position_dependent_load", alone=True)
     assert record["gain"]["ci95"][0] > 0, case.describe()
 
 
@@ -338,11 +340,7 @@ def test_a_wrong_offset_is_not_taken_for_a_load(tmp_path, seed):
 
     case = foreign_case(tmp_path, "axes", [draw], seed, n_runs=3, duration_s=10.0, n=n)
     record = case.diagnose()
-    assert record["verdict"] == "winch_parameter_error", case.describe()
-    assert {c["effect"] for c in record["causes"]} == {"winch_parameter_error"}, \
-        case.describe()
-    ok, why = parameters_ok(case, record["causes"][0])
-    assert ok, f"{why}: {case.describe()}"
+    _assert_named(case, record, "winch_parameter_error", alone=True)
 
 
 @pytest.mark.slow
@@ -365,8 +363,4 @@ def test_wrong_parameters_on_several_axes_are_one_re_identification(tmp_path, se
     case = foreign_case(tmp_path, "axes", ["winch_parameter_error"], seed, n_runs=3,
                         duration_s=10.0, n=n, channels=list(range(n)))
     record = case.diagnose()
-    assert record["verdict"] == "winch_parameter_error", case.describe()
-    assert {c["effect"] for c in record["causes"]} == {"winch_parameter_error"}, \
-        case.describe()
-    ok, why = parameters_ok(case, record["causes"][0])
-    assert ok, f"{why}: {case.describe()}"
+    _assert_named(case, record, "winch_parameter_error", alone=True)
