@@ -24,6 +24,7 @@ from scipy.signal import butter, periodogram, sosfiltfilt
 
 from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.errors import ConfigError
 
 log = logging.getLogger(__name__)
 
@@ -199,7 +200,7 @@ class RegressionSettings:
         if isinstance(rest, bool):
             return np.full(n, rest)
         if len(rest) != n:
-            raise ValueError(f"regression.encoder_rest: {len(rest)} entries for {n} channels")
+            raise ConfigError(f"regression.encoder_rest: {len(rest)} entries for {n} channels")
         return np.array(rest, bool)
 
 
@@ -313,6 +314,18 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
     if isinstance(settings, ResolvedReading):
         return settings
     filt = settings.filter
+    # a word where a number goes is a typo of the user's, named before any arithmetic
+    for name, value, word in (("filter.cutoff_hz", filt.cutoff_hz, AUTO),
+                              ("filter.trim_s", filt.trim_s, AUTO),
+                              ("filter.speed_cutoff_hz", filt.speed_cutoff_hz, AUTO),
+                              ("decimate", settings.decimate, AUTO),
+                              ("sign_sharpness", settings.sign_sharpness, RIG),
+                              ("zero_order_hold", settings.zero_order_hold, AUTO),
+                              ("encoder_rest", settings.encoder_rest, AUTO),
+                              ("hold_fraction", settings.hold_fraction, AUTO)):
+        if isinstance(value, str) and value != word:
+            raise ConfigError(f"regression.{name}: unknown setting {value!r} "
+                              f"(a value, or {word!r})")
     fs = float(rig.sample_rate_hz)
     cutoff = filt.cutoff_hz
     if cutoff == AUTO:
@@ -356,7 +369,7 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
                      "sample is the command of %.3g ms before it", fraction, rate, fs,
                      500 * fraction / fs)
     if not isinstance(fraction, str) and not 0.0 < float(fraction) <= 1.0:
-        raise ValueError(f"regression.hold_fraction: {fraction!r} is not in (0, 1]")
+        raise ConfigError(f"regression.hold_fraction: {fraction!r} is not in (0, 1]")
     speed = filt.speed_cutoff_hz
     if speed == AUTO:
         speed = (None if law is None else
@@ -373,14 +386,6 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
         rest = tuple(bool(v) for v in np.any(seen, axis=0)) if seen else True
         log.info("position sensors resolving standstill (encoders): %s", ", ".join(
             f"{i + 1}: {'yes' if r else 'no'}" for i, r in enumerate(np.atleast_1d(rest))))
-    for name, value in (("filter.cutoff_hz", cutoff), ("filter.trim_s", trim),
-                        ("filter.speed_cutoff_hz", speed),
-                        ("decimate", q), ("sign_sharpness", law),
-                        ("zero_order_hold", hold), ("encoder_rest", rest),
-                        ("hold_fraction", fraction)):
-        if isinstance(value, str):
-            raise ValueError(f"regression.{name}: unknown setting {value!r} "
-                             f"(a value, or {AUTO!r}/{RIG!r} where documented)")
     return ResolvedReading(replace(filt, cutoff_hz=float(cutoff), trim_s=float(trim),
                                    speed_cutoff_hz=None if speed is None else float(speed)),
                            int(q), None if law is None else float(law), bool(hold), rest,

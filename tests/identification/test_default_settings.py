@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import logging
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -24,6 +25,7 @@ from cdpr_pipeline.data.reading import (
 )
 from cdpr_pipeline.data.rig import AxesRig, WinchParams
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.errors import ConfigError
 from cdpr_pipeline.resources import emps_path
 from cdpr_pipeline.stages.identify import identify
 
@@ -103,6 +105,18 @@ def test_the_wider_speed_band_finds_a_reversal_where_it_is():
     # (300 draws: 0.26-0.35 of the narrow band's delay)
     assert late_wide < late_narrow / 2, (cutoff, a1, a2, late_narrow, late_wide)
     np.testing.assert_array_equal(acc_wide, acc_narrow)
+
+
+@pytest.mark.parametrize("key, value", [("speed_cutoff_hz", "bogus"), ("cutoff_hz", "fast")])
+def test_an_unknown_filter_setting_is_a_configuration_error(key, value):
+    """A typo in a ``regression.filter`` key is the user's, named with the key (the
+    command prints it as an error, not as an internal one)."""
+    run = _axis_run(1000.0, [0.5, 2.0])
+    rig = AxesRig(1000.0, ("q1",), WinchParams([1.0], [1.0], [1.0], [0.0]),
+                  coulomb_sharpness=35.0)
+    bad = replace(AUTO, filter=replace(AUTO.filter, **{key: value}))
+    with pytest.raises(ConfigError, match=f"regression.filter.{key}: unknown setting"):
+        resolve_settings(bad, [run], rig)
 
 
 def test_unresolved_filter_refuses_to_run():
