@@ -123,7 +123,7 @@ class Segment:
         return replace(traj, name=self.name, t=traj.t[sl], position=traj.position[sl],
                        torques=traj.torques[sl], desired=part(traj.desired),
                        lengths=part(traj.lengths), velocity=part(traj.velocity),
-                       acceleration=part(traj.acceleration),
+                       acceleration=part(traj.acceleration), external=part(traj.external),
                        extra={k: v[sl] for k, v in traj.extra.items()})
 
     def as_dict(self) -> dict[str, Any]:

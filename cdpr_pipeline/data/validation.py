@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from .axis_controller import parse_axis_controller
 from .errors import ROW_NOTE, DataValidationError, Problem, Severity
 from .rig import (
     FORMAT,
@@ -48,7 +49,8 @@ ANCHOR_TOLERANCE_M = 1e-6  # anchors closer than this are one point (a typo, not
 #: corrupt, not a measurement (a unit slip of 1e3 stays far inside; a 1e300 does not).
 #: Time: 30 years; axis positions 1000 km or 1.6e5 turns; forces/torques 1e10 N (N m),
 #: 10x the largest presses and drives; velocity 1e4 m/s; acceleration 1e6 m/s^2.
-PHYSICAL_LIMITS = {"t": 1e9, "q": 1e6, "qd": 1e6, "u": 1e10, "v": 1e4, "a": 1e6}
+PHYSICAL_LIMITS = {"t": 1e9, "q": 1e6, "qd": 1e6, "u": 1e10, "fext": 1e10, "v": 1e4,
+                   "a": 1e6}
 #: fastest a measured position may change, m/s or rad/s (about 1e6 rpm): a faster
 #: jump between two samples is a corrupt sample, not motion
 MAX_SPEED = 1e5
@@ -297,13 +299,17 @@ class _RigChecker:
         controller = self.raw.get("controller")
         if controller is not None and not isinstance(controller, Mapping):
             self.error("controller", "must be a mapping", "rig_shape")
+        elif controller is not None:
+            controller, problems = parse_axis_controller(controller, n)
+            for key, message in problems:
+                self.error(key, message, "rig_controller")
         extra = {k: v for k, v in self.raw.items() if k not in _AXES_KEYS}
         virtual = self._virtual()
         if self.problems or rate is None or names is None or nominal is None:
             return None
         return AxesRig(sample_rate_hz=rate, axes=tuple(names), nominal=nominal,
-                       controller=None if controller is None else dict(controller),
-                       virtual=virtual, extra=extra, coulomb_sharpness=law)
+                       controller=controller, virtual=virtual, extra=extra,
+                       coulomb_sharpness=law)
 
     def _anchors(self) -> np.ndarray | None:
         raw = self.required("anchors_m")
@@ -696,8 +702,8 @@ class _FileChecker:
         """Values beyond :data:`PHYSICAL_LIMITS` (cable-robot positions are held to the
         anchor frame instead, in :meth:`_check_cdpr`)."""
         for name, values in columns.items():
-            match = re.match(r"^(t|qd|q|u|v|a)[0-9xyz]*$", name)
-            if match is None or (match.group(1) in ("q", "qd")
+            match = re.match(r"^(t|qd|q|u|fext|v|a)[0-9xyz]*$", name)
+            if match is None or (match.group(1) in ("q", "qd", "fext")
                                  and match.group(1) not in _channel_prefixes(self.rig)):
                 continue    # q, qd: a column of another kind (a cable robot's extra)
             if match.group(1) in ("v", "a") and name[1:] not in ("x", "y", "z"):
