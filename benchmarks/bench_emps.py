@@ -56,7 +56,7 @@ def main() -> None:
     out = Path("outputs/bench_emps")
     dataset = load_dataset(convert_emps(emps_path(), out / "emps", overwrite=True))
     run = {tr.name: tr for tr in dataset.trajectories}[TEST[0]]
-    edges = pulse_edges(run.extra["pulses_n"], run.t)
+    edges = pulse_edges(run.external[:, 0], run.t)
 
     extended, causes, seconds = {}, {}, {}
     for protocol, conf in PROTOCOLS.items():

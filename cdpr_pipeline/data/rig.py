@@ -213,6 +213,12 @@ class ControllerSpec:
     feedforward: str = "winch_nominal"
     rate_hz: float = 300.0
 
+    @property
+    def why_not(self) -> None:
+        """A cable robot's controller always states a loop (see :class:`~cdpr_pipeline.
+        data.axis_controller.AxisController`, whose free-form blocks do not)."""
+        return None
+
     def as_dict(self) -> dict[str, Any]:
         return {
             "type": self.type,

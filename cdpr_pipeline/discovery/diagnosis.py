@@ -24,16 +24,15 @@ from cdpr_pipeline.data.reading import (
     RegressionSettings,
     as_resolved,
 )
-from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.split import HELDOUT_FRACTION, MIN_HELDOUT_S, Split, heldout_split
 from cdpr_pipeline.data.validation import check_run_lengths
 from cdpr_pipeline.discovery.bands import power_band_hz, row_noise
-from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
+from cdpr_pipeline.discovery.closed_loop import compare_motion
 from cdpr_pipeline.discovery.damping import with_fitted_damping
 from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
 from cdpr_pipeline.discovery.freeform.search import FreeFormSearch
 from cdpr_pipeline.discovery.never_worse import never_worse
-from cdpr_pipeline.discovery.plots import BeforeAfterPlot, ClosedLoopPlot, ColumnPlot, Plots
+from cdpr_pipeline.discovery.plots import BeforeAfterPlot, ColumnPlot, Plots
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,
@@ -48,7 +47,6 @@ from cdpr_pipeline.discovery.results import (
     Band,
     BlackBoxShare,
     ClosedLoopComparison,
-    ClosedLoopErrors,
     Discrepancy,
     ErrorMetrics,
     HeldoutGain,
@@ -589,22 +587,18 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     clock["validity"] = time.perf_counter() - t0
     log.info("never worse and validity: %.1f s", clock["validity"])
 
-    closed, closed_plot = ClosedLoopComparison(False), None
-    why_not = can_resimulate(rig, trajectories) if settings.closed_loop else "disabled"
-    if why_not is None and split.blocks:
-        # a block inside a run does not start at rest, where the re-simulation starts
-        why_not = ("the runs are cut into time blocks; the closed loop re-simulates whole "
-                   "runs from rest")
-        log.info("closed loop not re-simulated: %s", why_not)
-    if why_not is None:
+    closed, closed_plot = ClosedLoopComparison(False, "disabled"), None
+    if settings.closed_loop:
         t0 = time.perf_counter()
-        closed, rows, closed_plot = _closed_loop(nominal, extended, rig, trajectories,
-                                                 held_names, bool(causes))
+        closed, rows, closed_plot = compare_motion(nominal, extended, rig, trajectories,
+                                                   held_names, bool(causes), split.blocks)
         found += rows
-        clock["closed loop"] = time.perf_counter() - t0
-        log.info("closed loop: %.1f s", clock["closed loop"])
-    else:
-        closed = ClosedLoopComparison(False, why_not)
+        if closed.available:
+            clock["closed loop"] = time.perf_counter() - t0
+            log.info("%s: %.1f s", "closed loop" if closed.mode == "closed_loop"
+                     else "n steps ahead", clock["closed loop"])
+        else:
+            log.info("closed loop not re-simulated: %s", closed.reason)
 
     blackbox = None
     if settings.blackbox is not None:
@@ -852,34 +846,3 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
     if len(causes) > 1:
         text += " Also: " + "; ".join(c.effect for c in causes[1:]) + "."
     return text
-
-
-def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names,
-                 extended_differs: bool
-                 ) -> tuple[ClosedLoopComparison, list[Discrepancy], ClosedLoopPlot]:
-    """Both models re-simulated in closed loop: the comparison, one discrepancy row per
-    column of the nominal model's errors, and the data of the report's figure."""
-    sim_nom = resimulate(nominal, nominal, rig, trajectories, label="nominal model")
-    err_nom = closed_loop_errors(trajectories, sim_nom)
-    err_ext = err_nom
-    if extended_differs:
-        err_ext = closed_loop_errors(trajectories, resimulate(
-            extended, nominal, rig, trajectories, label="extended model"))
-    rows, errors = [], {}
-    for sig_name in ("position", "torque"):
-        allb = np.concatenate([err_nom[n][sig_name] for n in err_nom])
-        total = float(np.sum(allb ** 2)) or 1.0
-        cols = ["x", "y", "z"] if sig_name == "position" else \
-            channel_names("torque", allb.shape[1])
-        rows += [Discrepancy(f"closed_loop_{sig_name}", col,
-                             float(np.sqrt(np.mean(allb[:, i] ** 2))),
-                             float(np.sum(allb[:, i] ** 2) / total))
-                 for i, col in enumerate(cols)]
-        hb = np.concatenate([err_nom[n][sig_name] for n in held_names])
-        ha = np.concatenate([err_ext[n][sig_name] for n in held_names])
-        errors[sig_name] = ClosedLoopErrors(
-            tuple(float(v) for v in np.sqrt(np.mean(hb ** 2, axis=0))),
-            tuple(float(v) for v in np.sqrt(np.mean(ha ** 2, axis=0))))
-    first = held_names[0]
-    plot = ClosedLoopPlot(first, err_nom[first]["position"], err_ext[first]["position"])
-    return ClosedLoopComparison(True, None, errors["position"], errors["torque"]), rows, plot

@@ -469,7 +469,8 @@ class Drives:
 
     kind: ClassVar[str] = "axes"
     cables: ClassVar[bool] = False
-    closed_loop: ClassVar[bool] = False
+    #: under a ``position_loop`` controller (:mod:`cdpr_pipeline.sim.axes_loop`)
+    closed_loop: ClassVar[bool] = True
     #: no cables to stretch (:attr:`Plant.elastic`)
     elastic: ClassVar[bool] = False
 
