@@ -13,7 +13,9 @@ command unit) and an optional force or torque limit::
     u        = clip(drive_gain command + u_ff + fext, -force_limit, force_limit)
 
 with ``e = qd - q``, ``D = qd' - v`` (derivative on the error) or ``-v`` (on the
-measurement), ``v`` the velocity the controller estimates, ``u_ff`` the stated model's
+measurement), ``v`` the velocity the controller estimates (the backward difference of
+the position over one control period, through a first-order low-pass of
+``velocity_filter_hz`` if stated; or the exact one), ``u_ff`` the stated model's
 inverse dynamics along the reference when ``feedforward: nominal`` and ``fext`` the
 run's recorded ``fext`` columns (a force injected at the drive, part of ``u``).
 
@@ -40,7 +42,8 @@ FEEDFORWARD = ("none", "nominal")
 VELOCITY_ESTIMATES = ("difference", "exact")
 #: every key of a ``position_loop`` block, and of its ``velocity_loop``
 LOOP_KEYS = frozenset({"type", "rate_hz", "kp", "kd", "derivative", "velocity_loop",
-                       "feedforward", "drive_gain", "force_limit", "velocity_estimate"})
+                       "feedforward", "drive_gain", "force_limit", "velocity_estimate",
+                       "velocity_filter_hz"})
 VELOCITY_LOOP_KEYS = frozenset({"kv", "ki"})
 
 
@@ -66,6 +69,9 @@ class AxisController:
     drive_gain: tuple[float, ...] = (1.0,)
     force_limit: tuple[float, ...] | None = None
     velocity_estimate: str = "difference"
+    #: cut-off (Hz) of a first-order low-pass on the difference velocity, one or per
+    #: axis; None: none
+    velocity_filter_hz: tuple[float, ...] | None = None
     #: the free-form block as rig.yaml states it; None for the schema
     description: Mapping[str, Any] | None = field(default=None, compare=True)
 
@@ -111,6 +117,8 @@ class AxisController:
                     "velocity_estimate": self.velocity_estimate})
         if self.force_limit is not None:
             out["force_limit"] = plain(self.force_limit)
+        if self.velocity_filter_hz is not None:
+            out["velocity_filter_hz"] = plain(self.velocity_filter_hz)
         return out
 
     @classmethod
@@ -217,6 +225,9 @@ def parse_axis_controller(raw: Mapping[str, Any], n: int | None
     values["feedforward"] = choice("feedforward", FEEDFORWARD, "none")
     values["velocity_estimate"] = choice("velocity_estimate", VELOCITY_ESTIMATES,
                                          "difference")
+    if raw.get("velocity_filter_hz") is not None:
+        values["velocity_filter_hz"] = per_axis("velocity_filter_hz",
+                                                raw["velocity_filter_hz"], positive=True)
     if problems or any(v is None for v in values.values()):
         return None, problems
     return AxisController(rate_hz=float(rate), **values), []

@@ -65,26 +65,53 @@ class AffineFriction:
         return cls(up, down, at_one - up, down - at_minus_one)
 
 
+def _theta(inertia: np.ndarray, slope: np.ndarray, v: np.ndarray, h: float) -> np.ndarray:
+    """The implicit weight of the resisting force per axis: 1/2 (the trapezoid, second
+    order) while it cannot ring, tending to 1 (backward Euler) where ``h R' / I`` is
+    large; 1 at rest, where the friction is set-valued (stiction must see all of it)."""
+    stiff = h * np.maximum(slope, 0.0)
+    theta = np.maximum(0.5, 1.0 - inertia / np.maximum(stiff, 1e-300))
+    return np.where(v == 0.0, 1.0, theta)
+
+
 def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray,
                   h: float, affine: AffineFriction | None = None
                   ) -> tuple[np.ndarray, np.ndarray]:
     """One sub-step of ``h`` seconds of every axis under a held ``force`` (B, n).
 
-    Solves ``I (v1 - v) / h = force - R(q, v1)`` per axis, ``R`` set-valued at rest: an
-    axis is at rest after the step when the momentum ``y = I v + h force`` lies between
-    ``h R(q, 0-)`` and ``h R(q, 0+)`` (stiction), else on the side ``y`` points to, by
-    Newton's method kept on that side: one step from the current speed while the axis
-    keeps its direction (the linearly implicit Euler step, as accurate as the backward
-    Euler it solves), iterated to convergence from rest after a reversal or a start.
-    With ``affine`` (:func:`affine_friction`) the solution is in closed form.
-    Position: ``q1 = q + h (v + v1) / 2``.
+    Solves ``I (v1 - v) / h = force - (1 - th) R(q, v) - th R(q, v1)`` per axis, ``th``
+    from :func:`_theta` (the trapezoid while the axis keeps its direction; backward
+    Euler, ``th = 1``, at rest and where it stops or reverses), ``R`` set-valued at
+    rest: an axis is at rest after the step when the momentum
+    ``y = I v + h force - h (1 - th) R(q, v)`` lies between ``h th R(q, 0-)`` and
+    ``h th R(q, 0+)`` (stiction), else on the side ``y`` points to, by Newton's method
+    kept on that side: one step from the current speed while the axis keeps its
+    direction (a linearly implicit step, as accurate as the scheme it solves), iterated
+    to convergence from rest after a reversal or a start. With ``affine``
+    (:func:`affine_friction`) the solution is in closed form. Position:
+    ``q1 = q + h (v + v1) / 2``.
     """
     inertia = model.winch.inertia
-    y = inertia * v + h * force
     if affine is not None:
-        # on each side the equation is linear; at most one side has a root of its sign
-        v1 = np.maximum((y - h * affine.up) / (inertia + h * affine.slope_up), 0.0) \
-            + np.minimum((y - h * affine.down) / (inertia + h * affine.slope_down), 0.0)
+        moving_up = v > 0.0
+        slope = np.where(moving_up, affine.slope_up, affine.slope_down)
+        resist = np.where(moving_up, affine.up, affine.down) + slope * v
+        v1 = None
+        for theta in (_theta(inertia, slope, v, h), 1.0):
+            ht = h * theta
+            y = inertia * v + h * force - (h - ht) * resist
+            # on each side the equation is linear; at most one side has a root of its sign
+            solved = np.maximum((y - ht * affine.up) / (inertia + ht * affine.slope_up), 0.0) \
+                + np.minimum((y - ht * affine.down) / (inertia + ht * affine.slope_down), 0.0)
+            if v1 is None:
+                v1 = solved
+                # the trapezoid while the axis keeps its direction; backward Euler when
+                # it stops or reverses (the old side's friction must not act past it)
+                event = solved * v <= 0.0
+                if not event.any():
+                    break
+            else:
+                v1 = np.where(event, solved, v1)
         return q + 0.5 * h * (v + v1), v1
     qs = q[None]
     at = v + (v == 0.0) * REST_SPEED
@@ -94,7 +121,17 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
     speeds[0], speeds[1], speeds[2] = REST_SPEED, -REST_SPEED, at
     np.add(at, dv, out=speeds[3])
     up, down, r_v, r_dv = model.friction_torque(qs, speeds)
-    positive, negative = y > h * up, y < h * down
+    theta = _theta(inertia, (r_dv - r_v) / dv, v, h)
+    y = inertia * v + h * force - h * (1.0 - theta) * r_v
+    ht = h * theta
+    positive, negative = y > ht * up, y < ht * down
+    # the trapezoid while the axis keeps its direction; backward Euler (theta = 1) where
+    # it stops or reverses (the old side's friction must not act past it)
+    event = ~((positive & (v > 0.0)) | (negative & (v < 0.0)))
+    if event.any():
+        ht = np.where(event, h, ht)
+        y = np.where(event, inertia * v + h * force, y)
+        positive, negative = y > ht * up, y < ht * down
     side = positive * 2.0 - 1.0
     # Newton from the current speed when it lies on that side, else from rest on it
     # (with the slope at the current speed: a first step, corrected by the next)
@@ -103,11 +140,11 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
     v1 = np.where(here, at, side * REST_SPEED)
     r_v = np.where(here, r_v, np.where(positive, up, down))
     for _ in range(MAX_NEWTON):
-        slope = np.maximum(inertia + h * (r_dv - r_v) / dv, 0.5 * inertia)
-        nxt = np.maximum((v1 - (inertia * v1 + h * r_v - y) / slope) * side,
+        slope = np.maximum(inertia + ht * (r_dv - r_v) / dv, 0.5 * inertia)
+        nxt = np.maximum((v1 - (inertia * v1 + ht * r_v - y) / slope) * side,
                          REST_SPEED) * side
-        # during motion one step is the linearly implicit Euler step, as accurate as
-        # the backward Euler it solves; after a reversal it iterates to convergence
+        # in motion one step is the linearly implicit step; after a reversal it
+        # iterates to convergence
         settled = here | stuck | (np.abs(nxt - v1)
                                   <= NEWTON_TOLERANCE * np.abs(v1) + REST_SPEED)
         v1 = nxt
@@ -294,17 +331,20 @@ class AxesLoop:
         limit = None if c.force_limit is None else c.per_axis("force_limit", n)
         on_error, derivative = c.derivative == "error", bool(np.any(kd > 0.0))
         difference = c.velocity_estimate == "difference"
+        keep = 0.0 if c.velocity_filter_hz is None else \
+            np.exp(-2.0 * np.pi * c.per_axis("velocity_filter_hz", n) * dt)
 
         q = np.array(refs.position, dtype=float)
         v = np.array(refs.velocity, dtype=float)
         q_prev = q - v * dt
+        speed = v.copy()
         integral = np.zeros_like(q)
         drive = None
         n_samples = refs.n_samples
         out = {k: np.empty((n_samples, *q.shape)) for k in ("position", "velocity", "force")}
         for k in range(len(ref)):
             if difference:
-                speed, q_prev = (q - q_prev) / dt, q
+                speed, q_prev = keep * speed + (1.0 - keep) * (q - q_prev) / dt, q
             else:
                 speed = v
             command = kp * (ref[k] - q)

@@ -65,6 +65,9 @@ class AxesRigSpec:
     #: per axis ``prismatic`` or ``rotary`` (rig.yaml's ``joint_types``); None: not
     #: stated, every axis prismatic
     joint_types: tuple[str, ...] | None = None
+    #: state the controller in rig.yaml's ``position_loop`` schema (the data format's,
+    #: so that the closed loop can be re-simulated); False: a free-form description
+    controller_schema: bool = False
 
     kind = "axes"
 
@@ -137,12 +140,22 @@ class AxesRigSpec:
             "nominal": {"inertia": self.inertia.tolist(), "viscous": self.viscous.tolist(),
                         "coulomb": self.coulomb.tolist(), "offset": self.offset.tolist(),
                         "coulomb_law": "sign"},
-            "controller": {"type": "pd_with_feedforward", "kp": kp.tolist(),
-                           "kd": kd.tolist(), "feedforward": "nominal",
-                           "rate_hz": float(self.rate_hz)},
+            "controller": self._controller(kp, kd),
             "generator": "cdpr_pipeline.testing.independent_sim",
             **({"joint_types": list(self.joint_types)} if self.joint_types else {}),
         }
+
+    def _controller(self, kp: np.ndarray, kd: np.ndarray) -> dict[str, Any]:
+        if not self.controller_schema:
+            return {"type": "pd_with_feedforward", "kp": kp.tolist(), "kd": kd.tolist(),
+                    "feedforward": "nominal", "rate_hz": float(self.rate_hz)}
+        # the same controller as the data format states one: PD on the error around no
+        # velocity loop, the nominal model as feedforward (this generator's is smoothed),
+        # the velocity a low-passed difference of the encoder position
+        return {"type": "position_loop", "rate_hz": float(self.rate_hz), "kp": kp.tolist(),
+                "kd": kd.tolist(), "derivative": "error", "feedforward": "nominal",
+                "velocity_estimate": "difference",
+                "velocity_filter_hz": self.velocity_filter_hz().tolist()}
 
     def describe(self) -> dict[str, Any]:
         out = self.rig_yaml()
@@ -364,8 +377,10 @@ def simulate_axes_runs(rig: AxesRigSpec, effects: list[Effect], families: list[s
     v_d = np.stack([r[1] for r in refs])
     a_d = np.stack([r[2] for r in refs])
     eps = 0.02 * rig.typical_speed
-    u_ff = (rig.inertia * a_d + rig.viscous * v_d + rig.coulomb * np.tanh(v_d / eps)
-            + rig.offset)
+    # a controller stated in the data format's schema feeds forward the nominal model
+    # exactly as stated (a hard sign); otherwise this generator's own smoothed sign
+    sign = np.sign(v_d) if rig.controller_schema else np.tanh(v_d / eps)
+    u_ff = rig.inertia * a_d + rig.viscous * v_d + rig.coulomb * sign + rig.offset
 
     substeps = int(np.ceil(SUB_RATE_HZ / rig.rate_hz - 1e-9))
     h = 1.0 / (rig.rate_hz * substeps)
