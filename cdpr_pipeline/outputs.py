@@ -188,7 +188,8 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
 
     If the block raises (or the process dies) ``out_dir`` stays as it was and the work so
     far stays in ``<out_dir>.partial`` (resumed by a run with the same ``digest``; removed
-    if the block raised before writing anything).
+    if the block raised before writing anything, with the folders above ``out_dir`` that
+    the run created).
 
     Parameters
     ----------
@@ -210,6 +211,25 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
         The directory to write instead of ``out_dir``.
     """
     out_dir = Path(out_dir)
+    # folders above out_dir that this run creates (for its lock): a run that fails
+    # before writing anything removes them again, leaving nothing behind
+    created = [p for p in out_dir.parents if not p.exists()]
+    try:
+        with _staged(out_dir, digest, nested, carry) as work:
+            yield work
+    except BaseException:
+        for folder in created:          # deepest first; only while empty
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        raise
+
+
+@contextmanager
+def _staged(out_dir: Path, digest: str, nested: bool, carry: Sequence[str]
+            ) -> Iterator[Path]:
+    """:func:`staged_output` without the clean-up of the folders above ``out_dir``."""
     with output_lock(out_dir):
         partial = partial_dir(out_dir, digest)
         work = partial / out_dir.name if nested else partial

@@ -92,6 +92,20 @@ def position_units(rig: Rig) -> tuple[str, ...]:
     return tuple(out)
 
 
+def force_units(rig: Rig) -> tuple[str, ...]:
+    """The unit of every force or torque channel ``u``: N m on a cable robot's winches;
+    an axis's from rig.yaml's ``units`` (keyed by ``u<i>``), else from its joint type
+    (N prismatic, N m rotary)."""
+    if rig.torque_unit is not None:
+        return (rig.torque_unit,) * rig.n
+    stated = rig.extra.get("units") or {}
+    out = []
+    for i, joint in enumerate(rig.joint_types):
+        unit = stated.get(f"u{i + 1}") if isinstance(stated, dict) else None
+        out.append(str(unit) if unit else ("N m" if joint == "rotary" else "N"))
+    return tuple(out)
+
+
 def _start_state(tr: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     """An axis run's measured position and velocity (forward difference) at its first
     sample."""
@@ -129,7 +143,8 @@ def resimulate(model: Model, nominal: Model, rig: Rig,
                trajectories: Sequence[Trajectory], settle_s: float = 1.0,
                label: str = "model", feedforward: Model | None = None
                ) -> dict[str, dict[str, np.ndarray]]:
-    """Simulated ``position`` (N, 3 or n) and ``torque`` (N, n) of every run, by name.
+    """Simulated ``position`` (N, 3 or n) and ``torque`` (N, n) of every run, by name
+    (and a cable robot's encoder ``lengths``, N, n).
 
     ``nominal`` is what the controller believes (its feedforward, for drive axes
     ``feedforward`` when given). A cable robot's runs start settled at rest
@@ -162,7 +177,8 @@ def resimulate(model: Model, nominal: Model, rig: Rig,
         n = min(len(t), result.t.size)
         for b, tr in enumerate(runs):
             out[tr.name] = {"position": result.truth["position"][b, :n],
-                            "torque": result.truth["u_cmd"][b, :n]}
+                            "torque": result.truth["u_cmd"][b, :n],
+                            "lengths": result.measured["lengths"][b, :n]}
     return out
 
 
