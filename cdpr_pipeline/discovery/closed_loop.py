@@ -270,7 +270,7 @@ def _summary(err: dict[str, dict[str, np.ndarray]], names: Sequence[str], signal
 
 
 def _run_errors(tr: Trajectory, before: dict[str, np.ndarray], after: dict[str, np.ndarray],
-                held: bool) -> RunMotionErrors:
+                held: bool, crosstest: bool = False) -> RunMotionErrors:
     def rms(e: np.ndarray) -> tuple[float, ...]:
         return tuple(float(v) for v in np.sqrt(np.mean(e ** 2, axis=0)))
 
@@ -285,7 +285,7 @@ def _run_errors(tr: Trajectory, before: dict[str, np.ndarray], after: dict[str, 
                     100 * float(np.linalg.norm(after["torque"])) / norm)
     return RunMotionErrors(held, (rms(before["position"]), rms(after["position"])),
                            (peak(before["position"]), peak(after["position"])),
-                           torque_rms, relative)
+                           torque_rms, relative, crosstest)
 
 
 def _feedforward(extended: Model, nominal: Model, rig: Rig,
@@ -319,12 +319,17 @@ def _feedforward_reason(rig: Rig, extended_differs: bool) -> str | None:
 
 def compare_motion(nominal: Model, extended: Model, rig: Rig,
                    trajectories: Sequence[Trajectory], held_names: Sequence[str],
-                   extended_differs: bool, blocks: bool = False
+                   extended_differs: bool, blocks: bool = False,
+                   crosstest: Sequence[Trajectory] = ()
                    ) -> tuple[ClosedLoopComparison, list[Discrepancy], ClosedLoopPlot | None]:
     """Both models' motion against the measured one: in closed loop where rig.yaml
     states a controller (:func:`can_resimulate`), else n steps ahead for drive axes.
-    Returns the comparison, one discrepancy row per column of the nominal model's errors
-    and the data of the report's figure."""
+    ``crosstest``: runs set aside from every fit, compared too (and flagged). Returns
+    the comparison, one discrepancy row per column of the nominal model's errors (on
+    the runs the diagnosis used) and the data of the report's figure."""
+    used = {tr.name for tr in trajectories}
+    trajectories = [*trajectories, *(tr for tr in crosstest if tr.name not in used)]
+    aside = {tr.name for tr in crosstest}
     why_not = can_resimulate(rig, trajectories, blocks)
     coordinates = tuple(rig.position_names)
     units = position_units(rig)
@@ -349,13 +354,14 @@ def compare_motion(nominal: Model, extended: Model, rig: Rig,
     else:
         return ClosedLoopComparison(False, why_not), [], None
     held = set(held_names)
-    runs = {tr.name: _run_errors(tr, err_nom[tr.name], err_ext[tr.name], tr.name in held)
+    runs = {tr.name: _run_errors(tr, err_nom[tr.name], err_ext[tr.name], tr.name in held,
+                                 tr.name in aside)
             for tr in trajectories}
     rows = []
     signals = ("position", "torque") if mode == "closed_loop" else ("position",)
     summaries = {}
     for sig_name in signals:
-        allb = np.concatenate([err_nom[n][sig_name] for n in err_nom])
+        allb = np.concatenate([err_nom[n][sig_name] for n in err_nom if n not in aside])
         total = float(np.sum(allb ** 2)) or 1.0
         cols = coordinates if sig_name == "position" else \
             channel_names("torque", allb.shape[1])
@@ -369,9 +375,10 @@ def compare_motion(nominal: Model, extended: Model, rig: Rig,
     if mode == "closed_loop":
         reason = _feedforward_reason(rig, extended_differs)
         if reason is None:
-            held_runs = [tr for tr in trajectories if tr.name in held]
+            held_runs = [tr for tr in trajectories if tr.name in held or tr.name in aside]
             feedforward = _feedforward(extended, nominal, rig, held_runs)
-    first = next(tr for tr in trajectories if tr.name == held_names[0])
+    # the figure shows the untouched cross-test run when there is one
+    first = next(tr for tr in trajectories if tr.name == ([*aside] or held_names)[0])
     plot = ClosedLoopPlot(first.name, err_nom[first.name]["position"],
                           err_ext[first.name]["position"],
                           first.t[:len(err_nom[first.name]["position"])] - first.t[0],

@@ -24,7 +24,13 @@ from cdpr_pipeline.data.reading import (
     RegressionSettings,
     as_resolved,
 )
-from cdpr_pipeline.data.split import HELDOUT_FRACTION, MIN_HELDOUT_S, Split, heldout_split
+from cdpr_pipeline.data.split import (
+    HELDOUT_FRACTION,
+    MIN_HELDOUT_S,
+    Split,
+    crosstest_runs,
+    heldout_split,
+)
 from cdpr_pipeline.data.validation import check_run_lengths
 from cdpr_pipeline.discovery.bands import power_band_hz, row_noise
 from cdpr_pipeline.discovery.closed_loop import compare_motion
@@ -105,6 +111,9 @@ class DiagnosisSettings:
     selection: SelectionSettings = field(default_factory=SelectionSettings)
     freeform: FreeFormSearch | None = field(default_factory=FreeFormSearch)
     heldout: list[str] | None = None
+    #: runs (names or families) set aside as an untouched cross-test: no fit or choice
+    #: sees them; the motion comparison reports on them (``split.crosstest``)
+    crosstest: list[str] | None = None
     closed_loop: bool = True
     blackbox: BlackBox | None = None
     max_lag: int = 20
@@ -142,11 +151,15 @@ def diagnosis_split(dataset: Dataset, settings: DiagnosisSettings | None = None)
     ``spiral`` or ``pulses`` are held out, else the last file. A single run holds out its
     last block (25 %, at least 3 s while half the run is left to train on); a block too
     short for the regression's trims and 100 rows raises. ``settings.regression`` as
-    :func:`diagnose` reads with it: resolved by the command, else resolved here.
+    :func:`diagnose` reads with it: resolved by the command, else resolved here. Runs
+    set aside as a cross-test (``settings.crosstest``) are in neither part.
     """
     settings = settings or DiagnosisSettings()
     regression = as_resolved(settings.regression, dataset.trajectories, dataset.rig)
-    return heldout_split(dataset.trajectories, settings.heldout, unknown="raise",
+    aside = {tr.name for tr in crosstest_runs(dataset.trajectories, settings.crosstest,
+                                              str(dataset.root))}
+    runs = [tr for tr in dataset.trajectories if tr.name not in aside]
+    return heldout_split(runs, settings.heldout, unknown="raise",
                          min_samples=min_block_samples(regression, dataset.rig.sample_rate_hz),
                          source=str(dataset.root))
 
@@ -231,6 +244,8 @@ class Diagnosis:
     #: the band the statistics rows kept and where it came from (``motion``, or
     #: ``residual`` when :attr:`DiagnosisSettings.follow_residual` widened it)
     band: dict[str, Any] = field(default_factory=dict)
+    #: runs set aside as an untouched cross-test (:attr:`DiagnosisSettings.crosstest`)
+    crosstest: tuple[str, ...] = ()
 
     @property
     def verdict(self) -> str:
@@ -247,7 +262,8 @@ class Diagnosis:
         return {
             "format": FORMAT,
             "dataset": self.dataset,
-            "split": {"train": list(self.train), "heldout": list(self.heldout)},
+            "split": {"train": list(self.train), "heldout": list(self.heldout),
+                      **({"crosstest": list(self.crosstest)} if self.crosstest else {})},
             "nominal": {"params": self.rig_params(), "metrics": self.nominal_metrics.as_dict(),
                         **({"unusable": self.unusable.as_dict()} if self.unusable else {})},
             "discrepancies": [e.as_dict() for e in self.discrepancies],
@@ -590,8 +606,9 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     closed, closed_plot = ClosedLoopComparison(False, "disabled"), None
     if settings.closed_loop:
         t0 = time.perf_counter()
-        closed, rows, closed_plot = compare_motion(nominal, extended, rig, trajectories,
-                                                   held_names, bool(causes), split.blocks)
+        closed, rows, closed_plot = compare_motion(
+            nominal, extended, rig, trajectories, held_names, bool(causes), split.blocks,
+            crosstest_runs(dataset.trajectories, settings.crosstest))
         found += rows
         if closed.available:
             clock["closed loop"] = time.perf_counter() - t0
@@ -624,7 +641,9 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     result = Diagnosis(str(dataset.root), rig, tuple(train_names), tuple(held_names), nominal,
                        extended, tuple(causes), selection.steps, tuple(found), nominal_metrics,
                        extended_metrics, gain, validity, closed, blackbox, sentence, clock,
-                       plots, tuple(extension), unusable, unexplained, band)
+                       plots, tuple(extension), unusable, unexplained, band,
+                       tuple(tr.name for tr in crosstest_runs(dataset.trajectories,
+                                                              settings.crosstest)))
     wider = _follow_residual(settings, float(rig.sample_rate_hz)) if unexplained else None
     if wider is None:
         return result

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from cdpr_pipeline.discovery.closed_loop_report import closed_loop_html
 from cdpr_pipeline.discovery.diagnosis import Diagnosis, describe_cause, winch_reference
 
 _STYLE = """
@@ -136,20 +137,6 @@ def _before_after_plot(d: Diagnosis) -> str:
     return _png(fig)
 
 
-def _closed_loop_plot(d: Diagnosis) -> str:
-    cl = d.plots.closed_loop
-    if cl is None:
-        return ""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(9, 2.6))
-    for label, err, c in (("nominal", cl.before, "C3"), ("extended", cl.after, "C2")):
-        ax.plot(1000 * np.linalg.norm(err, axis=1), color=c, lw=0.9, label=label)
-    ax.set_ylabel("|measured - simulated| (mm)")
-    ax.set_xlabel(f"sample of {cl.run}")
-    ax.legend(fontsize=8)
-    return _png(fig)
-
-
 def _table(rows: list[list[Any]], header: list[str]) -> str:
     def cell(v: Any) -> str:
         if isinstance(v, float):
@@ -219,8 +206,7 @@ def render(d: Diagnosis) -> str:
         _table(gain_rows, ["channel", "RMSE before", "RMSE after", "drop %", "95 % CI %"]),
         _before_after_plot(d),
         "<h2>Validity tests (held-out)</h2>", _validity_plot(d),
-        "<h2>Closed loop</h2>", _closed_loop_plot(d) or
-        f"<p>{html.escape(d.closed_loop.reason or 'not available')}</p>",
+        *closed_loop_html(d, _png, _plt()),
         "<h2>What the nominal model gets wrong</h2>",
         _table(disc, ["signal", "channel", "RMS", "share", "band (Hz)", "whiteness p",
                       "follows"]),

@@ -280,10 +280,12 @@ class RunMotionErrors:
     position_max: tuple[tuple[float, ...], tuple[float, ...]]
     torque_rms: tuple[tuple[float, ...], tuple[float, ...]] | None = None
     torque_relative_pct: tuple[float, float] | None = None
+    #: set aside as an untouched cross-test (no fit or choice saw it)
+    crosstest: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
-            "heldout": self.heldout,
+            "heldout": self.heldout, "crosstest": self.crosstest,
             "position": {"rms_before": _floats(self.position_rms[0]),
                          "rms_after": _floats(self.position_rms[1]),
                          "max_before": _floats(self.position_max[0]),

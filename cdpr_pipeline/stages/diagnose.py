@@ -58,11 +58,13 @@ def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
         blackbox = NetworkBlackBox(LazyNet(bb.model.net), int(bb.window), int(bb.epochs),
                                    int(bb.max_windows), int(bb.seed))
     heldout = cfg.split.heldout
+    crosstest = cfg.split.get("crosstest")
     return DiagnosisSettings(
         regression=instantiate(cfg.regression),
         selection=instantiate(disc.selection),
         freeform=instantiate(disc.freeform) if disc.freeform else None,
         heldout=list(heldout) if heldout else None,
+        crosstest=list(crosstest) if crosstest else None,
         closed_loop=bool(disc.closed_loop),
         blackbox=blackbox,
         max_lag=int(disc.max_lag),
