@@ -24,6 +24,7 @@ import numpy as np
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.data.reading import ResolvedReading, resolve_settings
+from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.discovery.residuals import Model, measured_rows, nominal_model, residuals
 from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
 from cdpr_pipeline.sim.axes_loop import AxesLoop, AxesReferences
@@ -181,18 +182,28 @@ def closed_loop_scores(model: Model, dataset: Dataset, runs: Sequence[str],
     nominal = nominal_model(rig, rig.coulomb_sharpness)
     loop = AxesLoop(model, rig.controller, rig.sample_rate_hz, feedforward=nominal,
                     substeps=substeps)
-    out = {}
+    groups: dict[int, list[Trajectory]] = {}
     for name in runs:
-        tr = by_name[name]
-        dt = float(np.median(np.diff(tr.t)))
-        speed = np.zeros(rig.n) if from_rest else (tr.position[1] - tr.position[0]) / dt
-        external = None if tr.external is None else tr.external[:, None]
-        result = loop.run(AxesReferences(tr.desired[:, None], tr.position[:1],
-                                         speed[None], external))
-        q, u = result.position[:, 0], result.force[:, 0]
-        out[name] = ClosedLoopScore(
-            float(100 * np.linalg.norm(tr.torques - u) / np.linalg.norm(tr.torques)),
-            float(np.sqrt(np.mean((tr.position - q) ** 2))),
-            float(np.sqrt(np.mean((tr.desired - q) ** 2))),
-            float(np.sqrt(np.mean((tr.desired - tr.position) ** 2))))
-    return out
+        groups.setdefault(by_name[name].n_samples, []).append(by_name[name])
+    out = {}
+    for group in groups.values():           # runs of one length advance as one batch
+        starts = []
+        for tr in group:
+            dt = float(np.median(np.diff(tr.t)))
+            starts.append(np.zeros(rig.n) if from_rest
+                          else (tr.position[1] - tr.position[0]) / dt)
+        external = None
+        if any(tr.external is not None for tr in group):
+            external = np.stack([np.zeros_like(tr.torques) if tr.external is None
+                                 else tr.external for tr in group], axis=1)
+        result = loop.run(AxesReferences(np.stack([tr.desired for tr in group], axis=1),
+                                         np.stack([tr.position[0] for tr in group]),
+                                         np.stack(starts), external))
+        for b, tr in enumerate(group):
+            q, u = result.position[:, b], result.force[:, b]
+            out[tr.name] = ClosedLoopScore(
+                float(100 * np.linalg.norm(tr.torques - u) / np.linalg.norm(tr.torques)),
+                float(np.sqrt(np.mean((tr.position - q) ** 2))),
+                float(np.sqrt(np.mean((tr.desired - q) ** 2))),
+                float(np.sqrt(np.mean((tr.desired - tr.position) ** 2))))
+    return {name: out[name] for name in runs}
