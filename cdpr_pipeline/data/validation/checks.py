@@ -102,8 +102,9 @@ CHECKS: dict[str, Check] = {
                           "after the first sample, positions 1e6 m (rad), forces 1e10 N "
                           "(N m), velocities 1e4 m/s, accelerations 1e6 m/s^2"),
     "torque_spike": Check("physics", E, "a torque (force) beyond 1000 times the run's "
-                          "working torque: the 99th percentile of its |u|, at least the "
-                          "stated model's static torque"),
+                          "working torque: the 90th percentile of its abs(u), at least the "
+                          "stated model's static torque (Coulomb friction, offset, a cable "
+                          "robot's platform weight on one drum)"),
     "jump": Check("physics", E, "a position that jumps faster than 1e5 m/s (rad/s) "
                   "between two samples"),
     "outside_frame": Check("physics", E, "a cable robot's platform (measured or desired) "
@@ -121,15 +122,15 @@ CHECKS: dict[str, Check] = {
                          "every run: an error; of some runs: a warning, those runs are "
                          "left out"),
     # what each command needs (cdpr validate reports these per command)
-    "swapped_torques": Check("commands", E, "identify, diagnose: two torque columns that "
+    "swapped_torques": Check("commands", EW, "identify, diagnose: two torque columns that "
                              "look exchanged (the stated model fits 10-fold better with "
                              "them swapped)"),
-    "no_reversal": Check("commands", E, "identify: a channel whose velocity never "
+    "no_reversal": Check("commands", EW, "identify: a channel whose velocity never "
                          "reverses in the fitted runs (Coulomb friction and offset "
                          "inseparable)"),
-    "window_split": Check("commands", E, "train: a run too short for the predictors' "
+    "window_split": Check("commands", EW, "train: a run too short for the predictors' "
                           "windows, or to cut into training, validation and test blocks"),
-    "no_desired": Check("commands", W, "virtual: the runs have no desired columns "
+    "no_desired": Check("commands", EW, "virtual: the runs have no desired columns "
                         "(`xd,yd,zd` or `qd1..qdn`) to drive a trained predictor along"),
     "not_simulated": Check("commands", W, "simulate: the virtual lab cannot run this kind "
                            "of rig"),
