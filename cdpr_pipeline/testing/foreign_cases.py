@@ -10,8 +10,8 @@ The dataset is written in ``cdpr-measured/1`` to a directory, its truth beside i
 configuration (``conf/diagnose.yaml``) with the closed loop and the black box off (they
 take no part in naming causes).
 
-Seeds are drawn at random (:func:`~cdpr_pipeline.testing.lab_cases.draw_seed`;
-``CDPR_TEST_SEED`` replays one) and every case describes itself
+Seeds come from :func:`~cdpr_pipeline.testing.draws.draw_seed` (the commit and the test's
+id; ``CDPR_TEST_SEED`` replays one) and every case describes itself
 (:attr:`ForeignCase.describe`) for failure messages.
 """
 

@@ -1,13 +1,11 @@
 """Virtual-lab datasets with hidden effects, simulated in memory for diagnosis tests.
 
-Seeds are drawn at random (``CDPR_TEST_SEED`` fixes them) and printed on failure, so a
-failing draw can be replayed; magnitudes come from each effect's documented ranges.
+Each test's seed comes from :func:`~cdpr_pipeline.testing.draws.draw_seed` (the commit and
+the test's id; ``CDPR_TEST_SEED`` replays one) and is printed on failure; magnitudes come
+from each effect's documented ranges.
 """
 
 from __future__ import annotations
-
-import os
-import secrets
 
 import numpy as np
 
@@ -19,10 +17,6 @@ from cdpr_pipeline.discovery.freeform import FreeFormSearch
 from cdpr_pipeline.sim.candidate_forms import DataScale
 from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.lab import simulate_lab
-
-
-def draw_seed() -> int:
-    return int(os.environ.get("CDPR_TEST_SEED", secrets.randbelow(2 ** 31)))
 
 
 def lab_dataset(rig, effects: list[Effect], seed: int, duration_s: float | None = None

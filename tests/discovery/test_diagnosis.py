@@ -1,5 +1,5 @@
-"""Hidden-effect tests: simulate the lab with one effect hidden (magnitude and seed drawn
-at random within the documented ranges), diagnose, and require the right verdict, the
+"""Hidden-effect tests: simulate the lab with one effect hidden (its magnitude drawn from
+the test's seed within the documented ranges), diagnose, and require the right verdict, the
 fitted physical parameter, and a held-out gain whose interval excludes zero.
 
 The fast suite draws one case of each kind; ``tests/discovery/test_detection_rates.py``

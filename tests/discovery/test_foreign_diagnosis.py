@@ -4,7 +4,7 @@ writer, hard-sign Coulomb friction with true stick-slip, random rigs, magnitudes
 channel in absolute units), written to disk and loaded like a user's recording, diagnosed
 with the command's own configuration (closed loop and black box off).
 
-Each test runs on both rig kinds and draws its seed at random (``CDPR_TEST_SEED`` replays
+Each test runs on both rig kinds and draws its seed from the commit (``CDPR_TEST_SEED`` replays
 one), and with it the rig (cable robot: 3 or 4 cables, 100-1000 Hz; drive axes: 1-6
 axes, 100-2000 Hz), the effect, the channels it acts on and its magnitude from the
 generator's documented ranges. Where the truth gives a number the cause can express, the
