@@ -33,8 +33,20 @@ DRAWN = pytest.StashKey[int]()
 DRAWING_FIXTURES = ("seed", "seed_of")
 
 
-def pytest_report_header(config) -> str:
-    return describe_draws()
+def pytest_report_header(config) -> list[str]:
+    return [describe_draws(), _blas_kernels()]
+
+
+def _blas_kernels() -> str:
+    """The BLAS kernels numpy runs on (``OPENBLAS_CORETYPE`` chooses OpenBLAS's): the
+    golden-record tests must hold under each (``make test-golden``)."""
+    try:
+        from threadpoolctl import threadpool_info
+    except ImportError:       # pragma: no cover - a scikit-learn dependency
+        return "BLAS: unknown (no threadpoolctl)"
+    found = sorted({f"{i.get('internal_api')} {i.get('version')} {i.get('architecture')}"
+                    for i in threadpool_info() if i.get("user_api") == "blas"})
+    return "BLAS: " + ("; ".join(found) or "none found")
 
 
 def pytest_collection_modifyitems(config, items) -> None:
