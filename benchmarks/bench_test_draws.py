@@ -19,24 +19,27 @@ after every draw (``--resume`` continues an interrupted run from it) and, at the
 into this benchmark's section of docs/measurements.md (``test-draws``; ``--no-record``
 leaves it alone, as for a trial on a few tests).
 
-How long it takes: one draw of the 60 fast random-draw tests (``-m "random_draw and not
-slow"``) was measured at about 12 min of wall time on 2 shared, loaded cores with
-``-n 2`` (their CPU time is about a third of that); by file, per draw (loaded 2-core
-machine, CPU seconds in brackets where measured apart):
+How long it takes: one draw of the 63 fast random-draw tests (``-m "random_draw and not
+slow"``), measured with this script (``--draws 1 -n 0``, in seven parts by file) on 2
+cores shared with other work (load average 9-12, so several times what an idle machine
+needs), took 856 s of wall time, 784 s of it in the tests; per test and draw:
 
-* ``tests/discovery/test_foreign_diagnosis.py`` (19 tests): 20-60 s each (10-18 s CPU),
-  the bulk of a draw;
-* ``tests/discovery/test_diagnosis.py``, ``test_per_winch.py``, ``test_timing.py``,
-  ``test_unexplained.py``, ``test_internal_force.py``, ``test_never_worse.py``,
-  ``test_cable_damping.py``, ``test_report.py``, ``test_encoder_rest.py``: 5-60 s each;
-* ``tests/identification/test_foreign_axes.py``, ``test_foreign_cdpr.py``: 20-60 s each;
-* the unit-level draws (``test_draws.py``, ``test_default_settings.py``,
-  ``test_independent_sim.py``, ``test_hard_sign.py``, ``test_timing.py``'s held
-  command, ``test_foreign_cases.py``): under 1 s to 15 s each.
+* ``tests/discovery/test_foreign_diagnosis.py``: 15 tests, 4-53 s each (211 s);
+* ``tests/discovery/test_per_winch.py``: 8 tests, 10-44 s each (192 s);
+* ``tests/discovery/test_internal_force.py``: 2 tests, 60 and 78 s (139 s);
+* ``tests/discovery/test_diagnosis.py``: 4 tests, 9-17 s (56 s);
+  ``test_cable_damping.py``: 3 tests, 9-22 s (50 s); ``test_never_worse.py``: 8 tests,
+  0.1-5 s (21 s); ``test_unexplained.py``: 3 tests, 0-8 s; ``test_report.py``: 4 s;
+* ``tests/identification/test_foreign_axes.py``: 6 tests, 2.5-19 s (55 s);
+  ``test_foreign_cdpr.py``: 2 tests, 10 and 18 s;
+* ``tests/testing/test_foreign_cases.py``: 2 tests, 7 s each; ``tests/sim/
+  test_hard_sign.py``: 3 s; the rest (``test_timing.py``'s held command,
+  ``test_default_settings.py``, ``test_independent_sim.py``, ``test_draws.py``): under
+  0.5 s each.
 
-So 200 draws of the fast tests take about 40 hours on 2 cores (a few hours on 16 with
-``-n 16``); the 12 slow random-draw tests (``--slow``: detection rates, null
-calibration, the lag studies) several minutes to an hour each per draw.
+So 200 draws take about 48 hours of that machine (``-n`` divides it by about the number
+of free cores). The 12 slow random-draw tests (``--slow``: detection rates, null
+calibration, the lag studies, each diagnosing several datasets) were not timed here.
 """
 
 from __future__ import annotations

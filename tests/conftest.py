@@ -49,6 +49,7 @@ def _blas_kernels() -> str:
     return "BLAS: " + ("; ".join(found) or "none found")
 
 
+@pytest.hookimpl(tryfirst=True)      # before `-m` selects by the marks
 def pytest_collection_modifyitems(config, items) -> None:
     for item in items:
         params = getattr(getattr(item, "callspec", None), "params", {})

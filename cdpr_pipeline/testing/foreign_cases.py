@@ -389,7 +389,7 @@ def parameters_ok(case: ForeignCase, cause: dict) -> tuple[bool, str]:
 #: by that share of its size is off by that share of its torque). One torque has several
 #: forms: ``c w [w > 0]`` is ``c w - c w [w < 0]``, an asymmetric viscous friction of the
 #: other direction with a viscous re-fit (seed 1234514106 at 287 Hz, 4 cables), and a
-#: Stribeck bump trades with Coulomb and viscous re-fits
+#: Stribeck bump can trade part of itself with Coulomb and viscous re-fits
 CONTRIBUTION_TOLERANCE = {"stribeck_friction": 0.35, "asymmetric_viscous_friction": 0.25,
                           "winch_parameter_error": 0.25}
 
