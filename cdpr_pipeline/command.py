@@ -24,8 +24,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.config import CONFIG_DIR
 from cdpr_pipeline.errors import ConfigError, UserError, reported
-from cdpr_pipeline.outputs import rebase_paths, staged_output
-from cdpr_pipeline.pipeline.inputs import inputs_state
+from cdpr_pipeline.outputs import inputs_state, rebase_paths, staged_output
 
 log = logging.getLogger(__name__)
 

@@ -6,6 +6,7 @@ What every ``cdpr`` command that writes an ``out_dir`` and every pipeline stage 
   :class:`~cdpr_pipeline.errors.OutputBusy` naming the holder's pid. The lock is the
   kernel's (``flock``), so a process that died holding it holds it no more: the next run
   takes it over.
+- :func:`inputs_state`: what a run's resume stamp holds of its inputs (sizes, times);
 - :func:`partial_dir`: the work in progress goes to ``<out_dir>.partial``, kept from an
   interrupted run with the same params (resumed) and emptied otherwise.
 - :func:`commit_output`: the finished partial directory is swapped in for ``out_dir``
@@ -21,7 +22,7 @@ import fcntl
 import logging
 import os
 import shutil
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -95,6 +96,29 @@ def output_lock(out_dir: Path) -> Iterator[None]:
         lock_path.unlink(missing_ok=True)
         fcntl.flock(handle, fcntl.LOCK_UN)
         handle.close()
+
+
+def inputs_state(paths: Mapping[str, str]) -> list:
+    """Size and modification time of every file under the input paths: cheap, and
+    enough to tell a resumed stage that its inputs changed.
+
+    Parameters
+    ----------
+    paths : Mapping
+        ``label -> path`` (see :func:`cdpr_pipeline.pipeline.inputs.input_paths`);
+        missing paths count as empty.
+
+    Returns
+    -------
+    list
+        ``(label, file, size, mtime_ns)`` per file, in a fixed order.
+    """
+    state = []
+    for key, top in sorted(paths.items()):
+        root = Path(top)
+        files = [root] if root.is_file() else sorted(q for q in root.rglob("*") if q.is_file())
+        state += [(key, str(q), q.stat().st_size, q.stat().st_mtime_ns) for q in files]
+    return state
 
 
 def partial_dir(out_dir: Path, digest: str) -> Path:
