@@ -174,26 +174,18 @@ def _replace(src: Path, dest: Path) -> None:
         os.replace(src, dest)
 
 
-def commit_output(partial: Path, out_dir: Path, carry: Sequence[str] = ()) -> None:
+def commit_output(partial: Path, out_dir: Path) -> None:
     """Swap the finished partial directory in for ``out_dir`` (two renames).
 
     Parameters
     ----------
     partial : Path
-        What :func:`partial_dir` returned, now complete.
+        What :func:`partial_dir` returned, now complete. A file in it still open for
+        writing (the command's log) keeps its handle: a rename moves the open file.
     out_dir : Path
         The output directory; its previous content is removed.
-    carry : sequence of str
-        Glob patterns of entries of the current ``out_dir`` that move into the new one
-        (those the partial directory lacks), e.g. Hydra's ``.hydra/`` and log files when
-        ``out_dir`` is Hydra's run directory. A file still open for writing keeps its
-        handle (a rename moves the open file).
     """
     partial, out_dir = Path(partial), Path(out_dir)
-    for pattern in carry:
-        for entry in sorted(out_dir.glob(pattern)) if out_dir.is_dir() else []:
-            if not (partial / entry.name).exists():
-                entry.rename(partial / entry.name)
     old = _sibling(out_dir, ".old")
     if old.exists():
         shutil.rmtree(old)
@@ -207,12 +199,12 @@ def commit_output(partial: Path, out_dir: Path, carry: Sequence[str] = ()) -> No
 
 @contextmanager
 def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
-                  carry: Sequence[str] = ()) -> Iterator[Path]:
+                  scratch: Sequence[str] = ()) -> Iterator[Path]:
     """Lock ``out_dir``, yield where to write it, and swap that in when the block ends.
 
     If the block raises (or the process dies) ``out_dir`` stays as it was and the work so
     far stays in ``<out_dir>.partial`` (resumed by a run with the same ``digest``; removed
-    if the block raised before writing anything).
+    if the block raised before writing anything but ``scratch``).
 
     Parameters
     ----------
@@ -225,8 +217,9 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
         True: the yielded path is ``<out_dir>.partial/<name>``, which must be created by
         the block (e.g. a dataset writer that refuses an existing directory); files the
         block writes beside it (``<name>.truth.yaml``) land beside ``out_dir``.
-    carry : sequence of str
-        See :func:`commit_output`.
+    scratch : sequence of str
+        Names of files in the partial directory that alone make nothing worth keeping
+        from a failed run (the command's log: the error was reported).
 
     Yields
     ------
@@ -242,18 +235,18 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
         try:
             yield work
         except BaseException:
-            if not any(partial.iterdir()):    # it failed before writing: nothing to keep
-                partial.rmdir()
+            if all(p.name in scratch for p in partial.iterdir()):   # failed before writing
+                shutil.rmtree(partial)                              # anything to resume
                 _sibling(out_dir, ".partial.params").unlink(missing_ok=True)
             raise
         if not nested:
-            commit_output(partial, out_dir, carry)
+            commit_output(partial, out_dir)
             repoint_text_outputs(out_dir, str(partial), str(out_dir))
             return
         if not work.exists():
             raise FileNotFoundError(f"{work}: the run wrote no {out_dir.name}")
         sidecars = [p for p in partial.iterdir() if p.name != out_dir.name]
-        commit_output(work, out_dir, carry)
+        commit_output(work, out_dir)
         repoint_text_outputs(out_dir, str(work), str(out_dir))
         for path in sidecars:
             _replace(path, out_dir.parent / path.name)
