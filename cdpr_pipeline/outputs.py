@@ -13,7 +13,8 @@ What every ``cdpr`` command that writes an ``out_dir`` and every pipeline stage 
   by renames; a run that fails or is killed leaves ``out_dir`` as it was.
 - :func:`rebase_paths` and :func:`repoint_text_outputs`: paths in a config pointed at the
   partial directory, and small text outputs that recorded them pointed back.
-- :func:`staged_output`: all of it around one block.
+- :func:`staged_output`: all of it around one block; :func:`final_paths` names the paths
+  being written there as they will be found (what a run logs to MLflow).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import os
 import shutil
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +35,8 @@ log = logging.getLogger(__name__)
 
 #: text outputs up to this size are repointed from the partial to the final directory
 MAX_REPOINT_BYTES = 5_000_000
+#: ``(where it is written, out_dir)`` of the output :func:`staged_output` is writing
+_STAGED: ContextVar[tuple[str, str] | None] = ContextVar("cdpr_staged_output", default=None)
 
 
 def _sibling(out_dir: Path, suffix: str) -> Path:
@@ -232,6 +236,7 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
         work = partial / out_dir.name if nested else partial
         if nested and work.exists():   # an interrupted writer's; a dataset writer does not
             shutil.rmtree(work)        # resume
+        token = _STAGED.set((str(work), str(out_dir)))
         try:
             yield work
         except BaseException:
@@ -239,6 +244,8 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
                 shutil.rmtree(partial)                              # anything to resume
                 _sibling(out_dir, ".partial.params").unlink(missing_ok=True)
             raise
+        finally:
+            _STAGED.reset(token)
         if not nested:
             commit_output(partial, out_dir)
             repoint_text_outputs(out_dir, str(partial), str(out_dir))
@@ -276,6 +283,24 @@ def rebase_paths(tree: Any, old: str, new: str) -> Any:
     if isinstance(tree, str) and (tree == old or tree.startswith(old.rstrip("/") + "/")):
         return new + tree[len(old.rstrip("/")):]
     return tree
+
+
+def final_paths(tree: Any) -> Any:
+    """``tree`` with the paths into the output being written (by :func:`staged_output`, in
+    this context) named as they will be found once it is swapped in; as it is elsewhere.
+
+    Parameters
+    ----------
+    tree : Any
+        A config as plain containers, or a path string.
+
+    Returns
+    -------
+    Any
+        A copy of ``tree`` (see :func:`rebase_paths`).
+    """
+    staged = _STAGED.get()
+    return tree if staged is None else rebase_paths(tree, *staged)
 
 
 def repoint_text_outputs(out_dir: Path, old: str, new: str) -> None:
