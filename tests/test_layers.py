@@ -3,7 +3,7 @@
 The order, lowest first (a layer may import its own and any lower one, never a higher):
 
 1. leaves: ``errors``, ``config``, ``progress``, ``metrics``, ``tables``, ``evolution``,
-   ``resources`` (no project imports);
+   ``resources`` (no project imports but ``errors``, which ``config`` reports with);
 2. ``data``: reading and checking datasets (how a run is read: ``data.reading``), rigs,
    splits;
 3. ``wavelet``: the wavelet split;
