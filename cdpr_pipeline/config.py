@@ -94,9 +94,23 @@ def _unknown(key: str, keys: Sequence[str], command: str) -> ConfigError:
     return ConfigError(f"unknown setting {key} ({hint})")
 
 
-def _type_error(key: str, text: str, value: Any, default: Any) -> str | None:
+def _an_argument_word(value: Any, default: Any) -> bool:
+    """Whether ``value`` is what an object's argument may take besides its default's type:
+    a list, or a word that is no misspelt ``true``/``false`` (Lightning's
+    ``devices=auto`` or ``[0, 1]``, ``deterministic=warn``)."""
+    if isinstance(value, list):
+        return not isinstance(default, bool)
+    if not (isinstance(value, str) and value.isalpha()):
+        return False
+    return not difflib.get_close_matches(value.lower(), ["true", "false"], n=1, cutoff=0.6)
+
+
+def _type_error(key: str, text: str, value: Any, default: Any,
+                argument: bool = False) -> str | None:
     """Why ``value`` cannot replace ``default`` (a boolean takes true or false, an integer
-    an integer, a float a number), or None. ``null`` and interpolations are not judged."""
+    an integer, a float a number), or None. ``null`` and interpolations are not judged;
+    an object's ``argument`` (its mapping has ``_target_``) may also take a word or a list
+    in place of a boolean or an integer (:func:`_an_argument_word`)."""
     if value is None or (isinstance(value, str) and "${" in value):
         return None
     if isinstance(default, bool):
@@ -105,11 +119,12 @@ def _type_error(key: str, text: str, value: Any, default: Any) -> str | None:
         ok, expected = isinstance(value, int) and not isinstance(value, bool), "an integer"
     elif isinstance(default, float):
         ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        expected = "a number"
+        return None if ok else f"{key}={text}: expected a number"
     elif isinstance(default, Mapping) and not isinstance(value, Mapping):
         return f"{key} holds settings ({', '.join(list(default)[:4])}), not one value"
     else:
         return None
+    ok = ok or (argument and _an_argument_word(value, default))
     return None if ok else f"{key}={text}: expected {expected}"
 
 
@@ -176,7 +191,8 @@ def check_overrides(name: str, overrides: Sequence[str], *, command: str,
       object (it has ``_target_``: ``trainer``, ``optimizer``, ...), whose constructor takes
       more arguments; ``+key`` for a key that is there is refused (``key=value`` sets it).
     - A value replacing a boolean must be ``true`` or ``false``, an integer an integer, a
-      float a number (``null`` and ``${...}`` interpolations pass).
+      float a number (``null`` and ``${...}`` interpolations pass); an object's argument
+      may also be a word or a list there (``trainer.devices=auto``, ``=[0,1]``).
     - Group options (``model=tcn``) must exist; ``hydra.*`` keys are Hydra's to check.
     - Anything else Hydra would refuse is reported in one line too (the config is composed
       with every override, a sweep's first value standing for the sweep).
@@ -240,8 +256,10 @@ def check_overrides(name: str, overrides: Sequence[str], *, command: str,
             resolved = OmegaConf.select(OmegaConf.create(tree), key, default=None,
                                         throw_on_resolution_failure=False)
             default = resolved if resolved is not None else default
+        parent = _node(tree, key.rpartition(".")[0]) if "." in key else tree
+        argument = isinstance(parent, Mapping) and TARGET_KEY in parent
         for value, text in _values(o):
-            problem = _type_error(key, text, value, default)
+            problem = _type_error(key, text, value, default, argument)
             if problem:
                 raise ConfigError(problem)
     _composed(name, [_first(o) for o in parsed])

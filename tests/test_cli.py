@@ -139,6 +139,8 @@ def test_booleans_and_numbers_are_read_strictly(capsys, tmp_path, sub):
     (["diagnose", "blackbox.model=tcn"], "blackbox.model holds settings"),
     (["train", "model=tcnx"], "unknown option model=tcnx (choices: arx, "),
     (["train", "trainer.max_epochs=2.5"], "trainer.max_epochs=2.5: expected an integer"),
+    (["train", "trainer.deterministic=flase"],
+     "trainer.deterministic=flase: expected true or false"),
     (["identify", "seed=0,1"], "seed=0,1: several values need -m"),
     (["identify", "hydra.run.dri=x"], "unknown setting hydra.run.dri (did you mean "
                                       "hydra.run.dir?)"),
@@ -159,12 +161,16 @@ def test_settings_refused_before_anything_runs(capsys, tmp_path, args, message):
     (["diagnose", "++blackbox.enabled=false"], ("blackbox", "enabled", False)),
     (["diagnose", "blackbox.epochs=null"], ("blackbox", "epochs", None)),
     (["train", "optimizer.lr=1"], ("optimizer", "lr", 1)),
+    (["train", "trainer.devices=auto"], ("trainer", "devices", "auto")),      # Lightning's
+    (["train", "trainer.devices=[0,1]"], ("trainer", "devices", [0, 1])),     # other types
+    (["train", "trainer.deterministic=warn"], ("trainer", "deterministic", "warn")),
     (["simulate", "+effects=[anchor_offset]", "effects.anchor_offset.cable=2"],
      ("effects", "anchor_offset", {"cable": 2})),
 ])
 def test_arguments_for_an_object_and_set_values_pass(capsys, args, shown):
     """``+key`` adds an argument to a mapping that builds an object (``_target_``: the
-    trainer's, the optimizer's); ``++key`` and ``null`` set a key that is there."""
+    trainer's, the optimizer's), whose arguments may also take a word or a list where the
+    default is an integer or a boolean; ``++key`` and ``null`` set a key that is there."""
     cli.main([*args, "--cfg", "job"])
     cfg = yaml.safe_load(capsys.readouterr().out)
     group, key, value = shown
