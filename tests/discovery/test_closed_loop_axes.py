@@ -4,11 +4,9 @@ errors in the axis's unit and the extended model's worth as feedforward; n steps
 where it states none, with the horizon chosen from the motion and stated.
 
 The datasets come from the independent generator (its controller stated in the schema,
-or free-form); seeds are drawn (``CDPR_TEST_SEED`` replays one) and printed."""
+or free-form); seeds are drawn from the commit (``CDPR_TEST_SEED`` replays one)."""
 
 from __future__ import annotations
-
-import os
 
 import numpy as np
 import pytest
@@ -21,17 +19,11 @@ from cdpr_pipeline.testing.independent_sim.axes import random_axes_rig, simulate
 from cdpr_pipeline.testing.lab_cases import fast_settings
 
 
-def _seed() -> int:
-    seed = int(os.environ.get("CDPR_TEST_SEED", np.random.default_rng().integers(2**31)))
-    print(f"CDPR_TEST_SEED={seed}")
-    return seed
-
-
 @pytest.fixture(scope="module")
-def loaded_axes(tmp_path_factory):
+def loaded_axes(tmp_path_factory, seed_of, request):
     """Two prismatic axes with a hidden position-dependent load on both, the controller
     stated in the schema (PD + the nominal model as feedforward)."""
-    seed = _seed()
+    seed = seed_of(request.node)
     rig = random_axes_rig(seed, n_axes=2, rate_hz=500.0).replace(controller_schema=True)
     out = tmp_path_factory.mktemp("axes") / "ds"
     simulate_axes_dataset(out, rig, ["position_dependent_load"], n_runs=3, duration_s=10.0,
@@ -69,8 +61,7 @@ def test_diagnose_re_simulates_axes_in_closed_loop(loaded_axes):
     assert d.plots.closed_loop is not None and d.plots.closed_loop.t[-1] > 1.0
 
 
-def test_without_a_stated_controller_the_motion_is_compared_n_steps_ahead(tmp_path):
-    seed = _seed()
+def test_without_a_stated_controller_the_motion_is_compared_n_steps_ahead(tmp_path, seed):
     rig = random_axes_rig(seed, n_axes=1, rate_hz=400.0)            # free-form controller
     simulate_axes_dataset(tmp_path / "ds", rig, ["position_dependent_load"], n_runs=2,
                           duration_s=10.0, seed=seed)

@@ -6,7 +6,6 @@ nothing behind."""
 from __future__ import annotations
 
 import json
-import os
 
 import numpy as np
 import pytest
@@ -27,11 +26,10 @@ def _cwd(monkeypatch, tmp_path):
 
 
 @pytest.fixture(scope="module")
-def axes_data(tmp_path_factory):
+def axes_data(tmp_path_factory, seed_of, request):
     """Two axes from the independent generator, its controller stated in the schema, a
     hidden position-dependent load."""
-    seed = int(os.environ.get("CDPR_TEST_SEED", np.random.default_rng().integers(2**31)))
-    print(f"CDPR_TEST_SEED={seed}")
+    seed = seed_of(request.node)
     rig = random_axes_rig(seed, n_axes=2, rate_hz=500.0).replace(controller_schema=True)
     out = tmp_path_factory.mktemp("axes") / "ds"
     simulate_axes_dataset(out, rig, ["position_dependent_load"], n_runs=3, duration_s=8.0,
