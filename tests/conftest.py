@@ -78,3 +78,14 @@ def small_lab(tmp_path_factory):
     out = tmp_path_factory.mktemp("small_lab") / "lab"
     simulate(compose_config("simulate", [*SMALL_LAB, f"out_dir={out}"]))
     return out
+
+
+@pytest.fixture(scope="session")
+def kind_cases(tmp_path_factory):
+    """One diagnosis of each rig kind (``testing.kind_cases``), seed drawn and printed."""
+    from cdpr_pipeline.testing.kind_cases import kind_cases as make
+    from cdpr_pipeline.testing.lab_cases import draw_seed
+
+    seed = draw_seed()
+    print(f"kind_cases: seed {seed} (CDPR_TEST_SEED={seed} replays it)")
+    return make(tmp_path_factory.mktemp("kind_cases"), seed)

@@ -179,7 +179,7 @@ def _explaining(d: Diagnosis, entry: Discrepancy, variable: str, cause: Judgemen
     ylabel = f"{entry.channel} residual ({column_unit(d, entry)})"
     corr = (entry.correlations or {}).get(variable, float("nan"))
     what = channel_label(d, entry.signal, i).split(": ", 1)[-1].rsplit(" (", 1)[0]
-    title = (f"{cause_name(cause) + ': ' if cause else ''}{what} residual against "
+    title = (f"{cause_name(cause, d.nominal) + ': ' if cause else ''}{what} residual against "
              f"{xlabel.rsplit(' (', 1)[0]} (r = {corr:+.2f})")
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)

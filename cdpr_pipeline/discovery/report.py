@@ -84,7 +84,7 @@ def _causes(d: Diagnosis) -> list[str]:
     reference = winch_reference(d.nominal, d.causes)
     sizes = d.sizes or [()] * len(d.causes)
     shares = d.shares
-    rows = [[cause_name(c), describe_cause(c, d.nominal, reference),
+    rows = [[cause_name(c, d.nominal), describe_cause(c, d.nominal, reference),
              sizes_text(s) or "-", ", ".join(c.channels), c.pvalue, c.bic_drop,
              _pct(100 * c.heldout_rmse_drop),
              _pct(share.pct) if share.pct is not None else "- (interaction, below)"]
@@ -93,7 +93,7 @@ def _causes(d: Diagnosis) -> list[str]:
            _table(rows, ["cause", "fitted", "sizes (± standard error)", "channels",
                          "p (LR test)", "BIC drop", f"{GAIN_NAME} when selected (%)",
                          "share of the gain (%)"])]
-    notes = [f"<li>{html.escape(cause_name(c))} {html.escape(s.note)}.</li>"
+    notes = [f"<li>{html.escape(cause_name(c, d.nominal))} {html.escape(s.note)}.</li>"
              for c, s in zip(d.causes, shares, strict=True) if s.note]
     if notes:
         out.append("<p>A share is the cause's held-out contribution (its Shapley value over "

@@ -112,7 +112,7 @@ class CauseComponent:
 
     def as_dict(self) -> dict[str, Any]:
         return {"channel": self.channel, "label": self.label,
-                "sizes": [s.as_dict() for s in self.sizes], "signal": self.signal,
+                "values": [s.as_dict() for s in self.sizes], "signal": self.signal,
                 "rms": self.rms, "noise": self.noise, "rms_unit": self.rms_unit,
                 "below_noise": self.below_noise}
 

@@ -199,10 +199,14 @@ def describe_cause(j: Judgement, nominal: Model, reference: Model | None = None)
 
 
 # ------------------------------------------------------------------ the sentence
-def cause_name(j: Judgement) -> str:
-    """The cause in words: its vocabulary name with spaces."""
-    return "an effect outside the vocabulary (unnamed)" if j.effect == "unnamed" \
-        else j.effect.replace("_", " ")
+def cause_name(j: Judgement, model: Model | None = None) -> str:
+    """The cause in words: its vocabulary name with spaces, a winch's drive in the
+    words of ``model``'s rig (``axis parameter error`` for ``winch_parameter_error`` on
+    drive axes)."""
+    if j.effect == "unnamed":
+        return "an effect outside the vocabulary (unnamed)"
+    words = j.effect.replace("_", " ")
+    return words if model is None else words.replace("winch", model.drive_word)
 
 
 def sizes_text(components: Sequence[CauseComponent]) -> str:
@@ -217,9 +221,10 @@ def sizes_text(components: Sequence[CauseComponent]) -> str:
     return text
 
 
-def _cause_text(j: Judgement, components: Sequence[CauseComponent]) -> str:
+def _cause_text(j: Judgement, components: Sequence[CauseComponent],
+                model: Model | None) -> str:
     sizes = sizes_text(components)
-    return f"{cause_name(j)} ({sizes})" if sizes else cause_name(j)
+    return f"{cause_name(j, model)} ({sizes})" if sizes else cause_name(j, model)
 
 
 def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutGain,
@@ -270,9 +275,9 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
             f"size stays below {noise_ratio:g} times the measurement noise: the nominal "
             f"model is adequate to that precision.")
     sizes = list(sizes) or [()] * len(causes)
-    text = prefix + f"Most likely cause: {_cause_text(causes[0], sizes[0])}."
+    text = prefix + f"Most likely cause: {_cause_text(causes[0], sizes[0], nominal)}."
     if len(causes) > 1:
-        text += " Also: " + "; ".join(_cause_text(c, s) for c, s in
+        text += " Also: " + "; ".join(_cause_text(c, s, nominal) for c, s in
                                       zip(causes[1:], sizes[1:], strict=True)) + "."
     text += f" Extending the model: {gain_text(gain)} on the {signal_words(gain.signal, nominal)}."
     return text

@@ -93,6 +93,23 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def diagnosis_record(d: Diagnosis, dataset_path: str, split: Split | None = None,
+                     model_file: str = "extended_model.yaml") -> dict[str, Any]:
+    """The content of ``diagnosis.json`` (``docs/diagnosis-format.md``), JSON-safe.
+
+    ``split``: the diagnosis's split (:func:`diagnosis_split`); when it cut runs into
+    time blocks, ``split`` lists them (run, samples, seconds).
+    """
+    record = d.as_json(model_file)
+    record["dataset"] = str(dataset_path)
+    if split is not None and split.blocks:
+        if [list(split.train), list(split.heldout)] != [list(d.train), list(d.heldout)]:
+            raise RuntimeError(f"split {split.as_dict()} is not the diagnosis's "
+                               f"({d.train}, {d.heldout})")
+        record["split"] = split.as_dict()
+    return _plain(record)
+
+
 def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str,
                   split: Split | None = None) -> dict[str, Path]:
     """diagnosis.json, report.html and extended_model.yaml in ``out_dir``.
@@ -103,14 +120,8 @@ def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str,
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": out_dir / "diagnosis.json", "html": out_dir / "report.html",
              "model": out_dir / "extended_model.yaml", "metrics": out_dir / "metrics.json"}
-    record = d.as_json(paths["model"].name)
-    record["dataset"] = str(dataset_path)
-    if split is not None and split.blocks:
-        if [list(split.train), list(split.heldout)] != [list(d.train), list(d.heldout)]:
-            raise RuntimeError(f"split {split.as_dict()} is not the diagnosis's "
-                               f"({d.train}, {d.heldout})")
-        record["split"] = split.as_dict()
-    paths["json"].write_text(json.dumps(_plain(record), indent=1))
+    record = diagnosis_record(d, dataset_path, split, paths["model"].name)
+    paths["json"].write_text(json.dumps(record, indent=1))
     paths["metrics"].write_text(json.dumps(_plain(summary_metrics(d)), indent=1))
     paths["html"].write_text(render(d))
     write_model(paths["model"], d.rig, d.effects, source=f"cdpr diagnose of {dataset_path}",
