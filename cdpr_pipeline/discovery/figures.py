@@ -298,7 +298,7 @@ def band_figure(d: Diagnosis) -> Figure | None:
         ax.bar(np.arange(len(labels)) + j * width, [100 * b.share for b in e.bands], width,
                label=e.channel)
     ax.set_xticks(np.arange(len(labels)) + 0.4 - width / 2, labels, fontsize=8)
-    xlabel, ylabel = "band (Hz), db4 wavelet", "share of the residual energy (%)"
+    xlabel, ylabel = "db4 wavelet band (Hz)", "share of the residual energy (%)"
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     title = "Where the nominal model's error sits in frequency (full-rate residual)"

@@ -213,11 +213,13 @@ def sizes_text(components: Sequence[CauseComponent]) -> str:
     """The sizes of a cause's parts above the noise, with their standard errors; how
     many parts below the noise were left out."""
     kept = [c for c in components if not c.below_noise]
+    if components and not kept:
+        where = ", ".join(c.label for c in components if c.label)
+        return f"{where + ': ' if where else ''}below the measurement noise"
     text = "; ".join(c.text() for c in kept)
     dropped = len(components) - len(kept)
     if dropped:
-        text += ("; " if text else "") + (
-            f"{dropped} part{'s' if dropped > 1 else ''} below the noise left out")
+        text += f"; {dropped} part{'s' if dropped > 1 else ''} below the noise left out"
     return text
 
 
