@@ -118,8 +118,8 @@ def _gain(d: Diagnosis) -> list[str]:
     return [f"<h2>Gain on held-out runs: {GAIN_NAME}</h2>",
             f"<p>{html.escape(gain_text(g))} on the {signal_words(g.signal, d.nominal)}: "
             f"RMSE {g.before:.4g} &rarr; {g.after:.4g} over every column"
-            + (f" (the drop weights each column's squared error by "
-               f"{html.escape(g.relative_to)})" if g.relative_to else "") + ".</p>",
+            + (f" (columns weighted by {html.escape(g.relative_to)})" if g.relative_to
+               else "") + ".</p>",
             _table(rows, ["channel", "RMSE, nominal model", "RMSE, extended model",
                           f"{GAIN_NAME} (%)", "95 % CI"])]
 

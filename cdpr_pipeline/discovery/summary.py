@@ -93,7 +93,8 @@ def gain_shares(causes: Sequence[Judgement]) -> list[GainShare]:
     shares = [v / total for v in values]
     odd = [k for k, s in enumerate(shares) if not 0.0 <= s <= 1.0]
     joint = sum(shares[k] for k in odd)
-    joint_pct = 100 * joint if 0.0 <= joint <= 1.0 and len(odd) > 1 else None
+    # their joint share says something only beside causes that have their own
+    joint_pct = 100 * joint if 0.0 <= joint <= 1.0 and 1 < len(odd) < len(causes) else None
     out = []
     for k, (c, s) in enumerate(zip(causes, shares, strict=True)):
         if k not in odd:

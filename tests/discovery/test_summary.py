@@ -25,9 +25,12 @@ def test_shares_of_the_gain_lie_between_0_and_100_or_say_why_not():
     together they make the whole gain. Two causes that add up are split as they add."""
     shares = gain_shares([_cause("a", 2.91), _cause("b", 1.38), _cause("c", -3.82)])
     assert [s.pct for s in shares] == [None, None, None]
-    assert shares[2].partners == ("a", "b")
-    assert shares[2].joint_pct == pytest.approx(100.0)
-    assert "interacts with a, b" in shares[2].note and "100 %" in shares[2].note
+    assert shares[2].partners == ("a", "b") and shares[2].joint_pct is None
+    assert "interacts with a, b" in shares[2].note and "%" not in shares[2].note
+    # beside a cause with its own share, the interacting pair's joint share
+    pair = gain_shares([_cause("a", 0.5), _cause("b", 1.2), _cause("c", -0.7)])
+    assert pair[0].pct == pytest.approx(50.0) and pair[1].pct is None
+    assert pair[1].joint_pct == pytest.approx(50.0) and "50 %" in pair[2].note
 
     plain = gain_shares([_cause("a", 0.7), _cause("b", 0.2)])
     assert [s.pct for s in plain] == pytest.approx([700 / 9, 200 / 9])
