@@ -96,7 +96,7 @@ def gain_shares(causes: Sequence[Judgement]) -> list[GainShare]:
     # their joint share says something only beside causes that have their own
     joint_pct = 100 * joint if 0.0 <= joint <= 1.0 and 1 < len(odd) < len(causes) else None
     out = []
-    for k, (c, s) in enumerate(zip(causes, shares, strict=True)):
+    for k, s in enumerate(shares):
         if k not in odd:
             out.append(GainShare(100 * s))
         else:

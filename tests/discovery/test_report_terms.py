@@ -77,7 +77,7 @@ def test_the_sentence_gives_every_cause_a_size_with_its_unit_and_error(kind_case
     case = kind_cases[kind]
     d = case.diagnosis
     assert d.causes and len(d.sizes) == len(d.causes), case.describe()
-    for cause, parts in zip(d.causes, d.sizes, strict=True):
+    for parts in d.sizes:
         shown = [p for p in parts if not p.below_noise]
         if not shown:           # named, and said to be below the noise
             assert "below the measurement noise" in d.sentence, case.describe()

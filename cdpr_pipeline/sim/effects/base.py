@@ -287,14 +287,14 @@ class Effect:
         sizes are relative to). By default every field named in :attr:`quantities`:
         one value per affected channel (``cables``, every channel when None) or one
         for them all (channel None), or the channel of a ``cable`` field."""
-        names = {f.name for f in dataclasses.fields(self)}
-        cables = getattr(self, "cables") if "cables" in names else None
-        own = int(getattr(self, "cable")) if "cable" in names else None
+        values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        cables = values.get("cables")
+        own = None if values.get("cable") is None else int(values["cable"])
         if own is None and cables is not None and len(cables) == 1:
             own = int(cables[0])
         out = []
         for key, quantity in self.quantities.items():
-            value = getattr(self, key) if key in names else None
+            value = values.get(key)
             if value is None:
                 continue
             neutral = None if key in self.shape_fields else 0.0
