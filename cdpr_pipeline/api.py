@@ -148,6 +148,8 @@ def validate(path: str | Path, *overrides: str, **values: Any):
     -------
     cdpr_pipeline.data.validation.ValidationReport
         ``.ok``, ``.errors`` and ``.warnings`` (each with file, column and row);
+        ``.runs`` (each run's length), ``.heldout`` (the runs diagnose holds out),
+        ``.commands`` (per command: ``usable``, ``needs``, ``problems``);
         ``.raise_for_errors()`` raises what the command reports.
     """
     from cdpr_pipeline.stages.validate import validate as run_validate

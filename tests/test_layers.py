@@ -60,7 +60,7 @@ HEAVY_DEPS = ("torch", "lightning")
 #: function-level project imports that defer torch/Lightning to the call that needs them:
 #: (importing module, imported module)
 HEAVY = {
-    ("cdpr_pipeline.models.physics", "cdpr_pipeline.models.module"),
+    ("cdpr_pipeline.models.residual_network", "cdpr_pipeline.models.module"),
     ("cdpr_pipeline.stages.compare", "cdpr_pipeline.stages.train"),
     ("cdpr_pipeline.stages.compare", "cdpr_pipeline.models.evaluation"),
     ("cdpr_pipeline.stages.compare", "cdpr_pipeline.models.forecast"),
