@@ -248,10 +248,16 @@ def _standard_errors(effects: Sequence[Effect], others: Sequence[Effect],
                   / h[j] for j in range(len(x0))], axis=1)
     dof = max(len(f0) - len(x0), 1)
     s2 = float(f0 @ f0) / dof
-    seen = np.linalg.norm(J, axis=0) > 0
+    norms = np.linalg.norm(J, axis=0)
+    seen = norms > 0
     cov = np.zeros((len(x0), len(x0)))
     if seen.any():
-        cov[np.ix_(seen, seen)] = s2 * np.linalg.pinv(J[:, seen].T @ J[:, seen])
+        # columns scaled to unit norm first: parameters of a heavy and a light axis
+        # differ by orders of magnitude, and a pseudo-inverse of the raw normal matrix
+        # would cut the small directions off as rounding
+        scaled = J[:, seen] / norms[seen]
+        inner = np.linalg.pinv(scaled.T @ scaled)
+        cov[np.ix_(seen, seen)] = s2 * inner / np.outer(norms[seen], norms[seen])
     var = np.einsum("ij,jk,ik->i", G, cov, G)
     # a size moved by a parameter the residual does not see is not determined
     undetermined = (np.abs(G[:, ~seen]) > 0).any(axis=1)
