@@ -151,11 +151,9 @@ def small_lab(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
-def kind_cases(tmp_path_factory):
-    """One diagnosis of each rig kind (``testing.kind_cases``), seed drawn and printed."""
+def kind_cases(tmp_path_factory, seed_of, request):
+    """One diagnosis of each rig kind (``testing.kind_cases``), from the session's seed
+    (printed with any failure of a test that uses them)."""
     from cdpr_pipeline.testing.kind_cases import kind_cases as make
-    from cdpr_pipeline.testing.lab_cases import draw_seed
 
-    seed = draw_seed()
-    print(f"kind_cases: seed {seed} (CDPR_TEST_SEED={seed} replays it)")
-    return make(tmp_path_factory.mktemp("kind_cases"), seed)
+    return make(tmp_path_factory.mktemp("kind_cases"), seed_of(request.node))

@@ -34,7 +34,7 @@ class KindCase:
     split: Any
 
     def describe(self) -> str:
-        return (f"{self.name} (seed {self.seed}, CDPR_TEST_SEED={self.seed} replays it): "
+        return (f"{self.name} (generator seed {self.seed}): "
                 f"{self.diagnosis.sentence}")
 
 

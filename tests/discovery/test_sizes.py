@@ -16,7 +16,7 @@ from cdpr_pipeline.discovery.sizes import cause_sizes
 from cdpr_pipeline.discovery.summary import cause_record, summary_sentence
 from cdpr_pipeline.sim.effects import PositionDependentLoad
 from cdpr_pipeline.testing.foreign_cases import foreign_case
-from cdpr_pipeline.testing.lab_cases import draw_seed, fast_settings
+from cdpr_pipeline.testing.lab_cases import fast_settings
 
 #: how many standard errors a fitted load may lie from the generator's: measured on
 #: seeds 1-6 (12 sizes), |z| was at most 2.3 but once 5.0 (seed 2: a 0.16 % bias of the
@@ -30,11 +30,10 @@ def _cause(effects, channels) -> Judgement:
                      1e3, "torque", 0.9, (0.8, 0.95), tuple(channels), passed=True)
 
 
-def test_the_standard_errors_cover_the_generators_load(tmp_path):
+def test_the_standard_errors_cover_the_generators_load(tmp_path, seed):
     """An unbalanced rotary load ``a sin q + b cos q`` on one of two axes, drawn by the
     independent generator: the fitted ``a`` and ``b`` lie within :data:`MAX_Z` standard
     errors of the truth, each error positive and in N m (the rotary axis's unit)."""
-    seed = draw_seed()
     case = foreign_case(tmp_path, "axes", ["position_dependent_load"], seed, n_runs=3,
                         duration_s=10.0, n=2, channels=[0],
                         rig_options={"joint_types": ["rotary", "prismatic"]})
