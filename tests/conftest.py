@@ -148,3 +148,12 @@ def small_lab(tmp_path_factory):
     out = tmp_path_factory.mktemp("small_lab") / "lab"
     simulate(compose_config("simulate", [*SMALL_LAB, f"out_dir={out}"]))
     return out
+
+
+@pytest.fixture(scope="session")
+def kind_cases(tmp_path_factory, seed_of, request):
+    """One diagnosis of each rig kind (``testing.kind_cases``), from the session's seed
+    (printed with any failure of a test that uses them)."""
+    from cdpr_pipeline.testing.kind_cases import kind_cases as make
+
+    return make(tmp_path_factory.mktemp("kind_cases"), seed_of(request.node))

@@ -50,8 +50,6 @@ _EXACT = Sensors(mocap_noise_m=0.0, encoder_counts_per_rev=0, torque_noise_nm=0.
 BANDWIDTH_SHARE = 0.99
 #: fewest samples of an n-step-ahead horizon
 MIN_HORIZON = 10
-#: the joint type of an axis -> the unit of its position
-JOINT_UNITS = {"prismatic": "m", "rotary": "rad"}
 
 
 def can_resimulate(rig: Rig, trajectories: Sequence[Trajectory],
@@ -79,31 +77,17 @@ def can_resimulate(rig: Rig, trajectories: Sequence[Trajectory],
 
 def position_units(rig: Rig) -> tuple[str, ...]:
     """The unit of every position coordinate: m for a cable robot's platform; an axis's
-    from rig.yaml's ``units`` (keyed by ``q<i>`` or the axis name), else from its joint
-    type (m prismatic, rad rotary)."""
+    own (:attr:`~cdpr_pipeline.data.rig.Rig.channel_units`: rig.yaml's ``units``, else
+    its joint type)."""
     if rig.shared_position_units:
         return ("m",) * len(rig.position_names)
-    stated = rig.extra.get("units") or {}
-    out = []
-    for i, (name, joint) in enumerate(zip(rig.position_names, rig.joint_types,
-                                          strict=True)):
-        unit = stated.get(f"q{i + 1}", stated.get(name)) if isinstance(stated, dict) else None
-        out.append(str(unit) if unit else JOINT_UNITS[joint])
-    return tuple(out)
+    return tuple(u.position for u in rig.channel_units)
 
 
 def force_units(rig: Rig) -> tuple[str, ...]:
-    """The unit of every force or torque channel ``u``: N m on a cable robot's winches;
-    an axis's from rig.yaml's ``units`` (keyed by ``u<i>``), else from its joint type
-    (N prismatic, N m rotary)."""
-    if rig.torque_unit is not None:
-        return (rig.torque_unit,) * rig.n
-    stated = rig.extra.get("units") or {}
-    out = []
-    for i, joint in enumerate(rig.joint_types):
-        unit = stated.get(f"u{i + 1}") if isinstance(stated, dict) else None
-        out.append(str(unit) if unit else ("N m" if joint == "rotary" else "N"))
-    return tuple(out)
+    """The unit of every force or torque channel ``u`` (:attr:`~cdpr_pipeline.data.rig.
+    Rig.channel_units`)."""
+    return tuple(u.force for u in rig.channel_units)
 
 
 def _start_state(tr: Trajectory) -> tuple[np.ndarray, np.ndarray]:

@@ -3,16 +3,14 @@ with the nominal and the extended model, per run in the rig's own units, and wha
 extended model buys as the controller's feedforward.
 
 :func:`closed_loop_html` returns the section's HTML parts; :mod:`~cdpr_pipeline.
-discovery.report` places them and passes its figure embedding in.
+discovery.report` places them, with the figure of :mod:`~cdpr_pipeline.discovery.figures`.
 """
 
 from __future__ import annotations
 
 import html
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
-
-import numpy as np
 
 from cdpr_pipeline.discovery.diagnosis import Diagnosis
 
@@ -94,34 +92,10 @@ def _feedforward_table(d: Diagnosis) -> str:
                             "largest, nominal → extended feedforward"]))
 
 
-def _plot(d: Diagnosis, figure_html: Callable[[Any], str], plt: Any) -> str:
-    cl = d.plots.closed_loop
-    if cl is None:
-        return ""
-    n = cl.before.shape[1]
-    fig, axes = plt.subplots(n, 1, figsize=(9, 1.8 * n + 0.8), sharex=True, squeeze=False)
-    t = cl.t if cl.t is not None else np.arange(len(cl.before))
-    for i in range(n):
-        unit = cl.units[i] if cl.units else "m"
-        coord = cl.coordinates[i] if cl.coordinates else f"{i + 1}"
-        shown, scale = scaled_unit(np.abs(np.concatenate([cl.before[:, i], cl.after[:, i]])),
-                                   unit)
-        ax = axes[i, 0]
-        ax.plot(t, cl.before[:, i] / scale, color="C3", lw=0.8, label="nominal")
-        ax.plot(t, cl.after[:, i] / scale, color="C2", lw=0.8, label="extended")
-        ax.set_ylabel(f"{coord} ({shown})", fontsize=8)
-    axes[0, 0].legend(fontsize=7, loc="upper right")
-    axes[-1, 0].set_xlabel("time (s)" if cl.t is not None else "sample")
-    what = "closed loop" if cl.mode == "closed_loop" else "n steps ahead"
-    fig.suptitle(f"{cl.run}: measured minus simulated position ({what})", fontsize=9)
-    fig.tight_layout()
-    return figure_html(fig)
-
-
-def closed_loop_html(d: Diagnosis, figure_html: Callable[[Any], str],
-                     plt: Any) -> list[str]:
-    """The report's motion section as HTML parts (its heading first). ``figure_html``
-    embeds a matplotlib figure, ``plt`` is ``matplotlib.pyplot``."""
+def closed_loop_html(d: Diagnosis, figure_html: str = "") -> list[str]:
+    """The report's motion section as HTML parts (its heading first); ``figure_html``
+    is its figure (:func:`~cdpr_pipeline.discovery.figures.closed_loop_figure`),
+    rendered."""
     cl = d.closed_loop
     if not cl.available:
         return ["<h2>Closed loop</h2>",
@@ -135,5 +109,4 @@ def closed_loop_html(d: Diagnosis, figure_html: Callable[[Any], str],
                  f"recorded force n steps ahead: {html.escape(cl.horizon['why'])}.")
     return ["<h2>Closed loop</h2>" if cl.mode == "closed_loop"
             else "<h2>Motion, n steps ahead</h2>",
-            f"<p>{intro}</p>", _runs_table(d), _feedforward_table(d),
-            _plot(d, figure_html, plt)]
+            f"<p>{intro}</p>", _runs_table(d), _feedforward_table(d), figure_html]

@@ -36,9 +36,10 @@ def test_the_report_renders_the_causes_and_figures_of_the_typed_diagnosis(paper_
 
     page = render(d)
     (c,) = record["causes"]
-    row = (f"<td>{html.escape(c['description'])}</td><td>{', '.join(c['channels'])}</td>"
+    assert f"<td>{html.escape(c['description'])}</td>" in page, seed
+    row = (f"<td>{', '.join(c['channels'])}</td>"
            f"<td>{c['evidence']['pvalue']:.4g}</td><td>{c['evidence']['bic_drop']:.4g}</td>"
-           f"<td>{c['evidence']['heldout_rmse_drop_pct']:.4g}</td>")
+           f"<td>{c['evidence']['heldout_rmse_drop_pct']:.1f} %</td>")
     assert row in page, seed
     assert page.count("<img") >= 4          # residual, before/after, validity, bands
 
