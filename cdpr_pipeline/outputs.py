@@ -281,8 +281,13 @@ def _staged(out_dir: Path, digest: str, nested: bool, scratch: Sequence[str]
         _sibling(out_dir, ".partial.params").unlink(missing_ok=True)
 
 
-def rebase_paths(tree: Any, old: str, new: str) -> Any:
-    """Every string that is ``old`` or a path under it, moved under ``new``.
+def rebase_paths(tree: Any, old: str, new: str, key: str = "out_dir") -> Any:
+    """Every ``out_dir`` that is ``old``, and every string that is a path under ``old``,
+    moved under ``new``.
+
+    A value equal to ``old`` itself is moved only under the key ``out_dir``: another
+    setting may hold the same word (``cdpr convert format=emps out_dir=emps``) without
+    naming the output.
 
     Parameters
     ----------
@@ -290,6 +295,8 @@ def rebase_paths(tree: Any, old: str, new: str) -> Any:
         A config as plain containers.
     old, new : str
         Directory paths.
+    key : str
+        The key ``tree`` is the value of (recursion).
 
     Returns
     -------
@@ -297,10 +304,11 @@ def rebase_paths(tree: Any, old: str, new: str) -> Any:
         A copy of ``tree``.
     """
     if isinstance(tree, dict):
-        return {k: rebase_paths(v, old, new) for k, v in tree.items()}
+        return {k: rebase_paths(v, old, new, str(k)) for k, v in tree.items()}
     if isinstance(tree, list):
-        return [rebase_paths(v, old, new) for v in tree]
-    if isinstance(tree, str) and (tree == old or tree.startswith(old.rstrip("/") + "/")):
+        return [rebase_paths(v, old, new, key) for v in tree]
+    if isinstance(tree, str) and ((tree == old and key == "out_dir")
+                                  or tree.startswith(old.rstrip("/") + "/")):
         return new + tree[len(old.rstrip("/")):]
     return tree
 
