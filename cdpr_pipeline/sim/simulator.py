@@ -4,9 +4,10 @@ The controller runs at its own rate with zero-order hold; between control ticks 
 plant is integrated with fixed steps (sub-steps chosen from the stiffest time scale of
 the plant, or given): RK4, or, on a rigid plant whose Coulomb law is stiff (a hard sign,
 a steep ``tanh``), a Rosenbrock step that takes the friction implicitly, so that the
-sub-steps follow the rig's mechanics, not the friction's slope. One plant, one controller and one sensor model are shared by all
-trajectories of a batch; the per-trajectory ``solve_ivp`` reference in
-:func:`simulate_reference` uses the very same :meth:`Plant.derivative`.
+sub-steps follow the rig's mechanics, not the friction's slope. One plant, one controller
+and one sensor model are shared by all trajectories of a batch; the per-trajectory
+``solve_ivp`` reference in :func:`simulate_reference` uses the very same
+:meth:`Plant.derivative`.
 """
 
 from __future__ import annotations
@@ -302,9 +303,9 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
     band; explicitly that slope dictates the step (it took 16 RK4 sub-steps per tick).
     Here the friction's slope ``D = sum_i c_i / R_i^2 k_i k_i^T`` (``c_i`` its
     :func:`friction_slope`: the secant to the speeds an explicit step would reach,
-    where the step crosses the transition band) is treated implicitly, ``W = M + gamma dt D`` on the platform
-    velocity (``M`` the reduced mass matrix), so the band costs no sub-steps: sticking
-    is damped out, not resolved. Everything else is as explicit as Heun's method. An
+    where the step crosses the transition band) is treated implicitly,
+    ``W = M + gamma dt D`` on the platform velocity (``M`` the reduced mass matrix), so
+    the band costs no sub-steps: sticking is damped out, not resolved. Everything else is as explicit as Heun's method. An
     actuator lag's state follows its exact solution, as in :func:`rk4_step`.
     """
     if plant.elastic:

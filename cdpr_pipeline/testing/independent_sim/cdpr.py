@@ -587,7 +587,8 @@ def simulate_runs(rig: RigSpec, effects: list[Effect], families: list[str], dura
                                "kd_nms_per_rad": kd.tolist(),
                                "velocity_filter_hz": rig.velocity_filter_hz()}}
     if computed is not None:
-        settings["controller"].update(zip(("kp_per_s2", "kd_per_s"), rig.platform_gains()))
+        settings["controller"].update(zip(("kp_per_s2", "kd_per_s"), rig.platform_gains(),
+                                          strict=True))
     if isinstance(plant, ElasticPlant):
         settings["cable_loss_time_constant_s"] = plant.tau_d.tolist()
     return columns, truth, settings

@@ -14,6 +14,7 @@ import numpy as np
 from .cdpr_geometry import unit_vectors
 from .effects import TrueModel, solve_tanh_implicit
 
+
 class RigidPlant:
     """Rigid cables: state (p, v); Moreau-type stepping (see the module docstring)."""
 
@@ -145,7 +146,8 @@ def _tanh_friction(acc_free: np.ndarray, mass_inv: np.ndarray, jac: np.ndarray,
     for _ in range(50):
         x = w + h * (jac @ a[..., None])[..., 0]
         th = np.tanh(k * x)
-        grad = (mass @ (a - acc_free)[..., None])[..., 0] + (jac_t @ (level * th)[..., None])[..., 0]
+        grad = (mass @ (a - acc_free)[..., None])[..., 0] \
+            + (jac_t @ (level * th)[..., None])[..., 0]
         hess = mass + h * jac_t @ ((level * k * (1.0 - th * th))[..., None] * jac)
         step = -np.linalg.solve(hess, grad[..., None])[..., 0]
         # converged once a step moves no winch speed by a millionth of the tanh's band
