@@ -305,8 +305,9 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
     :func:`friction_slope`: the secant to the speeds an explicit step would reach,
     where the step crosses the transition band) is treated implicitly,
     ``W = M + gamma dt D`` on the platform velocity (``M`` the reduced mass matrix), so
-    the band costs no sub-steps: sticking is damped out, not resolved. Everything else is as explicit as Heun's method. An
-    actuator lag's state follows its exact solution, as in :func:`rk4_step`.
+    the band costs no sub-steps: sticking is damped out, not resolved. Everything else
+    is as explicit as Heun's method. An actuator lag's state follows its exact solution,
+    as in :func:`rk4_step`.
     """
     if plant.elastic:
         raise ValueError("rosenbrock_step integrates rigid plants only")
