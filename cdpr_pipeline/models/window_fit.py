@@ -27,7 +27,7 @@ def fit_windows(make_net: Callable[[], nn.Module], inputs: Sequence[np.ndarray],
     weights, and the windows are drawn from a generator of their own."""
     w = int(window)
     views, ends, ys = [], [], []
-    for r, (x, y) in enumerate(zip(inputs, targets, strict=True)):
+    for x, y in zip(inputs, targets, strict=True):
         xt = torch.as_tensor(np.asarray(x), dtype=torch.float32)
         if len(xt) < w:
             continue
