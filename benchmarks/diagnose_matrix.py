@@ -5,7 +5,8 @@ it, each shape on its own so that the matrix can be run in pieces.
 Shapes (five runs of 15 s each, one hidden Stribeck friction, each with the hard sign and
 with ``tanh(500 w)``): cable robots of 3 and 4 cables at 250 and 500 Hz and of 8 cables
 at 1 kHz, with the format's computed-torque controller (so the closed loop runs); a
-6-axis arm at 1 kHz; a single EMPS-like axis at 1 kHz (a heavy prismatic axis:
+6-axis arm at 1 kHz; a single EMPS-like axis at 1 kHz (both with the format's position
+loop, so the closed loop runs there too) (a heavy prismatic axis:
 inertia 95, viscous 200, Coulomb 20, as the EMPS rig.yaml states).
 
 Per shape: the wall time of the ``cdpr diagnose`` process (start-up included), its CPU
@@ -71,7 +72,7 @@ class Shape:
         else:
             emps = {"inertia": 95.0, "viscous": 200.0, "coulomb": 20.0} if self.n == 1 else {}
             rig = random_axes_rig(SEED, n_axes=self.n, rate_hz=self.rate_hz,
-                                  coulomb_tanh=self.law, **emps)
+                                  coulomb_tanh=self.law, **emps).replace(controller_schema=True)
             simulate_axes_dataset(path, rig, ["stribeck_friction"], n_runs=RUNS,
                                   duration_s=DURATION_S, seed=SEED, overwrite=True)
 

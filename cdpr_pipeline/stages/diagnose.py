@@ -31,9 +31,16 @@ from cdpr_pipeline.discovery.diagnosis import (
     diagnosis_split,
 )
 from cdpr_pipeline.discovery.report import render
+from cdpr_pipeline.discovery.summary import GAIN_KEY, gain_text
 from cdpr_pipeline.models.blackbox import NetworkBlackBox
 from cdpr_pipeline.sim.model_file import write_model
-from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
+from cdpr_pipeline.tracking import (
+    finished_or_failed,
+    flatten_params,
+    log_metrics,
+    make_logger,
+    run_name,
+)
 from cdpr_pipeline.wavelet.split import WaveletSplit
 
 log = logging.getLogger(__name__)
@@ -59,11 +66,13 @@ def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
         blackbox = NetworkBlackBox(LazyNet(bb.model.net), int(bb.window), int(bb.epochs),
                                    int(bb.max_windows), int(bb.seed))
     heldout = cfg.split.heldout
+    crosstest = cfg.split.get("crosstest")
     return DiagnosisSettings(
         regression=instantiate(cfg.regression),
         selection=instantiate(disc.selection),
         freeform=instantiate(disc.freeform) if disc.freeform else None,
         heldout=list(heldout) if heldout else None,
+        crosstest=list(crosstest) if crosstest else None,
         closed_loop=bool(disc.closed_loop),
         blackbox=blackbox,
         max_lag=int(disc.max_lag),
@@ -93,6 +102,23 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def diagnosis_record(d: Diagnosis, dataset_path: str, split: Split | None = None,
+                     model_file: str = "extended_model.yaml") -> dict[str, Any]:
+    """The content of ``diagnosis.json`` (``docs/diagnosis-format.md``), JSON-safe.
+
+    ``split``: the diagnosis's split (:func:`diagnosis_split`); when it cut runs into
+    time blocks, ``split`` lists them (run, samples, seconds).
+    """
+    record = d.as_json(model_file)
+    record["dataset"] = str(dataset_path)
+    if split is not None and split.blocks:
+        if [list(split.train), list(split.heldout)] != [list(d.train), list(d.heldout)]:
+            raise RuntimeError(f"split {split.as_dict()} is not the diagnosis's "
+                               f"({d.train}, {d.heldout})")
+        record["split"] = split.as_dict()
+    return _plain(record)
+
+
 def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str,
                   split: Split | None = None) -> dict[str, Path]:
     """diagnosis.json, report.html and extended_model.yaml in ``out_dir``.
@@ -103,14 +129,8 @@ def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str,
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": out_dir / "diagnosis.json", "html": out_dir / "report.html",
              "model": out_dir / "extended_model.yaml", "metrics": out_dir / "metrics.json"}
-    record = d.as_json(paths["model"].name)
-    record["dataset"] = str(dataset_path)
-    if split is not None and split.blocks:
-        if [list(split.train), list(split.heldout)] != [list(d.train), list(d.heldout)]:
-            raise RuntimeError(f"split {split.as_dict()} is not the diagnosis's "
-                               f"({d.train}, {d.heldout})")
-        record["split"] = split.as_dict()
-    paths["json"].write_text(json.dumps(_plain(record), indent=1))
+    record = diagnosis_record(d, dataset_path, split, paths["model"].name)
+    paths["json"].write_text(json.dumps(record, indent=1))
     write_metrics(paths["metrics"], d)
     paths["html"].write_text(render(d))
     write_model(paths["model"], d.rig, d.effects, source=f"cdpr diagnose of {dataset_path}",
@@ -133,8 +153,12 @@ def summary_metrics(d: Diagnosis, command: dict[str, float] | None = None
                     ) -> dict[str, float]:
     """Flat figures for ``dvc metrics show`` and MLflow; ``command``: the seconds of
     the command's own phases around the diagnosis (start-up, loading, writing, MLflow,
-    the wall time and what no phase names), as :func:`run_diagnosis` measures them."""
-    out = {"causes": len(d.causes), "gain_relative": d.gain.relative,
+    the wall time and what no phase names), as :func:`run_diagnosis` measures them.
+    The gain is the held-out RMSE drop (``heldout_rmse_drop_pct`` with its 95 %
+    interval), with the RMSE before and after."""
+    out = {"causes": len(d.causes), GAIN_KEY: 100 * d.gain.relative,
+           f"{GAIN_KEY}_ci95_lo": 100 * d.gain.ci95[0],
+           f"{GAIN_KEY}_ci95_hi": 100 * d.gain.ci95[1],
            "gain_before": d.gain.before, "gain_after": d.gain.after}
     # seconds of every phase (``time_total_s`` the whole diagnosis, start-up apart)
     out.update({f"time_{phase.replace(' ', '_').replace('-', '_')}_s": v
@@ -182,16 +206,20 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
     t0 = time.perf_counter()
     paths = write_outputs(d, Path(cfg.out_dir), cfg.data.path, diagnosis_split(data, settings))
     command = {"startup": startup, "writing": time.perf_counter() - t0}
-    log.info("verdict: %s", d.verdict)
+    log.info("verdict: %s; %s", d.verdict, gain_text(d.gain))
     log.info("%s", d.sentence)
     t0 = time.perf_counter()
-    logger = make_logger(cfg.tracking.experiment, run_name=f"diagnose-{Path(cfg.data.path).name}",
+    logger = make_logger(cfg.tracking.experiment, run_name=run_name("diagnose", cfg.data.path),
                          uri=cfg.tracking.uri, tags={"cdpr_task": "diagnose",
                                                      "verdict": d.verdict})
     with finished_or_failed(logger):
         logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
+        # the one gain figure, named as everywhere else (GAIN_NAME: the held-out RMSE drop)
         metrics = {"gain/before": d.gain.before, "gain/after": d.gain.after,
-                   "gain/relative": d.gain.relative, "causes/count": len(d.causes)}
+                   f"gain/{GAIN_KEY}": 100 * d.gain.relative,
+                   f"gain/{GAIN_KEY}_ci95_lo": 100 * d.gain.ci95[0],
+                   f"gain/{GAIN_KEY}_ci95_hi": 100 * d.gain.ci95[1],
+                   "causes/count": len(d.causes)}
         metrics.update({f"time/{phase.replace(' ', '_')}_s": v
                         for phase, v in {**d.timings, **command}.items()})
         for part in ("train", "heldout"):
@@ -214,7 +242,7 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
             command[k] for k in ("startup", "writing", "mlflow")) - loading - d.timings["total"]
         write_metrics(paths["metrics"], d, command)
         logger.experiment.log_artifact(logger.run_id, str(paths["metrics"]))
-    log.info("outputs in %s, logged to MLflow in %.1f s", cfg.out_dir, command["mlflow"])
+    log.info("logged to MLflow in %.1f s", command["mlflow"])
     return d
 
 

@@ -73,6 +73,9 @@ class AxesRigSpec:
     #: per axis ``prismatic`` or ``rotary`` (rig.yaml's ``joint_types``); None: not
     #: stated, every axis prismatic
     joint_types: tuple[str, ...] | None = None
+    #: state the controller in rig.yaml's ``position_loop`` schema (the data format's,
+    #: so that the closed loop can be re-simulated); False: a free-form description
+    controller_schema: bool = False
     #: the Coulomb law the axes follow and rig.yaml states: None the hard sign, ``k``
     #: (s/rad or s/m) ``tanh(k q')``
     coulomb_tanh: float | None = None
@@ -148,12 +151,22 @@ class AxesRigSpec:
             "nominal": {"inertia": self.inertia.tolist(), "viscous": self.viscous.tolist(),
                         "coulomb": self.coulomb.tolist(), "offset": self.offset.tolist(),
                         "coulomb_law": coulomb_law_yaml(self.coulomb_tanh)},
-            "controller": {"type": "pd_with_feedforward", "kp": kp.tolist(),
-                           "kd": kd.tolist(), "feedforward": "nominal",
-                           "rate_hz": float(self.rate_hz)},
+            "controller": self._controller(kp, kd),
             "generator": "cdpr_pipeline.testing.independent_sim",
             **({"joint_types": list(self.joint_types)} if self.joint_types else {}),
         }
+
+    def _controller(self, kp: np.ndarray, kd: np.ndarray) -> dict[str, Any]:
+        if not self.controller_schema:
+            return {"type": "pd_with_feedforward", "kp": kp.tolist(), "kd": kd.tolist(),
+                    "feedforward": "nominal", "rate_hz": float(self.rate_hz)}
+        # the same controller as the data format states one: PD on the error around no
+        # velocity loop, the nominal model as feedforward (this generator's is smoothed),
+        # the velocity a low-passed difference of the encoder position
+        return {"type": "position_loop", "rate_hz": float(self.rate_hz), "kp": kp.tolist(),
+                "kd": kd.tolist(), "derivative": "error", "feedforward": "nominal",
+                "velocity_estimate": "difference",
+                "velocity_filter_hz": self.velocity_filter_hz().tolist()}
 
     def describe(self) -> dict[str, Any]:
         out = self.rig_yaml()
@@ -387,8 +400,12 @@ def simulate_axes_runs(rig: AxesRigSpec, effects: list[Effect], families: list[s
     v_d = np.stack([r[1] for r in refs])
     a_d = np.stack([r[2] for r in refs])
     eps = 0.02 * rig.typical_speed
-    u_ff = (rig.inertia * a_d + rig.viscous * v_d + rig.coulomb * np.tanh(v_d / eps)
-            + rig.offset)
+    # a controller stated in the data format's schema feeds forward the nominal model
+    # exactly as stated (a hard sign, or the stated tanh); otherwise this generator's own
+    # smoothed sign
+    stated = np.sign(v_d) if rig.coulomb_tanh is None else np.tanh(rig.coulomb_tanh * v_d)
+    sign = stated if rig.controller_schema else np.tanh(v_d / eps)
+    u_ff = rig.inertia * a_d + rig.viscous * v_d + rig.coulomb * sign + rig.offset
 
     substeps = int(np.ceil(SUB_RATE_HZ / rig.rate_hz - 1e-9))
     h = 1.0 / (rig.rate_hz * substeps)
