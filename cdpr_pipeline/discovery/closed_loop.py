@@ -40,7 +40,7 @@ from cdpr_pipeline.sim.axes_loop import (
     substeps_for,
 )
 from cdpr_pipeline.sim.sensors import Sensors
-from cdpr_pipeline.sim.simulator import BatchSimulator, auto_substeps, implicit_friction
+from cdpr_pipeline.sim.simulator import BatchSimulator
 from cdpr_pipeline.sim.trajectories import SampledDesired
 
 log = logging.getLogger(__name__)
@@ -143,21 +143,21 @@ def resimulate(model: Model, nominal: Model, rig: Rig,
     sim = BatchSimulator(model, nominal, rig.controller, _EXACT, rig.sample_rate_hz,
                          settle_s=settle_s)
     dt = 1.0 / rig.controller.rate_hz
-    substeps = auto_substeps(model, dt)
+    substeps = sim.substeps_for(dt)
     groups: dict[int, list[Trajectory]] = {}
     for tr in trajectories:
         groups.setdefault(tr.n_samples, []).append(tr)
     log.info("closed loop: re-simulating the %s on %d runs (%d batch%s, %d sub-step%s per "
              "control tick, %s)", label, len(trajectories), len(groups),
              "" if len(groups) == 1 else "es", substeps, "" if substeps == 1 else "s",
-             "friction implicit (ROS2)" if implicit_friction(model) else "RK4")
+             "friction implicit (ROS2)" if sim.implicit(dt) else "RK4")
     out: dict[str, dict[str, np.ndarray]] = {}
     rng = np.random.default_rng(0)           # exact sensors draw nothing
     for runs in groups.values():
         t = runs[0].t - runs[0].t[0]
         desired = SampledDesired(t, np.stack([tr.desired for tr in runs]),
                                  [tr.family for tr in runs])
-        result = sim.run(desired, rng)
+        result = sim.run(desired, rng, truth_keys=("position", "u_cmd"))
         n = min(len(t), result.t.size)
         for b, tr in enumerate(runs):
             out[tr.name] = {"position": result.truth["position"][b, :n],

@@ -119,12 +119,13 @@ class _Filtered:
     it: those combinations are taken from the spread rows
     (:meth:`RunSignals.torque_spread`), filtered once."""
 
-    __slots__ = ("_sig", "_x", "rows", "_slope", "_spread", "_slope_spread")
+    __slots__ = ("_sig", "_x", "rows", "_slope", "_spread", "_slope_spread", "_lagged")
 
     def __init__(self, sig: RunSignals, x: np.ndarray) -> None:
         self._sig, self._x = sig, x
         self.rows = sig.rows(sig.torque_weighted(x))
         self._slope = self._spread = self._slope_spread = None
+        self._lagged: tuple[bytes, np.ndarray] | None = None
 
     def _derivative(self) -> np.ndarray:
         return np.gradient(self._x, self._sig.t, axis=0)
@@ -146,6 +147,18 @@ class _Filtered:
                 out = out + tau * self._slope
             return out if scale is None else scale * out
         n = sig.n
+        if scale is None and self._slope_spread is None:
+            # one lag per drive on a block no parameter scales (an effect's extra torque,
+            # new at every evaluation of a fit that moves the effect): the rows of
+            # ``x + tau x'`` through the projection, n signals filtered where the spread
+            # takes n^2 (and twice); the last lag's rows are kept for the next call
+            if not lagged:
+                return self.rows
+            tau = np.broadcast_to(tau, (n,))
+            key = tau.tobytes()
+            if self._lagged is None or self._lagged[0] != key:
+                self._lagged = (key, sig.rows(sig.torque_weighted(tau * self._derivative())))
+            return self.rows + self._lagged[1]
         s = np.ones(n) if scale is None else np.broadcast_to(np.asarray(scale, float), (n,))
         if self._spread is None:
             self._spread = sig.rows(sig.torque_spread(self._x))

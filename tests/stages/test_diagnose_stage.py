@@ -84,6 +84,12 @@ def test_diagnose_writes_the_spec_files(tmp_path, anchor_lab, cfg):
               "closed_loop", "black_box", "total")
     assert all(metrics[f"time_{k}_s"] >= 0.0 for k in phases)
     assert metrics["time_total_s"] >= sum(metrics[f"time_{k}_s"] for k in phases[2:-1])
+    # and every second of the wall time has a name: start-up, loading, the diagnosis,
+    # writing, MLflow and what lies between them
+    named = ("startup", "loading", "total", "writing", "mlflow", "other")
+    assert all(metrics[f"time_{k}_s"] >= 0.0 for k in named[:-1])
+    assert sum(metrics[f"time_{k}_s"] for k in named) == pytest.approx(metrics["time_wall_s"])
+    assert abs(metrics["time_other_s"]) < 0.1 * metrics["time_wall_s"]
 
     html = (out / "report.html").read_text()
     assert "Verdict: anchor_offset" in html and "cable 2" in html and "<img" in html
