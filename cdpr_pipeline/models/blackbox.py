@@ -27,7 +27,7 @@ class NetworkBlackBox:
     """
 
     net_factory: Any = None
-    window: int = 32
+    window: int = 16
     epochs: int = 5
     max_windows: int = 4096
     seed: int = 0
