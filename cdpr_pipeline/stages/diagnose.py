@@ -37,7 +37,7 @@ from cdpr_pipeline.sim.model_file import write_model
 from cdpr_pipeline.tracking import (
     finished_or_failed,
     flatten_params,
-    log_metrics,
+    log_run,
     make_logger,
     run_name,
 )
@@ -213,7 +213,6 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
                          uri=cfg.tracking.uri, tags={"cdpr_task": "diagnose",
                                                      "verdict": d.verdict})
     with finished_or_failed(logger):
-        logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
         # the one gain figure, named as everywhere else (GAIN_NAME: the held-out RMSE drop)
         metrics = {"gain/before": d.gain.before, "gain/after": d.gain.after,
                    f"gain/{GAIN_KEY}": 100 * d.gain.relative,
@@ -231,7 +230,9 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
                 getattr(d.nominal_metrics, part).relative_error_pct
             metrics[f"extended/{part}/relative_error_pct"] = \
                 getattr(d.extended_metrics, part).relative_error_pct
-        log_metrics(logger.experiment, logger.run_id, metrics)
+        # params and metrics in one request (each is a transaction on the store)
+        log_run(logger.experiment, logger.run_id, metrics=metrics,
+                params=flatten_params(OmegaConf.to_container(cfg, resolve=True)))
         for key, p in paths.items():
             if key != "metrics":
                 logger.experiment.log_artifact(logger.run_id, str(p))
