@@ -28,8 +28,8 @@ with a seed each. Each verdict gate's rate on these nulls is measured
 look on a wider band, a cause named there, the materiality of a failing column
 (``unexplained_noise_ratio``, ``unexplained_min_error_pct``: ``unexplained``), the
 unusable-model threshold, and the verdict itself; per generator and kind, per run count
-and per run length. ``--part i/k`` runs every k-th dataset from the i-th (parts run one
-after another or side by side), ``--merge a.json b.json ...`` summarises parts together.
+and per run length. ``--part i/k`` runs the i-th of k consecutive shares of the datasets (parts run
+one after another or side by side), ``--merge a.json b.json ...`` summarises parts together.
 
     python -m benchmarks.bench_null_calibration [--lab 6 --cdpr 10 --axes 8 | --grid 2]
         [--part 1/3] [--first-seed 5000] [--settings cli|fast]
@@ -190,7 +190,8 @@ def main() -> None:
     parser.add_argument("--axes", type=int, default=8, help="independent drive-axes datasets")
     parser.add_argument("--grid", type=int, default=0,
                         help="replicates of the calibration grid (instead of the counts)")
-    parser.add_argument("--part", default="1/1", help="i/k: every k-th dataset from the i-th")
+    parser.add_argument("--part", default="1/1",
+                        help="i/k: the i-th of k consecutive shares of the datasets")
     parser.add_argument("--merge", type=Path, nargs="+", help="summarise these parts' JSON")
     parser.add_argument("--first-seed", type=int, default=5000)
     add_settings_option(parser)
@@ -212,7 +213,7 @@ def main() -> None:
                  else null_datasets(args.lab, args.cdpr, args.axes, args.first_seed))
         records = []
         with tempfile.TemporaryDirectory() as tmp:
-            for spec in specs[i - 1::k]:
+            for spec in specs[(i - 1) * len(specs) // k:i * len(specs) // k]:
                 rec = run_null(spec, settings, Path(tmp), paper_rig)
                 records.append(rec)
                 top = max(rec["candidates"], key=lambda c: c["gain"], default=None)

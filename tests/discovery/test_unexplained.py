@@ -19,13 +19,10 @@ import numpy as np
 import pytest
 
 from cdpr_pipeline.data.reading import resolve_settings
+from cdpr_pipeline.discovery.adequacy import heldout_columns, unexplained_residual
 from cdpr_pipeline.discovery.bands import row_noise
-from cdpr_pipeline.discovery.diagnosis import (
-    DiagnosisSettings,
-    summary_sentence,
-    unexplained_residual,
-)
-from cdpr_pipeline.discovery.residuals import Residuals, nominal_model
+from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, summary_sentence
+from cdpr_pipeline.discovery.residuals import Residuals
 from cdpr_pipeline.discovery.results import HeldoutGain
 from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.testing.foreign_cases import FAST, foreign_case, foreign_settings
@@ -101,15 +98,20 @@ def test_where_it_sits_is_every_material_column(quiet_lab, seed):
     rows = size * np.sin(2 * np.pi * rng.uniform(0.3, 2.0, 3) * t[:, None])
     res = Residuals([held[0].name], [{"torque": rows}])
     validity = {"u1": _validity(True), "u2": _validity(False), "u3": _validity(False)}
-    found = unexplained_residual(res, held, nominal_model(rig, regression.sign_sharpness),
-                                 validity, settings)
+
+    def verdict(validity):
+        columns = heldout_columns(res, held, validity, settings.selection.alpha)
+        return unexplained_residual(columns, settings.unexplained_noise_ratio,
+                                    settings.unexplained_min_error_pct,
+                                    settings.selection.alpha, 5.0)
+
+    found = verdict(validity)
     assert [c.channel for c in found.columns] == ["u1", "u3"], seed
     assert found.share_of_error > 0.99, seed
     assert found.columns[0].failed_tests == ("ljung_box",)
     assert found.columns[1].failed_tests == ()
     # no material column fails a test: not unexplained
-    assert unexplained_residual(res, held, None, {c: _validity(False) for c in validity},
-                                settings) is None
+    assert verdict({c: _validity(False) for c in validity}) is None
 
 
 def test_none_never_claims_adequacy_when_tests_failed():
