@@ -637,9 +637,6 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         log.info("black box: %.1f s", clock["black box"])
     clock["total"] = time.perf_counter() - start
 
-    if again is not None and again.unexplained is not None:
-        # the wider band sees all of an error above the motion's band: where it sits
-        unexplained = again.unexplained
     sentence = summary_sentence(causes, nominal, gain, unusable, withdrawn, unexplained,
                                 failing, settings.unexplained_noise_ratio)
     if again is not None:
