@@ -685,6 +685,14 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
             # winch against a viscous and Coulomb re-fit plus a Stribeck bump that
             # explains no more there); with as many, a BIC better by one parameter's
             # worth (a named effect wins ties)
+            if log:
+                log.info("  in place of %s: free-form %s with %d parameters for their %d%s",
+                         ", ".join(c.label for c in torque),
+                         "passes" if alone.passed else f"fails ({alone.reason})",
+                         alone.n_params, named,
+                         "" if not alone.passed else " (BIC %+.1f)" % (
+                             search.bic(alone_effects, alone.n_params)
+                             - search.bic(named_effects, named)))
             if alone.passed and alone.n_params <= named and (
                     search.bic(alone_effects, alone.n_params) + search.log_n()
                     < search.bic(named_effects, named)
