@@ -587,7 +587,7 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     fs = float(rig.sample_rate_hz)
     analysed_hz = analysed_band_hz(settings.regression, fs)
     held_columns = heldout_columns(before_held, held, validity.before,
-                                   settings.selection.alpha)
+                                   settings.selection.alpha, channel)
     failing = [c.channel for c in held_columns if c.failed_tests]
     unexplained = None if causes else unexplained_residual(
         held_columns, settings.unexplained_noise_ratio, settings.unexplained_min_error_pct,
