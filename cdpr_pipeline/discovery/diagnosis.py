@@ -115,24 +115,25 @@ class DiagnosisSettings:
     #: training relative torque error (%) above which the stated model is unusable and
     #: every winch is re-identified before causes are named
     unusable_error_pct: float = 100.0
-    #: a held-out torque column whose validity tests fail makes a diagnosis without
-    #: causes ``unexplained`` (not ``none``) only when its RMS error is material: at
-    #: least this many times the measurement noise the rows carry
-    #: (:func:`~cdpr_pipeline.discovery.bands.row_noise`). Effect-free data fail the
-    #: tests at hundreds of rows with errors of 0.5-5.6 times it (filter, tension and
-    #: noise artefacts: 12 independent datasets); a periodic torque above the analysed
-    #: band left 7-39 times it
+    #: with no cause on either look, a held-out torque column of the motion band that
+    #: fails a validity test makes the diagnosis ``unexplained`` (not ``none``) only when
+    #: its RMS error is material: at least this many times the measurement noise the rows
+    #: carry (:func:`~cdpr_pipeline.discovery.bands.row_noise`). The tests alone fail on
+    #: most effect-free datasets; this gate is calibrated on effect-free data of both
+    #: generators and rig kinds (``benchmarks/bench_null_calibration.py --grid``,
+    #: docs/method.md 3.5)
     unexplained_noise_ratio: float = 20.0
     #: ... and at least this share (%) of its measured signal's RMS (what "material"
     #: means where a recording carries no measurable noise)
     unexplained_min_error_pct: float = 0.1
-    #: the band follows the residual: a diagnosis that would be ``unexplained`` is made
-    #: once more on rows whose band is this many times wider (derivative cut-off and
-    #: decimation alike, at most 0.4 fs), the free-form angle harmonics as many times
-    #: more, the selection's alpha halved (a second look at the same data); a cause it
-    #: finds (never worse on held-out runs) is the verdict. An effect periodic in a winch
-    #: or axis angle lies at its wavenumber times the angle's rate, above a band derived
-    #: from the motion. 1 (or less): off
+    #: the band follows the residual: a diagnosis without cause whose held-out residual
+    #: fails a validity test (any size) is made once more on rows whose band is this many
+    #: times wider (derivative cut-off and decimation alike, at most 0.4 fs), the
+    #: free-form angle harmonics as many times more, the selection's alpha halved (a
+    #: second look at the same data); a cause it finds (never worse on held-out runs) is
+    #: the verdict (:mod:`~cdpr_pipeline.discovery.adequacy`). An effect periodic in a
+    #: winch or axis angle lies at its wavenumber times the angle's rate, above a band
+    #: derived from the motion. 1 (or less): off
     follow_residual: float = 4.0
 
 
@@ -231,7 +232,9 @@ class Diagnosis:
     #: tests with a material size (verdict ``unexplained``)
     unexplained: Unexplained | None = None
     #: the band the statistics rows kept and where it came from (``motion``, or
-    #: ``residual`` when :attr:`DiagnosisSettings.follow_residual` widened it)
+    #: ``residual`` when :attr:`DiagnosisSettings.follow_residual` widened it), with the
+    #: held-out columns of its look (``columns``) and the other look (``motion`` or
+    #: ``tried``)
     band: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -779,8 +782,22 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
         f"lowers the held-out {gain.signal} RMSE by {100 * gain.relative:.1f} % "
         f"(95 % CI {100 * gain.ci95[0]:.1f} to {100 * gain.ci95[1]:.1f} %).")
     if len(causes) > 1:
-        text += " Also: " + "; ".join(c.effect for c in causes[1:]) + "."
+        text += " Also: " + "; ".join(_also(c, causes) for c in causes[1:]) + "."
     return text
+
+
+def _also(cause: Judgement, causes: Sequence[Judgement]) -> str:
+    """A further cause's name, with the interaction that keeps it when its own held-out
+    contribution is not positive (:func:`~cdpr_pipeline.discovery.never_worse.
+    interaction`)."""
+    i = cause.interaction
+    if i is None:
+        return cause.effect
+    partners = {c.label: c.effect for c in causes}
+    beside = ", ".join(dict.fromkeys(partners.get(w, w) for w in i["with"])) or "the others"
+    return (f"{cause.effect} (held-out contribution {100 * (cause.contribution or 0):.1f} "
+            f"%: alone it changes the held-out error by {-i['alone_pct']:+.1f} %; it helps "
+            f"only beside {beside}, adding {i['adds_to_others_pct']:.1f} %)")
 
 
 def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names,
