@@ -148,23 +148,36 @@ def gates_markdown(summary: dict) -> list[str]:
     def pct(x: float) -> str:
         return f"{100 * x:.1f} %"
 
-    lines = ["", f"Verdict gates on the same nulls (target: at most 1 % each). Validity: a "
-             f"held-out column fails a validity test (the second look on a wider band "
-             f"runs); second look: it names a cause; materiality: a failing column at "
-             f">= {nr['threshold']:g} x the noise and >= {nr['min_error_pct']:g} % of its "
-             f"signal on either look (`unexplained`); unusable: nominal training error "
+    lines = ["", f"Verdict gates on the same nulls (target: at most 1 % each for the gates "
+             f"that decide a verdict). Validity: a held-out column fails a validity test "
+             f"(no verdict on its own: the second look on a wider band runs); second look: "
+             f"it names a cause (a false alarm); materiality: a failing column of the "
+             f"motion band at >= {nr['threshold']:g} x the noise and "
+             f">= {nr['min_error_pct']:g} % of its signal (`unexplained`), with the "
+             f"largest failing noise ratio there and, for comparison, on the wider look "
+             f"(which decides nothing); unusable: nominal training error "
              f"> {un['threshold']:g} %; verdict: anything but `none`.", "",
-             "| group | datasets | validity fails (second look runs) | second look names a "
-             "cause | material failing column | largest failing noise ratio | unusable "
-             "| verdict not none |", "|---|---|---|---|---|---|---|---|"]
+             "Per dataset, a first-step candidate crossing each selection gate on its "
+             "own: the likelihood ratio (p < alpha/m), the held-out gain (>= min_gain), "
+             "its bootstrap interval (lower end > 0), and all of them (a cause named).", "",
+             "| group | datasets | LR p < alpha/m | gain >= min_gain | interval > 0 | all "
+             "selection gates | validity fails (second look runs) | second look names a "
+             "cause | material failing column | largest failing noise ratio (wider look) "
+             "| unusable | verdict not none |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, s in summary.items():
         if "gates" not in s:
             continue
         g = s["gates"]
         lines.append(
-            f"| {name} | {g['datasets']} | {pct(g['validity']['rate'])} | "
+            f"| {name} | {g['datasets']} | "
+            f"{pct(s['pvalue']['datasets_with_any_below_bonferroni'])} | "
+            f"{pct(s['heldout_gain'].get('datasets_with_any', 0.0))} | "
+            f"{pct(s['ci_lower']['datasets_with_any_above_zero'])} | "
+            f"{pct(s['passed_all_tests']['datasets_with_any'])} | "
+            f"{pct(g['validity']['rate'])} | "
             f"{pct(g['second_look_cause']['rate'])} | {pct(g['noise_ratio']['rate'])} | "
-            f"{g['noise_ratio']['largest']:.1f} | {pct(g['unusable']['rate'])} | "
+            f"{g['noise_ratio']['largest']:.1f} ({g['noise_ratio']['largest_wider_look']:.0f})"
+            f" | {pct(g['unusable']['rate'])} | "
             f"{pct(g['verdict']['rate'])} |")
     q1, q2 = nr["quantiles_first_look"], nr["quantiles_wider_look"]
     lines += ["", "Noise ratio of the worst failing column, quantiles: motion band "
