@@ -10,13 +10,15 @@ on the innovations of the AR noise model. With no cause found:
    (:func:`wider_band`), whatever its size: the band follows the residual, and a cause
    found there is judged as every candidate is (held-out gain, never worse);
 2. when neither look finds a cause, the verdict is ``unexplained`` where a failing
-   column is material (:func:`unexplained_residual`), else ``none``. Material means an
-   RMS error of at least ``unexplained_noise_ratio`` times the measurement noise and
-   ``unexplained_min_error_pct`` of the measured signal: both thresholds are calibrated
-   on effect-free data of both generators and both rig kinds
-   (``benchmarks/bench_null_calibration.py``), where the statistical tests alone reject
-   routinely (another simulator's data differ from any nominal model slightly and
-   systematically: filter and friction-reversal artefacts at a few times the noise).
+   column of the motion band's look is material (:func:`unexplained_residual`), else
+   ``none``. Material means an RMS error of at least ``unexplained_noise_ratio`` times
+   the measurement noise and ``unexplained_min_error_pct`` of the measured signal,
+   calibrated on effect-free data of both generators and both rig kinds
+   (``benchmarks/bench_null_calibration.py --grid``), where the statistical tests alone
+   reject on most datasets (another simulator's data differ from any nominal model
+   slightly and systematically, at a few times the noise). The wider look's residual
+   decides nothing: on effect-free independent cable robots it reaches tens of times
+   the noise.
 """
 
 from __future__ import annotations
