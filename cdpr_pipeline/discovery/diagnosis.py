@@ -196,6 +196,24 @@ def diagnosis_needs(dataset: Dataset, settings: DiagnosisSettings
     return {tr.name: max(block, held_need) if tr.name in held else block for tr in runs}, why
 
 
+def check_diagnosable(dataset: Dataset, settings: DiagnosisSettings) -> None:
+    """Refuse, before any analysis, a dataset :func:`diagnose` cannot use: a run shorter
+    than :func:`diagnosis_needs`, or torque columns that look exchanged
+    (:func:`~cdpr_pipeline.identification.pipeline.check_torque_labels`). ``cdpr
+    validate`` asks the same, so the two never disagree. ``settings.regression``
+    resolved.
+
+    Raises
+    ------
+    DataValidationError
+        Naming each problem's file, column and row.
+    """
+    needs, why = diagnosis_needs(dataset, settings)
+    check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "diagnose",
+                      why, dataset.root)
+    check_torque_labels(dataset, settings.regression)
+
+
 @dataclass(frozen=True)
 class Diagnosis:
     """Result of :func:`diagnose` (see :meth:`as_json` for the file layout).
@@ -520,19 +538,14 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     Raises
     ------
     DataValidationError
-        Before any analysis, for a run shorter than :func:`diagnosis_needs` or torque
-        columns that look exchanged
-        (:func:`~cdpr_pipeline.identification.pipeline.check_torque_labels`).
+        Before any analysis, for a dataset :func:`check_diagnosable` refuses.
     """
     settings = settings or DiagnosisSettings()
     # filter, decimation and Coulomb law chosen once, from the whole dataset and its rig:
     # by the command (the stage), or here when called on its own
     settings = dataclasses.replace(settings, regression=as_resolved(
         settings.regression, dataset.trajectories, dataset.rig))
-    needs, why = diagnosis_needs(dataset, settings)
-    check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "diagnose",
-                      why, dataset.root)
-    check_torque_labels(dataset, settings.regression)
+    check_diagnosable(dataset, settings)
     clock: dict[str, float] = {}
     start = time.perf_counter()
     rig = dataset.rig

@@ -32,7 +32,13 @@ from cdpr_pipeline.discovery.diagnosis import (
 from cdpr_pipeline.discovery.report import render
 from cdpr_pipeline.models.blackbox import NetworkBlackBox
 from cdpr_pipeline.sim.model_file import write_model
-from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
+from cdpr_pipeline.tracking import (
+    finished_or_failed,
+    flatten_params,
+    log_metrics,
+    make_logger,
+    run_name,
+)
 from cdpr_pipeline.wavelet.split import WaveletSplit
 
 log = logging.getLogger(__name__)
@@ -153,7 +159,7 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
     log.info("verdict: %s", d.verdict)
     log.info("%s", d.sentence)
     t0 = time.perf_counter()
-    logger = make_logger(cfg.tracking.experiment, run_name=f"diagnose-{Path(cfg.data.path).name}",
+    logger = make_logger(cfg.tracking.experiment, run_name=run_name("diagnose", cfg.data.path),
                          uri=cfg.tracking.uri, tags={"cdpr_task": "diagnose",
                                                      "verdict": d.verdict})
     with finished_or_failed(logger):
@@ -174,7 +180,7 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
         log_metrics(logger.experiment, logger.run_id, metrics)
         for p in paths.values():
             logger.experiment.log_artifact(logger.run_id, str(p))
-    log.info("outputs in %s, logged to MLflow in %.1f s", cfg.out_dir, time.perf_counter() - t0)
+    log.info("logged to MLflow in %.1f s", time.perf_counter() - t0)
     return d
 
 
