@@ -53,7 +53,7 @@ import platform
 import tempfile
 from pathlib import Path
 
-from benchmarks.measurements import invoked_as, record
+from benchmarks.measurements import commit, invoked_as, record
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.stages.simulate import rig_from_config
 from cdpr_pipeline.testing.foreign_cases import (
@@ -214,10 +214,13 @@ def main() -> None:
 
     settings = named_settings(args.settings)
     sel = settings.selection
+    provenance = ""
     if args.merge:
         parts = [json.loads(p.read_text()) for p in args.merge]
         records = [r for p in parts for r in p["datasets"]]
         part = "1/1"
+        provenance = "".join(f"\n\nPart {p['part']}: `{p['command']}`, commit {p['commit']}."
+                             for p in parts if "command" in p)
     else:
         part = args.part
         i, k = (int(x) for x in part.split("/"))
@@ -243,13 +246,15 @@ def main() -> None:
         "benchmark": "null calibration of cdpr diagnose",
         "settings": args.settings, "alpha": sel.alpha, "min_gain": sel.min_gain,
         "thresholds": thresholds_of(settings), "part": part,
+        "command": invoked_as(), "commit": commit(),
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
                     "load_avg_at_end": os.getloadavg()},
         "datasets": records, "summary": summary}, indent=1))
     print(f"\nwritten {args.out}")
     if part == "1/1":
         record("null-calibration", "Null calibration of cdpr diagnose",
-               summary_markdown(summary, sel.alpha, sel.min_gain), command=invoked_as())
+               summary_markdown(summary, sel.alpha, sel.min_gain) + provenance,
+               command=invoked_as())
 
 
 if __name__ == "__main__":
