@@ -102,6 +102,11 @@ class SelectionSettings:
         to act on that winch (besides BIC, see
         :func:`~cdpr_pipeline.discovery.fitting.fit_winches`).
     seed : int
+    exclude : list of str
+        Vocabulary effects not tried as candidates; the free-form search still leaves
+        their shapes to them (the second look on a wider band leaves the rigid-body
+        parameters to the first: :data:`~cdpr_pipeline.discovery.adequacy.
+        MOTION_BAND_EFFECTS`).
     """
 
     alpha: float = 0.05
@@ -114,6 +119,7 @@ class SelectionSettings:
     refit_winches: bool = False
     min_winch_gain: float = 0.05
     seed: int = 0
+    exclude: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True, eq=False)
@@ -614,7 +620,9 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
     kind = nominal.kind
     search = _Search(nominal, train, heldout, settings, freeform,
                      _data_scale(train, kind, nominal), kind, log)
-    candidates = candidates_for(rig, search.scale, settings.effects, settings.refit_winches)
+    candidates = [c for c in candidates_for(rig, search.scale, settings.effects,
+                                            settings.refit_winches)
+                  if c.effect not in settings.exclude]
     # free-form terms with a candidate's shape are that candidate's to explain
     search.shapes = vocabulary_shapes(rig, search.scale, settings.effects)
     start = time.perf_counter()
