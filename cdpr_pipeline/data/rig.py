@@ -13,10 +13,15 @@ is an object of that layer, looked up by :attr:`Rig.kind`.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
+
+from cdpr_pipeline.data.units import WINCH_UNITS, ChannelUnits, axes_units
+
+from .axis_controller import AxisController
 
 FORMAT = "cdpr-measured/1"
 WINCH_KEYS = ("inertia", "viscous", "coulomb", "offset")
@@ -134,6 +139,19 @@ class Rig(Protocol):
         """The unit of the torque columns ``u`` where the data format fixes it."""
 
     @property
+    def drive_word(self) -> str:
+        """What a user calls one channel's drive: ``winch`` (cable robot) or ``axis``."""
+
+    @property
+    def drive_words(self) -> str:
+        """Its plural: ``winches`` or ``axes``."""
+
+    @property
+    def channel_units(self) -> tuple[ChannelUnits, ...]:
+        """Per channel the units of its position, speed and force or torque
+        (:mod:`cdpr_pipeline.data.units`)."""
+
+    @property
     def shared_position_units(self) -> bool:
         """Whether every position coordinate has one unit (cable robot: m)."""
 
@@ -210,6 +228,12 @@ class ControllerSpec:
     feedforward: str = "winch_nominal"
     rate_hz: float = 300.0
 
+    @property
+    def why_not(self) -> None:
+        """A cable robot's controller always states a loop (see :class:`~cdpr_pipeline.
+        data.axis_controller.AxisController`, whose free-form blocks do not)."""
+        return None
+
     def as_dict(self) -> dict[str, Any]:
         return {
             "type": self.type,
@@ -239,11 +263,13 @@ CDPR_SIGNALS = (
     RecordedSignal("velocity", ("vx", "vy", "vz"), required=False),
     RecordedSignal("acceleration", ("ax", "ay", "az"), required=False),
 )
-#: the recorded signals of a run of drive axes
+#: the recorded signals of a run of drive axes; ``fext``: the part of ``u`` the
+#: controller did not command (a force injected at the drive, EMPS's pulses)
 AXES_SIGNALS = (
     RecordedSignal("position", "q"),
     RecordedSignal("desired", "qd", required=False),
     RecordedSignal("torques", "u"),
+    RecordedSignal("external", "fext", required=False),
 )
 
 
@@ -276,6 +302,8 @@ class CdprRig(_Signals):
     shared_position_units = True
     #: the data spec: a cable robot's u is the commanded torque
     torque_commanded = True
+    drive_word = "winch"
+    drive_words = "winches"
 
     def __post_init__(self) -> None:
         object.__setattr__(
@@ -305,6 +333,11 @@ class CdprRig(_Signals):
     @property
     def count_text(self) -> str:
         return f"{self.n} anchors"
+
+    @property
+    def channel_units(self) -> tuple[ChannelUnits, ...]:
+        """Every winch turns in rad with torques in N m (the data format)."""
+        return (WINCH_UNITS,) * self.n
 
     @property
     def controller_rate_hz(self) -> float | None:
@@ -348,12 +381,17 @@ class CdprRig(_Signals):
 
 @dataclass(frozen=True)
 class AxesRig(_Signals):
-    """Nominal description of independent drive axes (``kind: axes``)."""
+    """Nominal description of independent drive axes (``kind: axes``).
+
+    ``controller`` is rig.yaml's block (:class:`~cdpr_pipeline.data.axis_controller.
+    AxisController`); a mapping given here is read as rig.yaml's block would be
+    (a ``ValueError`` naming the key when it breaks the schema).
+    """
 
     sample_rate_hz: float
     axes: tuple[str, ...]
     nominal: WinchParams
-    controller: dict[str, Any] | None = None
+    controller: AxisController | None = None
     virtual: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
     #: the stated Coulomb law (see :class:`CdprRig`); rig.yaml's ``nominal.coulomb_law``
@@ -369,6 +407,13 @@ class AxesRig(_Signals):
     shared_position_units = False
     #: an axis's u is the force or torque applied
     torque_commanded = False
+    drive_word = "axis"
+    drive_words = "axes"
+
+    def __post_init__(self) -> None:
+        if isinstance(self.controller, Mapping):
+            object.__setattr__(self, "controller",
+                               AxisController.from_dict(self.controller, len(self.axes)))
 
     @property
     def n(self) -> int:
@@ -396,7 +441,7 @@ class AxesRig(_Signals):
 
     @property
     def controller_rate_hz(self) -> float | None:
-        return (self.controller or {}).get("rate_hz")
+        return None if self.controller is None else self.controller.rate_hz
 
     def frame_bounds(self) -> None:
         """Drive axes have no frame: their range is what the runs record."""
@@ -413,7 +458,7 @@ class AxesRig(_Signals):
         if self.coulomb_sharpness is not None:
             out["nominal"]["coulomb_law"] = coulomb_law_dict(self.coulomb_sharpness)
         if self.controller is not None:
-            out["controller"] = dict(self.controller)
+            out["controller"] = self.controller.as_dict()
         if self.virtual:
             out["virtual"] = True
         out.update({k: v for k, v in self.extra.items() if k not in out})
@@ -446,6 +491,13 @@ class AxesRig(_Signals):
                 raise ValueError(f"rig.yaml: joint_types[{i}] (axis {self.axes[i]}): must be "
                                  f"one of {list(JOINT_TYPES)}, got {value!r}")
         return tuple(str(v) for v in raw)
+
+    @property
+    def channel_units(self) -> tuple[ChannelUnits, ...]:
+        """Per axis rad and N m (rotary) or m and N (prismatic), from
+        :attr:`joint_types`; rig.yaml's optional ``units`` (``{q1: m, u1: N}``) wins
+        where it names a column."""
+        return axes_units(self.joint_types, self.extra.get("units"))
 
 
 #: the kinds of rig rig.yaml may state, by its ``kind``

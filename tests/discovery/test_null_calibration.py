@@ -12,12 +12,11 @@ from __future__ import annotations
 import pytest
 
 from cdpr_pipeline.testing.foreign_cases import foreign_settings, null_grid, run_null, summarise
-from cdpr_pipeline.testing.lab_cases import draw_seed
 
 
 @pytest.mark.slow
-def test_false_alarms_at_most_5_percent(paper_rig, tmp_path):
-    first = draw_seed()
+def test_false_alarms_at_most_5_percent(paper_rig, tmp_path, seed):
+    first = seed
     settings = foreign_settings()
     specs = null_grid(1, first)
     assert len(specs) >= 20

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 # The imports stay in registry order, not sorted (module docstring).
 # ruff: noqa: I001
-from cdpr_pipeline.sim.effects.base import EFFECTS, Effect, make_effect, per_winch
+from cdpr_pipeline.sim.effects.base import EFFECTS, Effect, Size, make_effect, per_winch
 from cdpr_pipeline.sim.effects.winch import WinchParameterError
 from cdpr_pipeline.sim.effects.friction import (
     AsymmetricViscousFriction,
@@ -64,13 +64,14 @@ from cdpr_pipeline.sim.effects.symbolic import SymbolicWinchTorque
 __all__ = [
     "EFFECTS", "ActuatorLag", "AnchorOffset", "AsymmetricViscousFriction", "CableElasticity",
     "CoggingTorque", "DrumRadiusError", "Effect", "PayloadMassError", "PositionDependentLoad",
-    "QuadraticDamping", "StribeckFriction", "SymbolicWinchTorque", "WinchParameterError",
+    "QuadraticDamping", "Size", "StribeckFriction", "SymbolicWinchTorque",
+    "WinchParameterError",
     "make_effect", "per_winch",
 ]
 
 # The public name of every effect class is this package's: truth records
 # ("class": "cdpr_pipeline.sim.effects.AnchorOffset"), Hydra targets and pickles name
 # the class where users import it, whichever family module defines it.
-for _cls in (Effect, *EFFECTS.values()):
+for _cls in (Effect, Size, *EFFECTS.values()):
     _cls.__module__ = __name__
 del _cls

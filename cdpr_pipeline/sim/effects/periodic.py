@@ -21,6 +21,7 @@ class CoggingTorque(Effect):
     expression: ClassVar[str] = "tau_f += A sin(N theta + phi)"
     in_vocabulary: ClassVar[bool] = False
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"amplitude_nm": (0.08, 0.2)}
+    explanatory_variable: ClassVar[str] = "position"
 
     amplitude_nm: float = 0.1
     periods_per_rev: int = 8
