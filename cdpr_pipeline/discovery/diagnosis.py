@@ -78,7 +78,7 @@ from cdpr_pipeline.identification.pipeline import (
     trim_words,
 )
 from cdpr_pipeline.identification.regressors import WinchRegression
-from cdpr_pipeline.sim.effects import CableElasticity, Effect, WinchParameterError
+from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.plant import smooth_sign
 from cdpr_pipeline.wavelet.split import WaveletSplit, band_energies
 
@@ -272,23 +272,12 @@ class Diagnosis:
 
 
 # ---------------------------------------------------------------------- records
-def _winch_change(effect: WinchParameterError, nominal: Model) -> dict[str, Any]:
-    i = effect.cable - 1
-    w = nominal.winch
-    old = {k: float(getattr(w, k)[i]) for k in ("inertia", "viscous", "coulomb", "offset")}
-    new = {"inertia": old["inertia"] * effect.inertia_scale,
-           "viscous": old["viscous"] * effect.viscous_scale,
-           "coulomb": old["coulomb"] * effect.coulomb_scale,
-           "offset": old["offset"] + effect.offset_delta}
-    return {"winch": effect.cable, "old": old, "new": new}
-
-
 def winch_reference(nominal: Model, causes: Sequence[Judgement]) -> Model:
     """The nominal model with every cause's re-identified winch parameters: what an
     effect's size is relative to in the extended model (a Stribeck size as a multiple of
     the extended model's F_c, not of a nominal F_c another cause replaced)."""
     return nominal.with_effects([e for c in causes for e in c.effects
-                                 if isinstance(e, WinchParameterError)])
+                                 if e.reidentifies_winch])
 
 
 def cause_params(effects: Sequence[Effect], nominal: Model,
@@ -298,13 +287,13 @@ def cause_params(effects: Sequence[Effect], nominal: Model,
     model when None)."""
     out: dict[str, Any] = {}
     reference = nominal if reference is None else reference
-    changes = [_winch_change(e, nominal) for e in effects if isinstance(e, WinchParameterError)]
+    changes = [e.winch_change(nominal.winch) for e in effects if e.reidentifies_winch]
     for e in effects:
-        if not isinstance(e, WinchParameterError):
+        if not e.reidentifies_winch:
             # per-winch sizes both absolute and relative to the extended winch parameters
             out.update({**e.params(), **e.derived(reference)})
     if changes:
-        out["winches" if all(isinstance(e, WinchParameterError) for e in effects)
+        out["winches" if all(e.reidentifies_winch for e in effects)
             else "refit_winches"] = changes
     return out
 
@@ -314,7 +303,7 @@ def cause_record(j: Judgement, nominal: Model, causes: Sequence[Judgement] = ()
     if j.freeform is not None:
         expression = j.freeform.describe()
     else:
-        structural = [e for e in j.effects if not isinstance(e, WinchParameterError)]
+        structural = [e for e in j.effects if not e.reidentifies_winch]
         expression = (structural or j.effects)[0].expression if j.effects else ""
     reference = winch_reference(nominal, causes)
     return {"effect": j.effect, "channels": list(j.channels),
@@ -337,14 +326,14 @@ def describe_cause(j: Judgement, nominal: Model, reference: Model | None = None)
     reference = nominal if reference is None else reference
     parts = []
     for e in j.effects:
-        if isinstance(e, WinchParameterError):
-            c = _winch_change(e, nominal)
+        if e.reidentifies_winch:
+            c = e.winch_change(nominal.winch)
             # a change worth a sentence: 2 % of the value (of F_c for the offset)
             ref = {k: abs(c["old"]["coulomb" if k == "offset" else k]) for k in c["old"]}
             diffs = [f"{k} {c['old'][k]:.4g} -> {c['new'][k]:.4g}" for k in c["old"]
                      if abs(c["new"][k] - c["old"][k]) > 0.02 * max(ref[k], 1e-12)]
             if diffs:
-                parts.append(f"winch {e.cable}: " + ", ".join(diffs))
+                parts.append(f"winch {c['winch']}: " + ", ".join(diffs))
         else:
             parts.append(e.describe(reference))
     return "; ".join(parts) if parts else j.label
@@ -663,14 +652,14 @@ def _cable_damping(causes: list[Judgement], nominal: Model, train: list[RunSigna
     training runs (:mod:`~cdpr_pipeline.discovery.damping`), and the extended model
     they make. The residuals predict the quasi-static stretch, so no gain changes."""
     extended = nominal.with_effects([e for c in causes for e in c.effects])
-    if not any(isinstance(e, CableElasticity) for c in causes for e in c.effects):
+    if not any(e.elastic_cables for c in causes for e in c.effects):
         return causes, extended
     out = []
     for c in causes:
         effects = tuple(with_fitted_damping(e, extended, nominal, train)
-                        if isinstance(e, CableElasticity) else e for e in c.effects)
+                        if e.elastic_cables else e for e in c.effects)
         for e in effects:
-            if isinstance(e, CableElasticity) and e.damping_interval_s is not None:
+            if e.elastic_cables and e.damping_interval_s is not None:
                 log.info("cable damping: %s", e.describe().split("; ", 1)[-1])
         out.append(dataclasses.replace(c, effects=effects))
     return out, nominal.with_effects([e for c in out for e in c.effects])
