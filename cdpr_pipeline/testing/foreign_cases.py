@@ -154,9 +154,13 @@ def foreign_case(out_dir: str | Path, kind: str, effects: list[str], seed: int,
         0-based channels the effect acts on (drawn: one, some or all, when omitted).
     rig_options : dict, optional
         Further nominal values for the rig's drawer (``inertia=[...]`` of
-        ``random_axes_rig``); drawn when omitted.
+        ``random_axes_rig``); drawn when omitted. Drive axes hiding ``cogging`` by name
+        state their pitch (``pitch=True``) unless the options say otherwise: cogging
+        repeats with a motor angle, which a prismatic axis has only with a pitch.
     """
     runs, duration = FULL[kind]
+    if kind == "axes" and "cogging" in effects:
+        rig_options = {"pitch": True, **(rig_options or {})}
     n_runs, duration_s = n_runs or runs, duration_s or duration
     root = Path(out_dir)
     last: Exception | None = None
@@ -245,6 +249,8 @@ TOLERANCE = {
     # the fitted load against the true one over the axis's stroke, relative to its size
     # (the rotary amplitude, or the spring's k times the amplitude)
     "position_dependent_load": {"load": 0.15},
+    # the period count must be the true one (else the channel counts as not found)
+    "cogging": {"amplitude": 0.25},
 }
 
 
@@ -255,7 +261,8 @@ def _rel(found: float, true: float) -> float:
 def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
     """Relative errors of the fitted magnitudes in ``cause`` (a ``diagnosis.json``
     cause record) against the simulated first effect, per channel, where the truth
-    gives a number the cause's form can express: per-winch (per-cable) effects always;
+    gives a number the cause's form can express: per-winch (per-cable) effects always
+    (``cogging``: its period count must be the true one, and its amplitude is compared);
     ``anchor_offset``: the cable named must be one that moved, and its
     offset is compared when only one moved.
 
@@ -340,6 +347,16 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
             else:
                 true, fit, size = ta * q + tb, a[i] * q + b[i], abs(ta) * rig.amplitude[i]
             errors[f"load[{c}]"] = float(np.abs(fit - true).max() / size)
+    elif name == "cogging":
+        at = dict(zip(p.get("cables", []), zip(p.get("periods", []), p.get("amplitude", []),
+                                               strict=True), strict=True))
+        for c in chans:
+            true_n = int(round(float(eff.params["periods"][c - 1])))
+            if c not in at or at[c][0] != true_n:
+                missing.append(f"winch {c}" + ("" if c not in at else
+                                               f" ({at[c][0]} periods, not {true_n})"))
+                continue
+            errors[f"amplitude[{c}]"] = _rel(at[c][1], eff.params["amplitude"][c - 1])
     elif name == "anchor_offset":
         c = int(p["cable"])
         if c not in chans:

@@ -231,5 +231,5 @@ class CoggingTorque(Effect):
             if ratio is not None and np.isfinite(ratio[j]):
                 size += f" ({ratio[j]:.2f} F_c)"
             parts.append(f"{f'winch {cables[j]}' if cables else 'every winch'}: "
-                         f"{int(round(periods[j]))} periods {per}, {size}")
+                         f"{int(round(periods[j]))} period{'' if round(periods[j]) == 1 else 's'} {per}, {size}")
         return "a torque periodic in position (cogging) on " + "; ".join(parts)
