@@ -230,6 +230,7 @@ class CoggingTorque(Effect):
             size = f"amplitude {amplitude[j]:.4g} {unit}"
             if ratio is not None and np.isfinite(ratio[j]):
                 size += f" ({ratio[j]:.2f} F_c)"
+            count = int(round(periods[j]))
             parts.append(f"{f'winch {cables[j]}' if cables else 'every winch'}: "
-                         f"{int(round(periods[j]))} period{'' if round(periods[j]) == 1 else 's'} {per}, {size}")
+                         f"{count} period{'' if count == 1 else 's'} {per}, {size}")
         return "a torque periodic in position (cogging) on " + "; ".join(parts)
