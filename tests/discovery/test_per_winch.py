@@ -31,7 +31,6 @@ from cdpr_pipeline.sim.effects import (
     EFFECTS,
     ActuatorLag,
     AsymmetricViscousFriction,
-    CoggingTorque,
     QuadraticDamping,
     StribeckFriction,
     WinchParameterError,
@@ -301,8 +300,7 @@ def test_actuator_lag_of_different_sizes_per_winch_is_named_per_winch(paper_rig,
     assert record["gain"]["ci95"][0] > 0, case
 
 
-@pytest.mark.parametrize("effect", [QuadraticDamping(0.5), CoggingTorque(0.12, 8, 0.3)],
-                         ids=["quadratic_damping", "cogging_torque"])
+@pytest.mark.parametrize("effect", [QuadraticDamping(0.5)], ids=["quadratic_damping"])
 def test_an_unnamed_cause_is_short_readable_and_never_named(paper_rig, seed, effect):
     d, record = _diagnose(paper_rig, [effect], seed)
     case = f"seed {seed}: {d.sentence}"
