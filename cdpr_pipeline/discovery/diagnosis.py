@@ -27,7 +27,7 @@ from cdpr_pipeline.data.reading import (
 from cdpr_pipeline.data.rig import CdprRig
 from cdpr_pipeline.data.split import HELDOUT_FRACTION, MIN_HELDOUT_S, Split, heldout_split
 from cdpr_pipeline.data.validation import check_run_lengths
-from cdpr_pipeline.discovery.bands import power_band_hz, row_noise
+from cdpr_pipeline.discovery.bands import analysed_band_hz, power_band_hz, row_noise
 from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
 from cdpr_pipeline.discovery.damping import with_fitted_damping
 from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
@@ -689,14 +689,6 @@ def _follow_residual(settings: DiagnosisSettings, fs: float) -> DiagnosisSetting
 def nominal_rate(signals: Sequence[RunSignals]) -> float:
     """The sample rate of the runs."""
     return float(np.median([s.fs for s in signals]))
-
-
-def analysed_band_hz(regression: RegressionSettings, fs: float) -> float:
-    """The band the statistics rows keep: the decimation's pass band ``0.4 fs / q``
-    (:func:`~cdpr_pipeline.data.reading.resolve_settings`), or the
-    derivative filter's cut-off without decimation."""
-    q = int(regression.decimate)
-    return 0.4 * fs / q if q > 1 else float(regression.filter.cutoff_hz)
 
 
 def failed_tests(v: ResidualValidity, alpha: float) -> list[str]:

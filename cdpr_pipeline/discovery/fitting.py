@@ -18,6 +18,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.optimize._numdiff import approx_derivative
 
+from cdpr_pipeline.discovery.bands import analysed_band_hz
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,
@@ -177,8 +178,12 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
     rows, n = r0.shape
     bounds = np.array([form.magnitude(i) for i in range(n)], float)
     components = (False, True) if form.quadrature else (False,)
-    positions = np.concatenate([s.theta[s.row_index()] for s in ctx.train]) \
-        if form.screen is not None else None
+    if form.screen is not None:
+        # the channels' positions and speeds at the statistics rows, and the band the
+        # rows keep, for the screen to place the variants it proposes
+        positions = np.concatenate([s.theta[s.row_index()] for s in ctx.train])
+        speeds = np.concatenate([s.omega[s.row_index()] for s in ctx.train])
+        band_hz = analysed_band_hz(ctx.train[0].settings, ctx.train[0].fs)
 
     mixes = any(s.mixes for s in ctx.train)
 
@@ -212,7 +217,7 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
         """The variants to try: per round one per winch, and the winches it is tried on."""
         if form.screen is None:
             return [([v] * n, winches) for v in form.variants]
-        proposed = form.screen(positions, target)
+        proposed = form.screen(positions, speeds, target, band_hz)
         depth = max((len(proposed[i]) for i in winches), default=0)
         out = []
         for j in range(depth):

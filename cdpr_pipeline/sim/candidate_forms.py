@@ -44,6 +44,10 @@ class DataScale:
 SLOW_SHARE = 0.01
 
 
+#: a screen of variants (:attr:`WinchForm.screen`)
+Screen = Callable[[np.ndarray, np.ndarray, np.ndarray, float], list[list[Any]]]
+
+
 class WinchPart(NamedTuple):
     """A winch-separable effect on one winch: the discrete ``variant`` (a direction, a
     period count, or None), the ``magnitude`` (linear in the torque), the ``shape``
@@ -82,11 +86,12 @@ class WinchForm:
         quadrature`, bounded like the magnitude): a sine and a cosine of one angle,
         whose amplitude and phase the two give in closed form.
     screen : callable or None
-        ``(positions, residual) -> per winch a list of variants`` worth fitting, best
-        first (an empty list: the effect cannot act on that winch), from the statistics
-        rows' channel positions and the residual to explain (both (rows, n)): for a
-        variant chosen among many (a period count), where fitting each would cost a
-        model evaluation. Replaces :attr:`variants`; the choice counts as a parameter.
+        ``(positions, speeds, residual, band_hz) -> per winch a list of variants`` worth
+        fitting, best first (an empty list: the effect cannot act on that winch), from
+        the statistics rows' channel positions and speeds, the residual to explain (all
+        (rows, n)) and the band the rows keep (Hz): for a variant chosen among many (a
+        period count), where fitting each would cost a model evaluation. Replaces
+        :attr:`variants`; the choice counts as a parameter.
     quadrature_name : str
         Name of the quadrature component, for reports.
     """
@@ -98,7 +103,7 @@ class WinchForm:
     shape: tuple[float, float] | None = None
     names: tuple[str, str] = ("magnitude", "shape")
     quadrature: bool = False
-    screen: Callable[[np.ndarray, np.ndarray], list[list[Any]]] | None = None
+    screen: Screen | None = None
     quadrature_name: str = "quadrature"
 
     @property
@@ -218,9 +223,8 @@ def winch_candidate(effect: str, label: str, make: Callable[[dict[int, WinchPart
                     typical: Callable[[int], float], variants: tuple[Any, ...] = (None,),
                     shape: tuple[float, float] | None = None,
                     names: tuple[str, str] = ("magnitude", "shape"),
-                    quadrature: bool = False,
-                    screen: Callable[[np.ndarray, np.ndarray], list[list[Any]]] | None
-                    = None, quadrature_name: str = "quadrature") -> Candidate:
+                    quadrature: bool = False, screen: Screen | None = None,
+                    quadrature_name: str = "quadrature") -> Candidate:
     """A winch-separable candidate (torque side): one magnitude per winch (two with a
     ``quadrature`` component), a per-winch shape parameter when ``shape`` gives its
     bounds, and per-winch ``variants`` (or variants a ``screen`` proposes from the data,

@@ -385,6 +385,13 @@ CDPR_RIGS = [(3, 100.0), (4, 250.0), (3, 500.0), (4, 1000.0), (3, 250.0), (4, 10
              (3, 1000.0), (4, 500.0)]
 #: independent drive axes: rates in turn (axis count drawn with the rig)
 AXES_RATES = [100.0, 250.0, 500.0, 1000.0, 2000.0]
+#: independent drive axes: what rig.yaml states of them, in turn: nothing (prismatic
+#: axes without a pitch: no motor angle, no cogging candidate), every prismatic axis's
+#: pitch, and rotary joints beside prismatic axes with a pitch (three axes): the
+#: candidates that need a motor angle (``cogging``) are judged on effect-free data too
+AXES_RIGS: list[dict] = [{}, {"rig_options": {"pitch": True}},
+                         {"n": 3, "rig_options": {"pitch": True, "joint_types":
+                                                  ["rotary", "prismatic", "rotary"]}}]
 
 
 def null_datasets(n_lab: int, n_cdpr: int, n_axes: int, first_seed: int) -> list[dict]:
@@ -394,7 +401,8 @@ def null_datasets(n_lab: int, n_cdpr: int, n_axes: int, first_seed: int) -> list
              "n": CDPR_RIGS[i % len(CDPR_RIGS)][0], "rate_hz": CDPR_RIGS[i % len(CDPR_RIGS)][1]}
             for i in range(n_cdpr)]
     out += [{"simulator": "independent", "kind": "axes", "seed": first_seed + 200 + i,
-             "rate_hz": AXES_RATES[i % len(AXES_RATES)]} for i in range(n_axes)]
+             "rate_hz": AXES_RATES[i % len(AXES_RATES)], **AXES_RIGS[i % len(AXES_RIGS)]}
+            for i in range(n_axes)]
     return out
 
 
@@ -413,13 +421,15 @@ def run_null(spec: dict, settings, tmp: Path, paper_rig) -> dict:
         seed = spec["seed"]
     else:
         case = foreign_case(tmp, spec["kind"], [], spec["seed"], n=spec.get("n"),
-                            rate_hz=spec.get("rate_hz"))
+                            rate_hz=spec.get("rate_hz"), rig_options=spec.get("rig_options"))
         t_sim = time.perf_counter() - start
         record = case.diagnose(settings)
         seconds, seed = case.seconds, case.seed
         r = case.rig
+        stated = ", ".join(f"{k}={v}" for k, v in (spec.get("rig_options") or {}).items())
         rig = (f"independent {spec['kind']} rig seed {r.seed} ({r.n} "
-               f"{'cables' if spec['kind'] == 'cdpr' else 'axes'}, {r.rate_hz:g} Hz)")
+               f"{'cables' if spec['kind'] == 'cdpr' else 'axes'}, {r.rate_hz:g} Hz"
+               f"{', ' + stated if stated else ''})")
     return {**spec, "seed": seed, "rig": rig, "simulate_s": t_sim, "diagnose_s": seconds,
             "grade": grade(record, []), "verdict": record["verdict"],
             "summary": record["summary"],

@@ -57,9 +57,23 @@ def test_the_scan_finds_each_winchs_period_count(paper_rig, seed):
     periods = rng.integers(1, MOST_PERIODS + 1, 3)
     residual = rng.uniform(0.1, 1.0, 3) * np.sin(periods * theta + rng.uniform(0, 6.3, 3)) \
         + 0.3 * rng.standard_normal(theta.shape)
-    proposed = screen(theta, residual)
+    proposed = screen(theta, np.zeros_like(theta), residual, 10.0)  # at rest: every count
     assert [p[0] for p in proposed] == periods.tolist(), seed
     assert all(len(p) == 3 for p in proposed)
+
+
+def test_the_scan_keeps_to_counts_within_the_band_the_rows_keep(paper_rig):
+    """At an RMS winch speed of 5 rad/s and a 15 Hz band, N periods per turn pass at
+    ``5 N / (2 pi)`` Hz: up to 18 lie within it; a stronger harmonic above it (here 30)
+    is not proposed (it would show only at the reversals, like a model's artefacts)."""
+    screen = _candidate(paper_rig)[0].form.screen
+    t = np.linspace(0, 60, 6000)
+    theta = 5.0 * np.sqrt(2) * np.sin(t)[:, None] * np.ones(3)     # RMS speed 5 rad/s
+    speed = np.gradient(theta, t, axis=0)
+    residual = np.sin(30 * theta) + 0.2 * np.sin(7 * theta)
+    proposed = screen(theta, speed, residual, 15.0)
+    assert all(p[0] == 7 and max(p) <= 18 for p in proposed), proposed
+    assert screen(theta, speed, residual, 60.0)[0][0] == 30
 
 
 def test_where_the_scan_looks_on_drive_axes():
@@ -74,7 +88,7 @@ def test_where_the_scan_looks_on_drive_axes():
     assert counts == [list(range(2, MOST_PERIODS + 1)), [6], []]
     screen = _candidate(rig)[0].form.screen
     q = np.linspace(-0.5, 0.5, 500)[:, None] * np.ones(3)
-    assert screen(q, np.sin(7 * q))[1:] == [[6], []]
+    assert screen(q, 0 * q, np.sin(7 * q), 10.0)[1:] == [[6], []]
     shapes = CoggingTorque.shapes(rig, None)
     assert "sin_k(theta, 2)" in shapes and "sin_k(theta, 1)" not in shapes
     assert f"cos_k(theta, {6 * 2 * np.pi / 0.01:.6g})" in shapes

@@ -55,6 +55,11 @@ def check_parameters(effect: Effect, cause: dict) -> None:
         assert p["cables"] == [1, 2, 3]
         signed = [d * r for d, r in zip(p["direction"], p["ratio"], strict=True)]
         assert signed == pytest.approx([effect.direction * effect.ratio] * 3, abs=0.1)
+    elif name == "cogging":
+        # drawn on every winch alike: every winch is found, each with N and A
+        assert p["cables"] == [1, 2, 3]
+        assert p["periods"] == [effect.periods] * 3
+        assert p["amplitude"] == pytest.approx([effect.amplitude] * 3, rel=0.1)
     elif name == "winch_parameter_error":
         changes = {c["winch"]: c for c in p["winches"]}
         assert effect.cable in changes

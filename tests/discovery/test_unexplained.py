@@ -6,8 +6,8 @@ meaning: the effect-free datasets of ``test_foreign_diagnosis.py`` and
 A position-periodic torque (the independent generator's ``cogging``, upper half of its
 amplitude range, so that it is material) is diagnosed with a vocabulary narrowed to one
 that cannot express it (cable elasticity only, which acts on the lengths) and the
-free-form search off: nothing tried can explain the torque residual, so the verdict must say so and where
-the residual sits.
+free-form search off: nothing tried can explain the torque residual, so the verdict must
+say so and where the residual sits.
 """
 
 from __future__ import annotations

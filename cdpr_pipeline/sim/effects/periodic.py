@@ -52,6 +52,17 @@ def harmonic_shares(angle: np.ndarray, residual: np.ndarray, k: np.ndarray) -> n
     return explained / max(float(residual @ residual), 1e-300)
 
 
+def in_band(speed: np.ndarray, per_unit: float, band_hz: float) -> float:
+    """The most periods per revolution whose torque lies within ``band_hz`` at the
+    channel's RMS speed (``speed`` in the position's unit per s, ``per_unit`` radians of
+    motor angle per unit): ``N`` periods pass at ``N |w| / (2 pi)`` Hz. Above it, such a
+    torque shows in the rows only where the channel turns slowly, around its
+    reversals, where a model's artefacts lie too (the lab's effect-free runs had
+    ``N`` = 17-46 fit them, significant on the training runs)."""
+    rms = float(np.sqrt(np.mean(np.square(speed)))) * per_unit
+    return 2 * np.pi * band_hz / rms if rms > 0 else np.inf
+
+
 def _per_winch_lengths(value: Any, cables: list[int] | None, n: int) -> np.ndarray:
     """Per-winch pitches (n,), 0 where none is given (the position is an angle)."""
     if value is None:
@@ -79,8 +90,11 @@ class CoggingTorque(Effect):
     power in: a sine and a cosine per winch (linear, so amplitude and phase come in
     closed form) at a period count chosen per winch among 1 to :data:`MOST_PERIODS` by
     a harmonic scan of the residual, or rig.yaml's ``cogging_periods`` where it states
-    one. A prismatic axis without ``pitch_m`` has no angle: a force periodic in its
-    position is left to the free-form search (``unnamed``, with its wavenumber).
+    one. The scan keeps to the counts whose frequency at the winch's RMS speed lies
+    within the band the statistics rows keep (:func:`in_band`); a cogging above it is
+    found when the diagnosis looks again on a wider band (``follow_residual``). A
+    prismatic axis without ``pitch_m`` has no angle: a force periodic in its position is
+    left to the free-form search (``unnamed``, with its wavenumber).
     """
 
     name: ClassVar[str] = "cogging"
@@ -167,9 +181,13 @@ class CoggingTorque(Effect):
                         else [pitch[c - 1] for c in cables],
                         cables=cables)]
 
-        def screen(positions: np.ndarray, residual: np.ndarray) -> list[list[int]]:
+        def screen(positions: np.ndarray, speeds: np.ndarray, residual: np.ndarray,
+                   band_hz: float) -> list[list[int]]:
             out: list[list[int]] = []
             for i, grid in enumerate(counts):
+                if len(grid) > 1:
+                    grid = [g for g in grid if g <= in_band(speeds[:, i], per_unit[i],
+                                                            band_hz)]
                 if len(grid) <= 1:
                     out.append(list(grid))
                     continue

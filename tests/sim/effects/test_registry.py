@@ -6,6 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from cdpr_pipeline.discovery.candidates import candidate_effects
 from cdpr_pipeline.sim import effects as package
 from cdpr_pipeline.sim.effects import (
     ALIASES,
@@ -27,7 +28,6 @@ from cdpr_pipeline.sim.effects import (
     vocabulary_names,
 )
 from cdpr_pipeline.sim.effects import VOCABULARY as VOCABULARY_CLASSES
-from cdpr_pipeline.discovery.candidates import candidate_effects
 from tests.sim.effects.effect_runs import changed_fields, run_lab
 
 #: the spec's effect vocabulary (shared/spec/diagnosis.md), in its table's order: the
