@@ -123,7 +123,10 @@ def test_foreign_rig_is_diagnosed(tmp_path, cfg):
     assert record["closed_loop"]["available"]
     # a refactoring leaves the diagnosis as it was: the record checked in beside this
     # file was written by this configuration before the layers were put in order
-    # (everything but the dataset's path; floats to 1e-6, what BLAS may change)
+    # (everything but the dataset's path; floats to 1e-6, what BLAS may change), and
+    # rewritten when `cogging` joined the vocabulary (one more first-step candidate, so
+    # the step's Bonferroni level and bootstrap intervals moved, and the free-form
+    # harmonics of the final step are cogging's shapes now: verdict none as before)
     expected = json.loads((Path(__file__).parent / "foreign_rig_diagnosis.json").read_text())
     record.pop("dataset")
     _assert_same(record, expected, "diagnosis.json")
