@@ -12,8 +12,8 @@ XDIST = -n $(TEST_WORKERS) --dist loadfile
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.cdpr-installed
 
-.PHONY: install run lock test test-pipeline test-slow bench bench-null bench-pipeline \
-	bench-models bench-detection lint clean
+.PHONY: install run lock test test-golden test-pipeline test-slow bench bench-null \
+	bench-pipeline bench-models bench-detection bench-test-draws lint clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -53,6 +53,19 @@ lock: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest $(XDIST) $(PYTEST_ARGS)
 
+## test-golden: the tests that compare with a record checked in (tests/stages/
+## foreign_rig_diagnosis.json) again under other OpenBLAS kernels: Haswell and Prescott,
+## and SkylakeX where /proc/cpuinfo reports AVX-512 (a kernel sums in another order; the
+## record must hold on any machine). Only those tests, one process each
+GOLDEN_TESTS ?= tests/stages/test_diagnose_stage.py::test_foreign_rig_is_diagnosed
+GOLDEN_KERNELS ?= Haswell Prescott $(shell grep -qw avx512f /proc/cpuinfo 2>/dev/null && echo SkylakeX)
+test-golden: $(STAMP)
+	@for kernel in $(GOLDEN_KERNELS); do \
+		echo "golden tests under OPENBLAS_CORETYPE=$$kernel"; \
+		OPENBLAS_CORETYPE=$$kernel $(BIN)/python -m pytest -n 0 -q $(GOLDEN_TESTS) \
+			$(PYTEST_ARGS) || exit 1; \
+	done
+
 ## test-pipeline: the end-to-end pipeline tests (cdpr repro profile=tiny in scratch copies):
 ## on the virtual lab (with a DVC push/clone/pull round trip), then ingesting the shipped
 ## foreign rig and the shipped EMPS data; and scaling out: DDP on 2 CPU processes, joblib
@@ -91,6 +104,12 @@ bench-pipeline: $(STAMP)
 ## magnitude of each hidden effect it detects reliably (about an hour on 2 cores)
 bench-detection: $(STAMP)
 	$(BIN)/python -m benchmarks.bench_detection
+
+## bench-test-draws: the pass rate of every random-draw test over 200 draws (DRAWS=N for
+## another count; hours on 2 cores, see the script's docstring)
+DRAWS ?= 200
+bench-test-draws: $(STAMP)
+	$(BIN)/python -m benchmarks.bench_test_draws --draws $(DRAWS) -n $(TEST_WORKERS)
 
 ## bench-models: train every trajectory predictor on the default dataset (about an hour
 ## on 2 cores); the dataset is simulated first if missing

@@ -8,9 +8,10 @@ Hydra strings (``"blackbox.enabled=false"``), keyword values (``method="rls"``) 
 mappings (``blackbox={"enabled": False}``). Errors raise (a
 :class:`~cdpr_pipeline.errors.UserError` for bad data or configuration); nothing exits.
 
-``out_dir`` defaults to the command's: where the config says, and for the commands whose
-``out_dir`` is Hydra's run directory, a new ``outputs/<date>/<time>`` in the working
-directory, as the command would make (without Hydra's ``.hydra/`` and log file).
+``out_dir`` defaults to the command's: where the config says; the commands whose config
+leaves it to Hydra (``diagnose``, ``identify``, ...) need it, as on the command line.
+Settings are checked as the command checks them (an unknown key, a value of the wrong
+type: :func:`cdpr_pipeline.config.check_overrides`).
 
 (:func:`cdpr_pipeline.discovery.diagnosis.diagnose` is the analysis itself, on a loaded
 :class:`~cdpr_pipeline.data.io.Dataset` and explicit settings; this module's
@@ -23,16 +24,11 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.command import require, run_staged
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.command import SWEEP_JOB_DIR, require, run_staged
+from cdpr_pipeline.config import check_overrides, compose_config
 from cdpr_pipeline.pipeline.overrides import hydra_literal
-
-#: ``out_dir`` values that stand for Hydra's run directory of the command
-_HYDRA_RUN_DIR = "${hydra:runtime.output_dir}"
 
 
 def overrides_of(args: Sequence[str], values: Mapping[str, Any]) -> list[str]:
@@ -74,21 +70,21 @@ def command_config(command: str, *overrides: str, **values: Any) -> DictConfig:
     Returns
     -------
     DictConfig
-        The composed config, its ``out_dir`` resolved (Hydra's run directory pattern
-        when the config leaves ``out_dir`` to Hydra).
+        The composed config; an ``out_dir`` the config leaves to Hydra is missing
+        (``???``: :func:`~cdpr_pipeline.command.require` asks for it).
+
+    Raises
+    ------
+    ConfigError
+        For a setting the command does not have or a value of the wrong type.
     """
-    if GlobalHydra.instance().is_initialized():
-        GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        cfg = compose(config_name=command, overrides=overrides_of(overrides, values),
-                      return_hydra_config=True)
-    run_dir = cfg.hydra.run.dir          # outputs/${now:...}: resolved now, as Hydra does
-    with_hydra = OmegaConf.to_container(cfg, resolve=False)
-    del with_hydra["hydra"]
-    plain = OmegaConf.create(with_hydra)
+    settings = overrides_of(overrides, values)
+    check_overrides(command, settings, command=f"cdpr {command}")
+    plain = OmegaConf.create(OmegaConf.to_container(compose_config(command, settings),
+                                                    resolve=False))
     if "out_dir" in plain and OmegaConf.to_container(plain, resolve=False)["out_dir"] \
-            == _HYDRA_RUN_DIR:
-        plain.out_dir = str(Path.cwd() / str(run_dir))   # absolute, as Hydra's
+            == SWEEP_JOB_DIR:
+        plain.out_dir = "???"
     OmegaConf.set_struct(plain, True)
     return plain
 
@@ -148,6 +144,8 @@ def validate(path: str | Path, *overrides: str, **values: Any):
     -------
     cdpr_pipeline.data.validation.ValidationReport
         ``.ok``, ``.errors`` and ``.warnings`` (each with file, column and row);
+        ``.runs`` (each run's length), ``.heldout`` (the runs diagnose holds out),
+        ``.commands`` (per command: ``usable``, ``needs``, ``problems``);
         ``.raise_for_errors()`` raises what the command reports.
     """
     from cdpr_pipeline.stages.validate import validate as run_validate

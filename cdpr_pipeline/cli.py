@@ -43,7 +43,8 @@ USAGE = """usage: cdpr <subcommand> [key=value ...] [-m] [--cfg job] [--help]
 
 subcommands:
   simulate   run the virtual lab and write a cdpr-measured/1 dataset (+ truth beside it)
-  validate   check a dataset against cdpr-measured/1 (data.path=DIR); non-zero exit on errors
+  validate   check a dataset against cdpr-measured/1 (data.path=DIR) and say per command
+             whether it can use the data; non-zero exit on errors or when none can
   train      train one trajectory predictor (model=NAME data.path=DIR), logged to MLflow;
              -m model=tcn_transformer,tcn,transformer,bilstm is the paper's comparison
   compare    the paper's Tables I and II from the MLflow runs (CSV, markdown, figure)

@@ -1,11 +1,14 @@
 """How a ``cdpr`` subcommand runs its stage function (the same way for the Python API).
 
 :func:`hydra_command` replaces ``@hydra.main`` on a subcommand's ``main``: the config
-comes from ``conf/`` (:data:`~cdpr_pipeline.config.CONFIG_DIR`); a required key left
-unset (``???``) is refused by name; errors are reported by
+comes from ``conf/`` (:data:`~cdpr_pipeline.config.CONFIG_DIR`); the command line's
+settings are checked first (:func:`~cdpr_pipeline.config.check_arguments`: an unknown
+key, a bad boolean or number end the command in one line); a required key left unset
+(``???``, or ``out_dir`` outside a sweep) is refused by name; errors are reported by
 :func:`~cdpr_pipeline.errors.reported` (a message, no traceback); and a command that
 writes ``out_dir`` writes it whole or not at all, one process at a time
-(:func:`run_staged`, on :mod:`cdpr_pipeline.outputs`, as the pipeline's stages do).
+(:func:`run_staged`, on :mod:`cdpr_pipeline.outputs`, as the pipeline's stages do), its
+log file ``<command>.log`` inside. Hydra itself writes nothing (``conf/hydra/``).
 """
 
 from __future__ import annotations
@@ -15,29 +18,34 @@ import hashlib
 import json
 import logging
 import os
-from collections.abc import Callable, Sequence
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
 import hydra
+from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-from cdpr_pipeline.config import CONFIG_DIR
+from cdpr_pipeline.config import CONFIG_DIR, check_arguments
 from cdpr_pipeline.errors import ConfigError, UserError, reported
-from cdpr_pipeline.outputs import rebase_paths, staged_output
-from cdpr_pipeline.pipeline.inputs import inputs_state
+from cdpr_pipeline.outputs import inputs_state, rebase_paths, staged_output
 
 log = logging.getLogger(__name__)
 
 T = TypeVar("T")
 
-#: what Hydra writes into its run directory itself (its config copy, the job's log files);
-#: kept when that directory is also the command's out_dir
-HYDRA_ENTRIES = (".hydra", "*.log")
+#: the format of the log file a command writes into its out_dir (as it prints its log)
+LOG_FORMAT = "[%(asctime)s][%(name)s][%(levelname)s] - %(message)s"
+#: the value of ``out_dir`` that stands for the directory Hydra gives a job of a sweep
+SWEEP_JOB_DIR = "${hydra:runtime.output_dir}"
 
 
 def require(cfg: DictConfig, command: str) -> None:
-    """Refuse a config with required values left unset (``???``), naming them.
+    """Refuse a config with required values left unset (``???``; ``out_dir`` left to Hydra
+    outside a sweep, where a job has no directory of its own), naming them.
 
     Raises
     ------
@@ -45,6 +53,8 @@ def require(cfg: DictConfig, command: str) -> None:
         If any value is missing.
     """
     missing = sorted(OmegaConf.missing_keys(cfg))
+    if _out_dir_left_to_hydra(cfg) and not _in_sweep():
+        missing = sorted({*missing, "out_dir"})
     if missing:
         example = " ".join(f"{k}=..." for k in missing)
         raise ConfigError(f"required: {', '.join(missing)} (e.g. {command} {example})")
@@ -73,19 +83,39 @@ def _digest(tree: dict[str, Any]) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def hydra_entries(out_dir: str | Path) -> tuple[str, ...]:
-    """:data:`HYDRA_ENTRIES` if ``out_dir`` is the running Hydra app's run directory
-    (the default ``out_dir: ${hydra:runtime.output_dir}``), else none."""
-    from hydra.core.hydra_config import HydraConfig
+def _out_dir_left_to_hydra(cfg: DictConfig) -> bool:
+    """Whether ``out_dir`` is the config's default that names Hydra's job directory."""
+    return "out_dir" in cfg and \
+        OmegaConf.to_container(cfg, resolve=False)["out_dir"] == SWEEP_JOB_DIR
 
-    if not HydraConfig.initialized():
-        return ()
-    run_dir = HydraConfig.get().runtime.output_dir
-    return HYDRA_ENTRIES if Path(run_dir).resolve() == Path(out_dir).resolve() else ()
+
+def _in_sweep() -> bool:
+    """Whether this is a job of a Hydra sweep (``-m``), which has a directory of its own."""
+    return HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
+
+
+@contextmanager
+def log_file(path: Path) -> Iterator[None]:
+    """Also write the log to ``path`` (appended) while the block runs.
+
+    Parameters
+    ----------
+    path : Path
+        The log file; its directory must exist.
+    """
+    handler = logging.FileHandler(path, mode="a", encoding="utf-8")
+    handler.setFormatter(logging.Formatter(LOG_FORMAT))
+    root = logging.getLogger()
+    root.addHandler(handler)
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)
+        handler.close()
 
 
 def run_staged(func: Callable[[DictConfig], T], cfg: DictConfig, *, nested: bool = False,
-               carry: Sequence[str] = ()) -> T:
+               scratch: Sequence[str] = ()) -> T:
     """Run ``func`` on ``cfg`` with its ``out_dir`` written whole, by one process.
 
     ``func`` gets the resolved config with every path under ``out_dir`` moved to the
@@ -103,9 +133,9 @@ def run_staged(func: Callable[[DictConfig], T], cfg: DictConfig, *, nested: bool
         For dataset writers that create ``out_dir`` themselves and may write files beside
         it (see :func:`~cdpr_pipeline.outputs.staged_output`); with ``overwrite: false``
         an existing ``out_dir`` is refused before anything runs.
-    carry : sequence of str
-        Entries of the current ``out_dir`` kept in the new one (glob patterns; see
-        :func:`hydra_entries`).
+    scratch : sequence of str
+        Files ``func`` writes that alone are not worth keeping from a failed run (its log;
+        see :func:`~cdpr_pipeline.outputs.staged_output`).
 
     Returns
     -------
@@ -126,7 +156,8 @@ def run_staged(func: Callable[[DictConfig], T], cfg: DictConfig, *, nested: bool
                           "name a directory of the command's own")
     if nested and tree.get("overwrite") is False and Path(out_dir).exists():
         raise UserError(f"out_dir={out_dir} exists; overwrite=true replaces it")
-    with staged_output(Path(out_dir), _digest(tree), nested=nested, carry=carry) as work:
+    with staged_output(Path(out_dir), _digest(tree), nested=nested,
+                       scratch=scratch) as work:
         result = func(_config(tree, out_dir, str(work)))
     log.info("wrote %s", out_dir)
     return result
@@ -149,18 +180,37 @@ def hydra_command(config_name: str, *, name: str | None = None, writes: bool = T
         See :func:`run_staged`.
     """
     command = f"cdpr {name or config_name}"
+    log_name = f"{name or config_name}.log"
 
     def decorate(task: Callable[[DictConfig], Any]) -> Callable[[], Any]:
-        @functools.wraps(task)        # the task's module names Hydra's job and log file
+        @functools.wraps(task)        # the task's module names Hydra's job
         def run(cfg: DictConfig) -> Any:
-            with reported(command):
+            with reported(command), ExitStack() as logging_to:
                 require(cfg, command)
                 if not writes:
                     return task(cfg)
-                carry = hydra_entries(OmegaConf.to_container(cfg, resolve=True)["out_dir"])
-                return run_staged(task, cfg, nested=nested, carry=carry)
+                if nested:            # a dataset: its folder holds what its format says
+                    return run_staged(task, cfg, nested=True)
 
-        return hydra.main(config_path=CONFIG_DIR, config_name=config_name,
-                          version_base="1.3")(run)
+                def logged(work: DictConfig) -> Any:
+                    # in the partial directory, so it lands in out_dir with the outputs;
+                    # open until the command ends (a rename keeps the open file)
+                    logging_to.enter_context(log_file(Path(work.out_dir) / log_name))
+                    return task(work)
+
+                return run_staged(logged, cfg, scratch=(log_name,))
+
+        hydra_main = hydra.main(config_path=CONFIG_DIR, config_name=config_name,
+                                version_base="1.3")(run)
+
+        @functools.wraps(task)
+        def main() -> Any:
+            # before Hydra composes: its own report of a bad setting is several lines and
+            # suggests `+key`, and it takes `flase` for a string
+            with reported(command):
+                check_arguments(config_name, sys.argv[1:], command=command)
+            return hydra_main()
+
+        return main
 
     return decorate

@@ -6,13 +6,15 @@ What every ``cdpr`` command that writes an ``out_dir`` and every pipeline stage 
   :class:`~cdpr_pipeline.errors.OutputBusy` naming the holder's pid. The lock is the
   kernel's (``flock``), so a process that died holding it holds it no more: the next run
   takes it over.
+- :func:`inputs_state`: what a run's resume stamp holds of its inputs (sizes, times);
 - :func:`partial_dir`: the work in progress goes to ``<out_dir>.partial``, kept from an
   interrupted run with the same params (resumed) and emptied otherwise.
 - :func:`commit_output`: the finished partial directory is swapped in for ``out_dir``
   by renames; a run that fails or is killed leaves ``out_dir`` as it was.
 - :func:`rebase_paths` and :func:`repoint_text_outputs`: paths in a config pointed at the
   partial directory, and small text outputs that recorded them pointed back.
-- :func:`staged_output`: all of it around one block.
+- :func:`staged_output`: all of it around one block; :func:`final_paths` names the paths
+  being written there as they will be found (what a run logs to MLflow).
 """
 
 from __future__ import annotations
@@ -21,8 +23,9 @@ import fcntl
 import logging
 import os
 import shutil
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +35,8 @@ log = logging.getLogger(__name__)
 
 #: text outputs up to this size are repointed from the partial to the final directory
 MAX_REPOINT_BYTES = 5_000_000
+#: ``(where it is written, out_dir)`` of the output :func:`staged_output` is writing
+_STAGED: ContextVar[tuple[str, str] | None] = ContextVar("cdpr_staged_output", default=None)
 
 
 def _sibling(out_dir: Path, suffix: str) -> Path:
@@ -97,6 +102,29 @@ def output_lock(out_dir: Path) -> Iterator[None]:
         handle.close()
 
 
+def inputs_state(paths: Mapping[str, str]) -> list:
+    """Size and modification time of every file under the input paths: cheap, and
+    enough to tell a resumed stage that its inputs changed.
+
+    Parameters
+    ----------
+    paths : Mapping
+        ``label -> path`` (see :func:`cdpr_pipeline.pipeline.inputs.input_paths`);
+        missing paths count as empty.
+
+    Returns
+    -------
+    list
+        ``(label, file, size, mtime_ns)`` per file, in a fixed order.
+    """
+    state = []
+    for key, top in sorted(paths.items()):
+        root = Path(top)
+        files = [root] if root.is_file() else sorted(q for q in root.rglob("*") if q.is_file())
+        state += [(key, str(q), q.stat().st_size, q.stat().st_mtime_ns) for q in files]
+    return state
+
+
 def partial_dir(out_dir: Path, digest: str) -> Path:
     """``<out_dir>.partial``, kept from an interrupted run with the same params (so the
     run resumes from it) and emptied otherwise.
@@ -150,26 +178,18 @@ def _replace(src: Path, dest: Path) -> None:
         os.replace(src, dest)
 
 
-def commit_output(partial: Path, out_dir: Path, carry: Sequence[str] = ()) -> None:
+def commit_output(partial: Path, out_dir: Path) -> None:
     """Swap the finished partial directory in for ``out_dir`` (two renames).
 
     Parameters
     ----------
     partial : Path
-        What :func:`partial_dir` returned, now complete.
+        What :func:`partial_dir` returned, now complete. A file in it still open for
+        writing (the command's log) keeps its handle: a rename moves the open file.
     out_dir : Path
         The output directory; its previous content is removed.
-    carry : sequence of str
-        Glob patterns of entries of the current ``out_dir`` that move into the new one
-        (those the partial directory lacks), e.g. Hydra's ``.hydra/`` and log files when
-        ``out_dir`` is Hydra's run directory. A file still open for writing keeps its
-        handle (a rename moves the open file).
     """
     partial, out_dir = Path(partial), Path(out_dir)
-    for pattern in carry:
-        for entry in sorted(out_dir.glob(pattern)) if out_dir.is_dir() else []:
-            if not (partial / entry.name).exists():
-                entry.rename(partial / entry.name)
     old = _sibling(out_dir, ".old")
     if old.exists():
         shutil.rmtree(old)
@@ -183,12 +203,12 @@ def commit_output(partial: Path, out_dir: Path, carry: Sequence[str] = ()) -> No
 
 @contextmanager
 def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
-                  carry: Sequence[str] = ()) -> Iterator[Path]:
+                  scratch: Sequence[str] = ()) -> Iterator[Path]:
     """Lock ``out_dir``, yield where to write it, and swap that in when the block ends.
 
     If the block raises (or the process dies) ``out_dir`` stays as it was and the work so
     far stays in ``<out_dir>.partial`` (resumed by a run with the same ``digest``; removed
-    if the block raised before writing anything).
+    if the block raised before writing anything but ``scratch``).
 
     Parameters
     ----------
@@ -201,8 +221,9 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
         True: the yielded path is ``<out_dir>.partial/<name>``, which must be created by
         the block (e.g. a dataset writer that refuses an existing directory); files the
         block writes beside it (``<name>.truth.yaml``) land beside ``out_dir``.
-    carry : sequence of str
-        See :func:`commit_output`.
+    scratch : sequence of str
+        Names of files in the partial directory that alone make nothing worth keeping
+        from a failed run (the command's log: the error was reported).
 
     Yields
     ------
@@ -215,21 +236,24 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
         work = partial / out_dir.name if nested else partial
         if nested and work.exists():   # an interrupted writer's; a dataset writer does not
             shutil.rmtree(work)        # resume
+        token = _STAGED.set((str(work), str(out_dir)))
         try:
             yield work
         except BaseException:
-            if not any(partial.iterdir()):    # it failed before writing: nothing to keep
-                partial.rmdir()
+            if all(p.name in scratch for p in partial.iterdir()):   # failed before writing
+                shutil.rmtree(partial)                              # anything to resume
                 _sibling(out_dir, ".partial.params").unlink(missing_ok=True)
             raise
+        finally:
+            _STAGED.reset(token)
         if not nested:
-            commit_output(partial, out_dir, carry)
+            commit_output(partial, out_dir)
             repoint_text_outputs(out_dir, str(partial), str(out_dir))
             return
         if not work.exists():
             raise FileNotFoundError(f"{work}: the run wrote no {out_dir.name}")
         sidecars = [p for p in partial.iterdir() if p.name != out_dir.name]
-        commit_output(work, out_dir, carry)
+        commit_output(work, out_dir)
         repoint_text_outputs(out_dir, str(work), str(out_dir))
         for path in sidecars:
             _replace(path, out_dir.parent / path.name)
@@ -259,6 +283,24 @@ def rebase_paths(tree: Any, old: str, new: str) -> Any:
     if isinstance(tree, str) and (tree == old or tree.startswith(old.rstrip("/") + "/")):
         return new + tree[len(old.rstrip("/")):]
     return tree
+
+
+def final_paths(tree: Any) -> Any:
+    """``tree`` with the paths into the output being written (by :func:`staged_output`, in
+    this context) named as they will be found once it is swapped in; as it is elsewhere.
+
+    Parameters
+    ----------
+    tree : Any
+        A config as plain containers, or a path string.
+
+    Returns
+    -------
+    Any
+        A copy of ``tree`` (see :func:`rebase_paths`).
+    """
+    staged = _STAGED.get()
+    return tree if staged is None else rebase_paths(tree, *staged)
 
 
 def repoint_text_outputs(out_dir: Path, old: str, new: str) -> None:

@@ -1,4 +1,6 @@
-"""Shared fixtures: the paper's rig and its nominal plant, composed from the real config."""
+"""Shared fixtures: the paper's rig and its nominal plant, composed from the real config;
+the seeds of random draws (``seed``, ``seed_of``: from the commit and the test's id,
+:mod:`cdpr_pipeline.testing.draws`), printed in the run's header and with every failure."""
 
 from __future__ import annotations
 
@@ -21,6 +23,74 @@ from cdpr_pipeline.config import compose_config  # noqa: E402
 from cdpr_pipeline.data.rig import CdprRig  # noqa: E402
 from cdpr_pipeline.sim.plant import Plant  # noqa: E402
 from cdpr_pipeline.stages.simulate import rig_from_config  # noqa: E402
+from cdpr_pipeline.testing.draws import commit_under_test, describe_draws, draw_seed  # noqa: E402
+
+#: the seed a test (or a module, for its module-scoped fixtures) drew
+DRAWN = pytest.StashKey[int]()
+#: the fixtures that draw a seed: a test that requests one, directly or through another
+#: fixture, is a random-draw test (marked ``random_draw``: benchmarks/bench_test_draws.py
+#: measures its pass rate over many draws)
+DRAWING_FIXTURES = ("seed", "seed_of")
+
+
+def pytest_report_header(config) -> list[str]:
+    return [describe_draws(), _blas_kernels()]
+
+
+def _blas_kernels() -> str:
+    """The BLAS kernels numpy runs on (``OPENBLAS_CORETYPE`` chooses OpenBLAS's): the
+    golden-record tests must hold under each (``make test-golden``)."""
+    try:
+        from threadpoolctl import threadpool_info
+    except ImportError:       # pragma: no cover - a scikit-learn dependency
+        return "BLAS: unknown (no threadpoolctl)"
+    found = sorted({f"{i.get('internal_api')} {i.get('version')} {i.get('architecture')}"
+                    for i in threadpool_info() if i.get("user_api") == "blas"})
+    return "BLAS: " + ("; ".join(found) or "none found")
+
+
+@pytest.hookimpl(tryfirst=True)      # before `-m` selects by the marks
+def pytest_collection_modifyitems(config, items) -> None:
+    for item in items:
+        params = getattr(getattr(item, "callspec", None), "params", {})
+        if any(f in item.fixturenames and f not in params for f in DRAWING_FIXTURES):
+            item.add_marker(pytest.mark.random_draw)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item, call):
+    """A failed test that drew says with which seed, and how to replay it."""
+    report = yield
+    if report.failed:
+        drawn = [(node.nodeid, node.stash[DRAWN]) for node in item.listchain()
+                 if DRAWN in node.stash]
+        if drawn:
+            lines = [f"{where or 'session'}: seed {seed}" for where, seed in drawn]
+            seed = drawn[-1][1]
+            lines.append(f"drawn from commit {commit_under_test()}; replay: "
+                         f"CDPR_TEST_SEED={seed} python -m pytest -n 0 '{item.nodeid}'")
+            report.sections.append(("random draw", "\n".join(lines)))
+    return report
+
+
+def _drawn_seed(node) -> int:
+    seed = draw_seed(node.nodeid)
+    node.stash[DRAWN] = seed
+    return seed
+
+
+@pytest.fixture
+def seed(request) -> int:
+    """The test's random seed (:func:`~cdpr_pipeline.testing.draws.draw_seed` of its node
+    id), printed when it fails."""
+    return _drawn_seed(request.node)
+
+
+@pytest.fixture(scope="session")
+def seed_of() -> Callable[[pytest.Item], int]:
+    """``seed_of(request.node)``: the seed of a module- or class-scoped fixture's draw
+    (of that node's id), printed with the failure of any test under it."""
+    return _drawn_seed
 
 
 @pytest.fixture(scope="session")
@@ -78,3 +148,12 @@ def small_lab(tmp_path_factory):
     out = tmp_path_factory.mktemp("small_lab") / "lab"
     simulate(compose_config("simulate", [*SMALL_LAB, f"out_dir={out}"]))
     return out
+
+
+@pytest.fixture(scope="session")
+def kind_cases(tmp_path_factory, seed_of, request):
+    """One diagnosis of each rig kind (``testing.kind_cases``), from the session's seed
+    (printed with any failure of a test that uses them)."""
+    from cdpr_pipeline.testing.kind_cases import kind_cases as make
+
+    return make(tmp_path_factory.mktemp("kind_cases"), seed_of(request.node))

@@ -1,4 +1,5 @@
-"""The ``cdpr`` command as a user meets it: errors as messages, Ctrl-C, ``--help``.
+"""The ``cdpr`` command as a user meets it: errors as messages, settings checked (one
+line, exit 2, for every command), Ctrl-C, ``--help``.
 
 Called in-process (``cdpr_pipeline.cli.main``), several times in one process, as the
 bad-input suite does."""
@@ -8,9 +9,13 @@ from __future__ import annotations
 import shutil
 
 import pytest
+import yaml
+from omegaconf import OmegaConf
 
+import cdpr_pipeline
 from cdpr_pipeline import cli
-from cdpr_pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, UserError
+from cdpr_pipeline.config import compose_config
+from cdpr_pipeline.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, ConfigError, UserError
 from cdpr_pipeline.resources import foreign_rig_path
 
 
@@ -25,7 +30,7 @@ def _run(capsys, *args: str) -> tuple[int | str | None, str, str]:
 def _no_debug(monkeypatch, tmp_path):
     monkeypatch.delenv("CDPR_DEBUG", raising=False)
     monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
-    monkeypatch.chdir(tmp_path)        # Hydra's run directories go there
+    monkeypatch.chdir(tmp_path)        # nothing may be written there
 
 
 def test_missing_data_path_is_named_without_a_traceback_every_time(capsys, tmp_path):
@@ -61,6 +66,125 @@ def test_a_bad_override_exits_2_without_a_traceback(capsys):
     code, _, err = _run(capsys, "diagnose", "no_such_key=1")
     assert code == EXIT_USER_ERROR
     assert "no_such_key" in err and "Traceback" not in err
+
+
+def _leaves(tree, prefix=""):
+    """``(dotted key, value)`` of every scalar of a config outside the mappings that build
+    an object (``_target_``: ``+key`` may add an argument there)."""
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict) and "_target_" not in value:
+            yield from _leaves(value, f"{name}.")
+        elif not isinstance(value, dict):
+            yield name, value
+
+
+def _settings(sub: str) -> dict:
+    """The composed config of ``cdpr <sub>`` (``stage`` has none: it runs params.yaml)."""
+    if sub not in cli.CONFIG_NAMES:
+        return {}
+    return OmegaConf.to_container(compose_config(cli.CONFIG_NAMES[sub]), resolve=False)
+
+
+def _refused(capsys, tmp_path, sub: str, *args: str) -> str:
+    """Run ``cdpr <sub> args``; assert one line on stderr, exit 2, nothing written; the
+    line."""
+    code, out, err = _run(capsys, sub, *args)
+    assert code == EXIT_USER_ERROR, (out, err)
+    assert err.count("\n") == 1 and err.startswith(f"cdpr {sub}: error: "), err
+    assert "Traceback" not in err and "HYDRA_FULL_ERROR" not in err and "+" not in \
+        err.replace(args[0], "")                  # no advice to add the key with +
+    assert out == "" and list(tmp_path.iterdir()) == []
+    return err.strip()
+
+
+@pytest.mark.parametrize("sub", sorted(cli.SUBCOMMANDS))
+def test_a_misspelt_setting_is_one_line_naming_the_closest(capsys, tmp_path, sub):
+    """The issue's typo, for every command: a real key of the command with a letter
+    dropped (``blackbox.enabld``), and the same with ``+``, which adds nothing."""
+    leaves = [k for k, _ in _leaves(_settings(sub)) if len(k.rpartition(".")[2]) > 3]
+    key = leaves[0] if leaves else "blackbox.enabled"
+    typo = key[:-2] + key[-1]
+    for arg in (f"{typo}=1", f"+{typo}=1"):
+        err = _refused(capsys, tmp_path, sub, arg)
+        assert f"unknown setting {typo} " in err
+        if leaves:
+            assert err.endswith(f"(did you mean {key}?)"), err
+
+
+@pytest.mark.parametrize("sub", sorted(cli.CONFIG_NAMES))
+def test_booleans_and_numbers_are_read_strictly(capsys, tmp_path, sub):
+    """``flase`` for a boolean, ``1O`` for an integer, ``fast`` for a float: refused with
+    the key named, for every command that has such a setting."""
+    by_type = {}
+    for key, value in _leaves(_settings(sub)):
+        by_type.setdefault(type(value), key)
+    bad = {bool: "flase", int: "1O", float: "fast"}
+    cases = [(by_type[kind], text) for kind, text in bad.items() if kind in by_type]
+    assert cases or sub in ("convert", "report"), f"cdpr {sub} has no boolean or number"
+    for key, text in cases:
+        err = _refused(capsys, tmp_path, sub, f"{key}={text}")
+        assert err.startswith(f"cdpr {sub}: error: {key}={text}: expected "), err
+
+
+@pytest.mark.parametrize("args, message", [
+    (["diagnose", "blackbox.enabled=flase"],
+     "blackbox.enabled=flase: expected true or false"),
+    (["diagnose", "blackbox.enabld=false"],
+     "unknown setting blackbox.enabld (did you mean blackbox.enabled?)"),
+    (["diagnose", "+blackbox.enabld=false"],
+     "unknown setting blackbox.enabld (did you mean blackbox.enabled?)"),
+    (["diagnose", "+blackbox.enabled=false"],
+     "blackbox.enabled is a setting already: blackbox.enabled=VALUE sets it (without +)"),
+    (["diagnose", "blackbox.model=tcn"], "blackbox.model holds settings"),
+    (["train", "model=tcnx"], "unknown option model=tcnx (choices: arx, "),
+    (["train", "trainer.max_epochs=2.5"], "trainer.max_epochs=2.5: expected an integer"),
+    (["train", "trainer.deterministic=flase"],
+     "trainer.deterministic=flase: expected true or false"),
+    (["identify", "seed=0,1"], "seed=0,1: several values need -m"),
+    (["identify", "hydra.run.dri=x"], "unknown setting hydra.run.dri (did you mean "
+                                      "hydra.run.dir?)"),
+    (["validate", "a b=c"], "cannot read the setting 'a b=c'"),
+    (["validate", "--bogus"], "unrecognized arguments: --bogus"),
+    (["stage", "diagnose", "blackbox.enabld=false"], "unknown setting blackbox.enabld"),
+])
+def test_settings_refused_before_anything_runs(capsys, tmp_path, args, message):
+    code, out, err = _run(capsys, *args)
+    assert code == EXIT_USER_ERROR
+    assert err.count("\n") == 1 and f"cdpr {args[0]}: error: {message}" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("args, shown", [
+    (["train", "+trainer.limit_train_batches=2"], ("trainer", "limit_train_batches", 2)),
+    (["train", "+optimizer.weight_decay=1e-4"], ("optimizer", "weight_decay", 1e-4)),
+    (["diagnose", "++blackbox.enabled=false"], ("blackbox", "enabled", False)),
+    (["diagnose", "blackbox.epochs=null"], ("blackbox", "epochs", None)),
+    (["train", "optimizer.lr=1"], ("optimizer", "lr", 1)),
+    (["train", "trainer.devices=auto"], ("trainer", "devices", "auto")),      # Lightning's
+    (["train", "trainer.devices=[0,1]"], ("trainer", "devices", [0, 1])),     # other types
+    (["train", "trainer.deterministic=warn"], ("trainer", "deterministic", "warn")),
+    (["simulate", "+effects=[anchor_offset]", "effects.anchor_offset.cable=2"],
+     ("effects", "anchor_offset", {"cable": 2})),
+])
+def test_arguments_for_an_object_and_set_values_pass(capsys, args, shown):
+    """``+key`` adds an argument to a mapping that builds an object (``_target_``: the
+    trainer's, the optimizer's), whose arguments may also take a word or a list where the
+    default is an integer or a boolean; ``++key`` and ``null`` set a key that is there."""
+    cli.main([*args, "--cfg", "job"])
+    cfg = yaml.safe_load(capsys.readouterr().out)
+    group, key, value = shown
+    if isinstance(value, dict):
+        assert value.items() <= cfg[group][key].items()
+    else:
+        assert cfg[group][key] == value
+
+
+def test_the_api_checks_settings_as_the_command_does():
+    with pytest.raises(ConfigError, match="expected true or false"):
+        cdpr_pipeline.command_config("diagnose", "blackbox.enabled=flase")
+    with pytest.raises(ConfigError, match=r"did you mean blackbox\.enabled\?"):
+        cdpr_pipeline.command_config("diagnose", blackbox={"enabld": False})
 
 
 def test_unknown_subcommand(capsys):

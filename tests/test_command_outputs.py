@@ -1,11 +1,14 @@
 """Every command's ``out_dir`` is written whole, by one process at a time: a run killed
 mid-write leaves the previous outputs as they were, and a second run on the same
-``out_dir`` fails at once, naming the writer."""
+``out_dir`` fails at once, naming the writer. Nothing else is written: no Hydra run
+directory (``outputs/``) in the working directory, the log in ``out_dir``."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -16,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from cdpr_pipeline import cli
+from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.errors import EXIT_USER_ERROR
 from cdpr_pipeline.resources import foreign_rig_path
 
@@ -27,6 +31,50 @@ def _cwd(monkeypatch, tmp_path):
     monkeypatch.delenv("CDPR_DEBUG", raising=False)
     monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
     monkeypatch.chdir(tmp_path)
+
+
+#: what a command's console had and must not have (Lightning's device notices, its advert)
+_NOISE = ("GPU available", "TPU available", "Tip", "litlogger", "Traceback")
+
+
+def _message(line: str) -> str:
+    """A printed line without the handler's prefix (``[time][logger][LEVEL] - `` of the
+    command's log, ``INFO: `` of Lightning's own console), as two handlers would print it."""
+    return re.sub(r"^(\[[^]]*\]\[[^]]*\]\[[^]]*\] - |(INFO|WARNING): )", "", line)
+
+
+@pytest.mark.slow
+def test_a_default_diagnose_prints_each_message_once_and_logs_its_final_out_dir(
+        tmp_path, new_mlflow_store):
+    """The black box on (the default: Lightning trains it), one epoch to keep it short: no
+    device notice or advert, no message twice, the log in out_dir, and the MLflow run named
+    after the command and the dataset with the final out_dir (not ``.partial``)."""
+    uri = new_mlflow_store(tmp_path / "store" / "mlflow.db")
+    out = tmp_path / "diag"
+    env = dict(os.environ, MLFLOW_TRACKING_URI=uri)
+    for name in ("CDPR_DEBUG", "HYDRA_FULL_ERROR"):
+        env.pop(name, None)
+    done = subprocess.run(
+        [sys.executable, "-m", "cdpr_pipeline.cli", "diagnose", f"data.path={FOREIGN}",
+         f"out_dir={out}", "blackbox.epochs=1"], env=env, cwd=tmp_path, capture_output=True,
+        text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    printed = (done.stdout + done.stderr).splitlines()
+    assert "black box: training" in done.stdout       # Lightning did run
+    assert not [line for line in printed if any(word in line for word in _NOISE)], printed
+    messages = [_message(line) for line in printed if line.strip()]
+    assert sorted(m for m in set(messages) if messages.count(m) > 1) == []
+    assert done.stderr == ""
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["diag", "store"]
+    assert (out / "diagnose.log").read_text().splitlines() == done.stdout.splitlines()
+
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(uri)
+    (run,) = client.search_runs([e.experiment_id for e in client.search_experiments()])
+    assert run.info.run_name == f"diagnose:{FOREIGN.name}"
+    assert run.data.params["out_dir"] == str(out)
+    assert ".partial" not in " ".join(run.data.params.values())
 
 
 def _previous(out: Path) -> None:
@@ -43,18 +91,72 @@ def test_a_command_replaces_its_out_dir_whole_and_leaves_nothing_beside(tmp_path
     out = tmp_path / "w" / "out"
     _previous(out)
     cli.main(["wavelet", f"data.path={FOREIGN}", f"out_dir={out}"])
-    assert sorted(p.name for p in out.iterdir()) == ["bands.json", "wavelet.npz"]
+    assert sorted(p.name for p in out.iterdir()) == ["bands.json", "wavelet.log", "wavelet.npz"]
     assert "wavelet" in json.loads((out / "bands.json").read_text())
     assert _left_beside(out) == []        # no .partial, .lock or .old
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["w"]     # no outputs/ from Hydra
 
 
-def test_hydra_run_directory_keeps_hydra_files_beside_the_outputs(tmp_path):
-    cli.main(["wavelet", f"data.path={FOREIGN}"])
-    (run_dir,) = (tmp_path / "outputs").glob("*/*")
-    assert sorted(p.name for p in run_dir.iterdir()) == [
-        ".hydra", "bands.json", "wavelet.log", "wavelet.npz"]
-    assert "wrote" in (run_dir / "wavelet.log").read_text()     # still logging after the swap
-    assert _left_beside(run_dir) == []
+def test_the_log_goes_into_out_dir_and_out_dir_is_required(tmp_path, capsys):
+    out = tmp_path / "out"
+    cli.main(["wavelet", f"data.path={FOREIGN}", f"out_dir={out}"])
+    printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("[")]
+    logged = (out / "wavelet.log").read_text().splitlines()
+    assert logged == printed and f"wrote {out}" in logged[-1]    # still logging after the swap
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["wavelet", f"data.path={FOREIGN}"])
+    assert exc.value.code == EXIT_USER_ERROR
+    assert "cdpr wavelet: error: required: out_dir (e.g. cdpr wavelet out_dir=...)" in \
+        capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+#: per command, a cheap run that fails once it has started (a missing input), with and
+#: without out_dir; ``params`` succeeds (it writes params.yaml, its output)
+_FAILING = {
+    "compare": ["data.path=missing"],
+    "convert": ["src=missing"],
+    "dataset": ["source=ingest", "path=missing"],
+    "diagnose": ["data.path=missing"],
+    "identify": ["data.path=missing"],
+    "params": ["dataset.source=ingest", "dataset.path=missing"],
+    "reconstruct": ["data.path=missing", "identification_json=missing.json"],
+    "report": ["dataset=missing", "stages.dataset=missing"],
+    "repro": ["dvc_args=[--no-such-flag]"],
+    "simulate": ["model_file=missing.yaml"],
+    "stage": [],
+    "train": ["data.path=missing"],
+    "validate": ["data.path=missing"],
+    "virtual": ["data.path=missing", "forecaster=missing.pt"],
+    "wavelet": ["data.path=missing"],
+}
+
+
+def test_every_command_has_a_cheap_run():
+    assert set(_FAILING) == set(cli.SUBCOMMANDS)
+
+
+@pytest.mark.parametrize("sub", sorted(cli.SUBCOMMANDS))
+def test_no_command_leaves_hydra_outputs_in_the_working_directory(
+        tmp_path, monkeypatch, new_mlflow_store, sub):
+    """The issue's clutter: every command, failed ones included and even with out_dir,
+    left outputs/<date>/<time>/ (Hydra's run directory) in the working directory."""
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", new_mlflow_store(tmp_path / "store" / "m.db"))
+    args = [sub, *(["diagnose"] if sub == "stage" else []), *_FAILING[sub]]
+    runs = [args]
+    if sub in cli.CONFIG_NAMES and "out_dir" in compose_config(cli.CONFIG_NAMES[sub]):
+        runs.append([*args, f"out_dir={tmp_path / 'out'}"])
+    for run in runs:
+        with contextlib.suppress(SystemExit):
+            cli.main(run)
+        left = sorted(p.name for p in tmp_path.iterdir())
+        assert "outputs" not in left and ".hydra" not in left and not \
+            [p for p in left if p.endswith(".log")], (run, left)
+
+
+def test_a_real_run_without_out_dir_writes_nothing_into_the_working_directory(tmp_path):
+    cli.main(["validate", f"data.path={FOREIGN}", "quiet=true"])
+    assert list(tmp_path.iterdir()) == []
 
 
 _KILLED_WRITER = textwrap.dedent("""

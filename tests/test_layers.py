@@ -3,7 +3,7 @@
 The order, lowest first (a layer may import its own and any lower one, never a higher):
 
 1. leaves: ``errors``, ``config``, ``progress``, ``metrics``, ``tables``, ``evolution``,
-   ``resources`` (no project imports);
+   ``resources`` (no project imports but ``errors``, which ``config`` reports with);
 2. ``data``: reading and checking datasets (how a run is read: ``data.reading``), rigs,
    splits;
 3. ``wavelet``: the wavelet split;
@@ -60,7 +60,7 @@ HEAVY_DEPS = ("torch", "lightning")
 #: function-level project imports that defer torch/Lightning to the call that needs them:
 #: (importing module, imported module)
 HEAVY = {
-    ("cdpr_pipeline.models.physics", "cdpr_pipeline.models.module"),
+    ("cdpr_pipeline.models.residual_network", "cdpr_pipeline.models.module"),
     ("cdpr_pipeline.stages.compare", "cdpr_pipeline.stages.train"),
     ("cdpr_pipeline.stages.compare", "cdpr_pipeline.models.evaluation"),
     ("cdpr_pipeline.stages.compare", "cdpr_pipeline.models.forecast"),
@@ -134,6 +134,48 @@ def test_imports_go_to_the_same_or_a_lower_layer():
               for m, found in IMPORTS.items() for imported, line, _ in found
               if _project(imported) and RANK[_unit(imported)] > RANK[_unit(m)]]
     assert not upward, "imports up the layers:\n" + "\n".join(upward)
+
+
+def _unit_cycle(edges: dict[str, set[str]]) -> list[str]:
+    """A cycle of the directed graph ``edges`` (unit -> units it imports), as the list of
+    its units (first repeated last); ``[]`` if there is none."""
+    state: dict[str, int] = {}          # 1: on the current path, 2: done
+    path: list[str] = []
+
+    def visit(unit: str) -> list[str]:
+        state[unit] = 1
+        path.append(unit)
+        for nxt in sorted(edges.get(unit, ())):
+            if state.get(nxt) == 1:
+                return [*path[path.index(nxt):], nxt]
+            if nxt not in state and (found := visit(nxt)):
+                return found
+        path.pop()
+        state[unit] = 2
+        return []
+
+    for unit in sorted(edges):
+        if unit not in state and (found := visit(unit)):
+            return found
+    return []
+
+
+def test_no_import_cycle_between_subpackages_and_top_level_modules():
+    """Two units of one layer may import each other's modules only one way (a cycle
+    between ``command`` and ``pipeline`` would let a change of either break the other);
+    every import counts, the facades' deferred ones too."""
+    edges: dict[str, set[str]] = {}
+    for m, found in IMPORTS.items():
+        for imported, _, _ in found:
+            if _project(imported) and _unit(imported) != _unit(m):
+                edges.setdefault(_unit(m), set()).add(_unit(imported))
+    assert _unit_cycle(edges) == [], f"import cycle: {' -> '.join(_unit_cycle(edges))}"
+
+
+def test_the_cycle_check_finds_a_cycle():
+    assert _unit_cycle({"command": {"pipeline"}, "pipeline": {"command"}}) == [
+        "command", "pipeline", "command"]
+    assert _unit_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) == []
 
 
 def test_no_function_level_project_import_but_the_heavy_and_the_facades():

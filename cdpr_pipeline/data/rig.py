@@ -18,6 +18,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from cdpr_pipeline.data.units import WINCH_UNITS, ChannelUnits, axes_units
+
 FORMAT = "cdpr-measured/1"
 WINCH_KEYS = ("inertia", "viscous", "coulomb", "offset")
 #: what a drive axis is (rig.yaml's optional ``joint_types``, one per axis): a
@@ -189,6 +191,19 @@ class Rig(Protocol):
         """The unit of the torque columns ``u`` where the data format fixes it."""
 
     @property
+    def drive_word(self) -> str:
+        """What a user calls one channel's drive: ``winch`` (cable robot) or ``axis``."""
+
+    @property
+    def drive_words(self) -> str:
+        """Its plural: ``winches`` or ``axes``."""
+
+    @property
+    def channel_units(self) -> tuple[ChannelUnits, ...]:
+        """Per channel the units of its position, speed and force or torque
+        (:mod:`cdpr_pipeline.data.units`)."""
+
+    @property
     def shared_position_units(self) -> bool:
         """Whether every position coordinate has one unit (cable robot: m)."""
 
@@ -338,6 +353,8 @@ class CdprRig(_Signals):
     shared_position_units = True
     #: the data spec: a cable robot's u is the commanded torque
     torque_commanded = True
+    drive_word = "winch"
+    drive_words = "winches"
 
     def __post_init__(self) -> None:
         object.__setattr__(
@@ -372,6 +389,11 @@ class CdprRig(_Signals):
     @property
     def count_text(self) -> str:
         return f"{self.n} anchors"
+
+    @property
+    def channel_units(self) -> tuple[ChannelUnits, ...]:
+        """Every winch turns in rad with torques in N m (the data format)."""
+        return (WINCH_UNITS,) * self.n
 
     @property
     def controller_rate_hz(self) -> float | None:
@@ -436,6 +458,8 @@ class AxesRig(_Signals):
     shared_position_units = False
     #: an axis's u is the force or torque applied
     torque_commanded = False
+    drive_word = "axis"
+    drive_words = "axes"
 
     @property
     def n(self) -> int:
@@ -513,6 +537,13 @@ class AxesRig(_Signals):
                 raise ValueError(f"rig.yaml: joint_types[{i}] (axis {self.axes[i]}): must be "
                                  f"one of {list(JOINT_TYPES)}, got {value!r}")
         return tuple(str(v) for v in raw)
+
+    @property
+    def channel_units(self) -> tuple[ChannelUnits, ...]:
+        """Per axis rad and N m (rotary) or m and N (prismatic), from
+        :attr:`joint_types`; rig.yaml's optional ``units`` (``{q1: m, u1: N}``) wins
+        where it names a column."""
+        return axes_units(self.joint_types, self.extra.get("units"))
 
 
     @property

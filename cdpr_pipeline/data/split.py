@@ -4,7 +4,8 @@ One family of split functions serves identification, diagnosis and the sequence 
 
 - :func:`model_split`: ``train``/``val``/``test`` for the sequence models, by whole runs
   stratified by family (:func:`whole_run_split`) wherever whole runs can give each part a
-  run, else by time blocks inside runs;
+  run, else by time blocks inside runs; :func:`window_split` for models that read
+  windows of a given length (what ``cdpr train`` and ``cdpr validate`` use);
 - :func:`heldout_split`: ``train``/``heldout`` for identification and diagnosis: whole
   runs held out (families ``spiral``/``pulses`` by default, else the last file; an
   explicit list wins), or the last block of the run when there is only one.
@@ -36,8 +37,10 @@ from typing import Any
 
 import numpy as np
 
+from .errors import DataValidationError, Problem
 from .io import Dataset
 from .trajectory import Trajectory, block_name, family_of
+from .validation import run_file
 
 log = logging.getLogger(__name__)
 
@@ -354,9 +357,11 @@ def model_split(runs: Sequence[Trajectory], val_fraction: float = 0.1,
 
     Raises
     ------
-    ValueError
+    RunTooShortError
         If a run cannot hold its blocks of at least ``min_samples`` samples and the gaps;
-        the message names the dataset and the run.
+        the message names the dataset and the run's file.
+    ValueError
+        If there are no runs.
     """
     runs = list(runs)
     if not runs:
@@ -389,11 +394,13 @@ def model_split(runs: Sequence[Trajectory], val_fraction: float = 0.1,
         n_train = n - n_val - n_test - n_gaps * gap
         if n_train < min_samples:
             rate = _rate(tr)
-            raise ValueError(
-                f"{source}: run {tr.name} has {_samples_label(n, rate)}: too short to cut "
+            raise RunTooShortError([Problem(
+                run_file(tr.name), "t", None,
+                f"run {tr.name} has {_samples_label(n, rate)}: too short to cut "
                 f"into training, validation and test blocks of at least "
                 f"{_samples_label(min_samples, rate)} each with gaps of {gap} samples; "
-                "record a longer run or use a shorter window")
+                "record a longer run or use a shorter window", "error", "window_split")],
+                root=source)
         test_start = n - n_test
         val_start = test_start - (gap if n_test else 0) - n_val
         parts["train"].append(Segment.of(tr, 0, n_train))
@@ -401,6 +408,48 @@ def model_split(runs: Sequence[Trajectory], val_fraction: float = 0.1,
         if n_test:
             parts["test"].append(Segment.of(tr, test_start, n))
     return Split.build(parts, gap)
+
+
+def window_split(runs: Sequence[Trajectory], window: int, *, val_fraction: float = 0.1,
+                 test_fraction: float = 0.1, test_families: Sequence[str] = ("spiral",),
+                 seed: int = 0, gap: int | None = None, min_samples: int = 1,
+                 source: str = "dataset") -> Split:
+    """The split of a sequence model that reads windows of ``window`` samples.
+
+    :func:`model_split` with gaps of ``gap`` samples (default ``window``) and blocks of
+    at least ``window + 3`` samples (and ``min_samples``); then every whole run of a part
+    must hold ``window + 3`` samples too: a window, its target and the two samples a
+    velocity needs.
+
+    Raises
+    ------
+    RunTooShortError
+        Naming the first short run's file and column ``t``.
+    """
+    runs = list(runs)
+    need = int(window) + 3
+    gap = int(window) if gap is None else int(gap)
+    split = model_split(runs, val_fraction, test_fraction, test_families, seed, gap=gap,
+                        min_samples=max(need, int(min_samples)), source=source)
+    by_name = {tr.name: tr for tr in runs}
+    short = [seg for part in split.part_names for seg in split[part]
+             if seg.whole and by_name[seg.run].n_samples < need]
+    if short:
+        tr = by_name[short[0].run]
+        rate = _rate(tr)
+        raise RunTooShortError([Problem(
+            run_file(tr.name), "t", None,
+            f"run has {_samples_label(tr.n_samples, rate)}, shorter than window+3 = {need} "
+            f"samples that a model reading windows of {window} samples needs"
+            + (f" (also too short: {[s.run for s in short[1:]]})" if len(short) > 1 else "")
+            + "; lower data.window or record a longer run", "error", "window_split")],
+            root=source)
+    return split
+
+
+class RunTooShortError(DataValidationError, ValueError):
+    """A run too short for a split (a :class:`ValueError` too, as the splits' other
+    refusals are); names the run's file and column ``t``."""
 
 
 # ------------------------------------------------------- identification and diagnosis

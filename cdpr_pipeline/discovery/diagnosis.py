@@ -33,7 +33,13 @@ from cdpr_pipeline.discovery.damping import with_fitted_damping
 from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
 from cdpr_pipeline.discovery.freeform.search import FreeFormSearch
 from cdpr_pipeline.discovery.never_worse import never_worse
-from cdpr_pipeline.discovery.plots import BeforeAfterPlot, ClosedLoopPlot, ColumnPlot, Plots
+from cdpr_pipeline.discovery.plots import (
+    BeforeAfterPlot,
+    ClosedLoopPlot,
+    ColumnPlot,
+    HeldoutRunPlot,
+    Plots,
+)
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,
@@ -67,6 +73,14 @@ from cdpr_pipeline.discovery.selection import (
     select_causes,
 )
 from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
+from cdpr_pipeline.discovery.sizes import CauseComponent, cause_sizes
+from cdpr_pipeline.discovery.summary import (
+    GainShare,
+    cause_record,
+    gain_shares,
+    judgement_record,
+    summary_sentence,
+)
 from cdpr_pipeline.discovery.validity import (
     NoiseModel,
     correlation_tests,
@@ -195,12 +209,30 @@ def diagnosis_needs(dataset: Dataset, settings: DiagnosisSettings
     return {tr.name: max(block, held_need) if tr.name in held else block for tr in runs}, why
 
 
+def check_diagnosable(dataset: Dataset, settings: DiagnosisSettings) -> None:
+    """Refuse, before any analysis, a dataset :func:`diagnose` cannot use: a run shorter
+    than :func:`diagnosis_needs`, or torque columns that look exchanged
+    (:func:`~cdpr_pipeline.identification.pipeline.check_torque_labels`). ``cdpr
+    validate`` asks the same, so the two never disagree. ``settings.regression``
+    resolved.
+
+    Raises
+    ------
+    DataValidationError
+        Naming each problem's file, column and row.
+    """
+    needs, why = diagnosis_needs(dataset, settings)
+    check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "diagnose",
+                      why, dataset.root)
+    check_torque_labels(dataset, settings.regression)
+
+
 @dataclass(frozen=True)
 class Diagnosis:
     """Result of :func:`diagnose` (see :meth:`as_json` for the file layout).
 
     ``timings`` holds the seconds per phase (signals, candidates, free-form, validity,
-    closed loop, black box, total); it is not part of ``diagnosis.json``, which depends
+    closed loop, black box, sizes, total); it is not part of ``diagnosis.json``, which depends
     only on the data and the settings, but of ``metrics.json`` (``time_<phase>_s``,
     with the command's start-up CPU seconds and loading beside them). ``plots`` holds
     the arrays of the report's figures (:class:`~cdpr_pipeline.discovery.plots.Plots`).
@@ -233,6 +265,15 @@ class Diagnosis:
     #: the band the statistics rows kept and where it came from (``motion``, or
     #: ``residual`` when :attr:`DiagnosisSettings.follow_residual` widened it)
     band: dict[str, Any] = field(default_factory=dict)
+    #: per cause, its sizes per channel with their standard errors
+    #: (:func:`~cdpr_pipeline.discovery.sizes.cause_sizes`)
+    sizes: tuple[tuple[CauseComponent, ...], ...] = ()
+
+    @property
+    def shares(self) -> list[GainShare]:
+        """Each cause's share of the held-out gain, or why it has none
+        (:func:`~cdpr_pipeline.discovery.summary.gain_shares`)."""
+        return gain_shares(self.causes)
 
     @property
     def verdict(self) -> str:
@@ -253,7 +294,10 @@ class Diagnosis:
             "nominal": {"params": self.rig_params(), "metrics": self.nominal_metrics.as_dict(),
                         **({"unusable": self.unusable.as_dict()} if self.unusable else {})},
             "discrepancies": [e.as_dict() for e in self.discrepancies],
-            "causes": [cause_record(c, self.nominal, self.causes) for c in self.causes],
+            "causes": [cause_record(c, self.nominal, self.causes, sizes, share)
+                       for c, sizes, share in zip(self.causes, self.sizes or
+                                                  [()] * len(self.causes), self.shares,
+                                                  strict=True)],
             "verdict": self.verdict,
             "summary": self.sentence,
             "unexplained": self.unexplained.as_dict() if self.unexplained else None,
@@ -269,74 +313,6 @@ class Diagnosis:
 
     def rig_params(self) -> dict[str, list[float]]:
         return self.nominal.winch.as_dict()
-
-
-# ---------------------------------------------------------------------- records
-def winch_reference(nominal: Model, causes: Sequence[Judgement]) -> Model:
-    """The nominal model with every cause's re-identified winch parameters: what an
-    effect's size is relative to in the extended model (a Stribeck size as a multiple of
-    the extended model's F_c, not of a nominal F_c another cause replaced)."""
-    return nominal.with_effects([e for c in causes for e in c.effects
-                                 if e.reidentifies_winch])
-
-
-def cause_params(effects: Sequence[Effect], nominal: Model,
-                 reference: Model | None = None) -> dict[str, Any]:
-    """The fitted physical parameters of a cause, with old and new winch values; sizes
-    relative to winch parameters use ``reference`` (:func:`winch_reference`; the nominal
-    model when None)."""
-    out: dict[str, Any] = {}
-    reference = nominal if reference is None else reference
-    changes = [e.winch_change(nominal.winch) for e in effects if e.reidentifies_winch]
-    for e in effects:
-        if not e.reidentifies_winch:
-            # per-winch sizes both absolute and relative to the extended winch parameters
-            out.update({**e.params(), **e.derived(reference)})
-    if changes:
-        out["winches" if all(e.reidentifies_winch for e in effects)
-            else "refit_winches"] = changes
-    return out
-
-
-def cause_record(j: Judgement, nominal: Model, causes: Sequence[Judgement] = ()
-                 ) -> dict[str, Any]:
-    if j.freeform is not None:
-        expression = j.freeform.describe()
-    else:
-        structural = [e for e in j.effects if not e.reidentifies_winch]
-        expression = (structural or j.effects)[0].expression if j.effects else ""
-    reference = winch_reference(nominal, causes)
-    return {"effect": j.effect, "channels": list(j.channels),
-            "params": cause_params(j.effects, nominal, reference),
-            "expression": expression,
-            "description": describe_cause(j, nominal, reference), "evidence": j.evidence()}
-
-
-def judgement_record(j: Judgement) -> dict[str, Any]:
-    return {"effect": j.effect, "variant": j.label, "n_params": j.n_params, "lr": j.lr,
-            "pvalue": j.pvalue, "bic_drop": j.bic_drop, "signal": j.channel,
-            "heldout_sse_drop_pct": 100 * j.heldout_gain,
-            "ci95_pct": [100 * j.ci[0], 100 * j.ci[1]], "passed": j.passed,
-            "reason": j.reason}
-
-
-def describe_cause(j: Judgement, nominal: Model, reference: Model | None = None) -> str:
-    """One sentence with the fitted physical parameter; winch changes from ``nominal``,
-    other effects' sizes relative to ``reference`` (:func:`winch_reference`)."""
-    reference = nominal if reference is None else reference
-    parts = []
-    for e in j.effects:
-        if e.reidentifies_winch:
-            c = e.winch_change(nominal.winch)
-            # a change worth a sentence: 2 % of the value (of F_c for the offset)
-            ref = {k: abs(c["old"]["coulomb" if k == "offset" else k]) for k in c["old"]}
-            diffs = [f"{k} {c['old'][k]:.4g} -> {c['new'][k]:.4g}" for k in c["old"]
-                     if abs(c["new"][k] - c["old"][k]) > 0.02 * max(ref[k], 1e-12)]
-            if diffs:
-                parts.append(f"winch {c['winch']}: " + ", ".join(diffs))
-        else:
-            parts.append(e.describe(reference))
-    return "; ".join(parts) if parts else j.label
 
 
 # ---------------------------------------------------------------------- metrics
@@ -375,13 +351,16 @@ def _bands(x: np.ndarray, fs: float, split: WaveletSplit) -> tuple[Band, ...]:
 
 def _signatures(sig: RunSignals, nominal: Model, channel: str, i: int
                 ) -> dict[str, np.ndarray]:
-    """Full-rate signals a residual of winch/cable ``i`` may follow."""
+    """Full-rate signals a residual of winch (axis, cable) ``i`` may follow, by the
+    names of :data:`~cdpr_pipeline.discovery.plots.VARIABLES` (what an effect's
+    ``explanatory_variable`` names)."""
     w = sig.omega[:, i]
-    out = {"winch speed": w, "speed sign": smooth_sign(w, nominal.sign_sharpness),
-           "|speed|": np.abs(w), "low speed (exp(-(w/w_rms)^2) sign w)":
+    out = {"position": sig.theta[:, i], "speed": w,
+           "speed sign": smooth_sign(w, nominal.sign_sharpness),
+           "|speed|": np.abs(w), "low speed":
            np.exp(-(w / (np.sqrt(np.mean(w ** 2)) + 1e-12) / 0.3) ** 2) * np.sign(w),
-           "winch acceleration": sig.alpha[:, i],
-           "torque rate": np.gradient(sig.torque[:, i], sig.t)}
+           "acceleration": sig.alpha[:, i],
+           "du/dt": np.gradient(sig.torque[:, i], sig.t)}
     if sig.position is not None:
         tension, g, _ = nominal.load_tensions(sig.position, sig.slow_acceleration)
         out.update({"tension": tension[:, i], "tension x length": tension[:, i] * g[:, i],
@@ -430,7 +409,7 @@ def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
                              key=lambda k: -abs(corr[k]))
             # bands of the unfiltered full-rate residual of the longest run
             bands = _bands(full[:, i], longest.fs, settings.wavelet)
-            inputs = sigs["winch speed"] if ch == "torque" else sigs["cable length"]
+            inputs = sigs["speed"] if ch == "torque" else sigs["cable length"]
             lags = _lags(settings.max_lag, len(innovations))
             tests = correlation_tests(innovations[:, i], inputs, lags)
             out.append(Discrepancy(ch, name, float(np.sqrt(np.mean(r ** 2))),
@@ -506,19 +485,14 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     Raises
     ------
     DataValidationError
-        Before any analysis, for a run shorter than :func:`diagnosis_needs` or torque
-        columns that look exchanged
-        (:func:`~cdpr_pipeline.identification.pipeline.check_torque_labels`).
+        Before any analysis, for a dataset :func:`check_diagnosable` refuses.
     """
     settings = settings or DiagnosisSettings()
     # filter, decimation and Coulomb law chosen once, from the whole dataset and its rig:
     # by the command (the stage), or here when called on its own
     settings = dataclasses.replace(settings, regression=as_resolved(
         settings.regression, dataset.trajectories, dataset.rig))
-    needs, why = diagnosis_needs(dataset, settings)
-    check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "diagnose",
-                      why, dataset.root)
-    check_torque_labels(dataset, settings.regression)
+    check_diagnosable(dataset, settings)
     clock: dict[str, float] = {}
     start = time.perf_counter()
     rig = dataset.rig
@@ -603,23 +577,31 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         blackbox = blackbox_share(nominal, extended, train, held, channel, settings.blackbox)
         clock["black box"] = time.perf_counter() - t0
         log.info("black box: %.1f s", clock["black box"])
+    t0 = time.perf_counter()
+    sizes = tuple(cause_sizes(causes, nominal, train, noise))
+    clock["sizes"] = time.perf_counter() - t0
     clock["total"] = time.perf_counter() - start
-
     alpha = settings.selection.alpha / max(len(validity.before), 1)
     failing = [k for k, v in validity.before.items() if failed_tests(v, alpha)]
     sentence = summary_sentence(causes, nominal, gain, unusable, withdrawn, unexplained,
-                                failing, settings.unexplained_noise_ratio)
+                                failing, settings.unexplained_noise_ratio, sizes)
+    measured = [measured_rows([s], channel) for s in held]
     plots = Plots(columns, BeforeAfterPlot(before_held.stacked(channel),
                                            after_held.stacked(channel), channel,
-                                           np.concatenate([s.row_times() for s in held])),
-                  closed_plot)
+                                           np.concatenate([s.row_times() for s in held]),
+                                           tuple(len(m) for m in measured), tuple(held_names)),
+                  closed_plot,
+                  tuple(HeldoutRunPlot(s.name, channel, s.row_times(), m, m - b[channel],
+                                       m - a[channel])
+                        for s, m, b, a in zip(held, measured, before_held.by_run,
+                                              after_held.by_run, strict=True)))
     band = {"analysed_hz": analysed_band_hz(settings.regression, rig.sample_rate_hz),
             "derivative_cutoff_hz": float(settings.regression.filter.cutoff_hz),
             "decimate": int(settings.regression.decimate), "from": "motion"}
     result = Diagnosis(str(dataset.root), rig, tuple(train_names), tuple(held_names), nominal,
                        extended, tuple(causes), selection.steps, tuple(found), nominal_metrics,
                        extended_metrics, gain, validity, closed, blackbox, sentence, clock,
-                       plots, tuple(extension), unusable, unexplained, band)
+                       plots, tuple(extension), unusable, unexplained, band, sizes)
     wider = _follow_residual(settings, float(rig.sample_rate_hz)) if unexplained else None
     if wider is None:
         return result
@@ -769,70 +751,14 @@ def _reidentify_if_unusable(nominal: Model, train: list[RunSignals], held: list[
     weights = fit_weights(base, signal_scales(train, base.channels))
     judge = Judge(FitContext(nominal, train, [], weights, ctx.columns), held,
                   settings.selection)
-    first = judge("winch_parameter_error", "winch_parameter_error[every winch re-identified]",
+    first = judge("winch_parameter_error",
+                  f"winch_parameter_error[every {nominal.drive_word} re-identified]",
                   effects, 4 * nominal.n, 1)
     log.warning("the stated model is unusable: %.0f %% relative torque error on the training "
                 "runs (over %.0f %%); every winch re-identified before naming causes", rel,
                 settings.unusable_error_pct)
     return first, Unusable(rel, settings.unusable_error_pct,
                            nominal.with_effects(effects).winch.as_dict())
-
-
-def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutGain,
-                     unusable: Unusable | None = None,
-                     withdrawn: Sequence[str] = (), unexplained: Unexplained | None = None,
-                     failing: Sequence[str] = (), noise_ratio: float = 10.0) -> str:
-    """The diagnosis in a few sentences. Without causes it says ``unexplained`` (where
-    the residual sits, which tests failed) or ``none``; ``none`` claims the nominal model
-    explains the data as well as anything tried only when no held-out column is
-    ``failing`` a validity test, and otherwise says those columns' errors stayed within
-    ``noise_ratio`` times the measurement noise (what made them no ``unexplained``)."""
-    prefix = ""
-    if unusable:
-        prefix = (f"The stated model was unusable ({unusable.relative_error_pct:.0f} % "
-                  f"relative torque error on the training runs): every winch was "
-                  f"re-identified before naming causes. ")
-    if withdrawn:
-        prefix += (f"Never worse: {', '.join(withdrawn)} did not improve the held-out runs "
-                   f"(with 95 % confidence, or beyond the other causes) and "
-                   f"{'was' if len(withdrawn) == 1 else 'were'} withdrawn. ")
-    if not causes and unexplained is not None:
-        u = unexplained
-        where = ", ".join(f"{c.channel} ({c.relative_error_pct:.2g} % of its measured "
-                          f"signal, {c.noise_ratio:.0f} x the noise)" for c in u.columns)
-        band = u.band_hz
-        return prefix + (
-            f"The nominal model does not explain the held-out measurements, and no "
-            f"candidate effect improves them beyond chance (verdict: unexplained): the "
-            f"held-out {u.signal} residual of {where} holds "
-            f"{100 * u.share_of_error:.0f} % of the error"
-            + ("" if band is None else f", most of it at {band[0]:.3g}-{band[1]:.3g} Hz of "
-               f"the 0-{u.analysed_hz:.3g} Hz the regression analyses")
-            + f", and fails the validity tests "
-            f"{', '.join(sorted({t for c in u.columns for t in c.failed_tests}))}.")
-    if not causes:
-        if not failing:
-            return prefix + ("The nominal model explains the measurements as well as "
-                             "anything tried: no candidate effect improves the held-out runs "
-                             "beyond chance, and the held-out residuals pass the validity "
-                             "tests (verdict: none).")
-        return prefix + (
-            f"No candidate effect improves the held-out runs beyond chance (verdict: none). "
-            f"The held-out residual of {', '.join(failing)} fails a validity test, but its "
-            f"size stays below {noise_ratio:g} times the measurement noise: the nominal "
-            f"model is adequate to that precision.")
-    top = causes[0]
-    name = "an effect outside the vocabulary (unnamed)" if top.effect == "unnamed" \
-        else top.effect.replace("_", " ")
-    text = prefix + (
-        f"Most likely cause: {name}: "
-        f"{describe_cause(top, nominal, winch_reference(nominal, causes))}. "
-        f"Extending the model "
-        f"lowers the held-out {gain.signal} RMSE by {100 * gain.relative:.1f} % "
-        f"(95 % CI {100 * gain.ci95[0]:.1f} to {100 * gain.ci95[1]:.1f} %).")
-    if len(causes) > 1:
-        text += " Also: " + "; ".join(c.effect for c in causes[1:]) + "."
-    return text
 
 
 def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names,
@@ -862,5 +788,8 @@ def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names,
             tuple(float(v) for v in np.sqrt(np.mean(hb ** 2, axis=0))),
             tuple(float(v) for v in np.sqrt(np.mean(ha ** 2, axis=0))))
     first = held_names[0]
-    plot = ClosedLoopPlot(first, err_nom[first]["position"], err_ext[first]["position"])
+    times = {tr.name: tr.t for tr in trajectories}
+    before = err_nom[first]["position"]
+    plot = ClosedLoopPlot(first, before, err_ext[first]["position"],
+                          times[first][:len(before)])
     return ClosedLoopComparison(True, None, errors["position"], errors["torque"]), rows, plot

@@ -112,8 +112,9 @@ def never_worse(nominal: Model, causes: Sequence[Judgement], held: list[RunSigna
             break
         dropped = kept.pop()
         withdrawn.append(dropped.label)
-        log.info("never worse: %s withdrawn (held-out gain %.1f %%, 95 %% CI %.1f to %.1f %%)",
-                 dropped.label, 100 * gain.relative, 100 * gain.ci95[0], 100 * gain.ci95[1])
+        log.info("never worse: %s withdrawn (held-out RMSE drop %.1f %%, 95 %% CI %.1f to "
+                 "%.1f %%)", dropped.label, 100 * gain.relative, 100 * gain.ci95[0],
+                 100 * gain.ci95[1])
     return NeverWorse(tuple(kept), tuple(withdrawn), extended, after,
                       dataclasses.replace(gain, withdrawn=tuple(withdrawn)))
 
@@ -150,11 +151,11 @@ def _adding_to_the_others(nominal: Model, causes: Sequence[Judgement],
             causes.remove(c)
             withdrawn.append(c.label)
             with_res = without_res
-            log.info("never worse: %s withdrawn (adds %.1f %% to the other causes on the "
-                     "held-out %s%s)", c.label, 100 * adds[ch], ch,
+            log.info("never worse: %s withdrawn (held-out RMSE drop beside the other "
+                     "causes %.1f %% on the %s%s)", c.label,
+                     100 * (1 - np.sqrt(max(1 - adds[ch], 0.0))), ch,
                      "" if own is None else
-                     f", 95 % CI of its RMSE drop {100 * own.ci95[0]:.1f} to "
-                     f"{100 * own.ci95[1]:.1f} %")
+                     f", 95 % CI {100 * own.ci95[0]:.1f} to {100 * own.ci95[1]:.1f} %")
     return causes, withdrawn
 
 

@@ -283,7 +283,8 @@ class ClosedLoopComparison:
 @dataclass(frozen=True)
 class BlackBoxShare:
     """Held-out share of the nominal residual a network explains, against the named
-    physics' share on the same rows."""
+    physics' share on the same rows (each ``1 - SSE_after / SSE_before``: at most 1,
+    negative where a model makes the residual worse)."""
 
     signal: str
     blackbox: float
@@ -291,11 +292,19 @@ class BlackBoxShare:
     model: str = "tcn_transformer on the nominal residual"
 
     @property
-    def physics_recovers_pct(self) -> float | None:
-        return 100 * self.physics / self.blackbox if self.blackbox > 0 else None
+    def physics_pct_of_best(self) -> float | None:
+        """The physics' share as a percentage of the better of the two shares, in
+        [0, 100]: 100 when the named physics explains at least as much as the network
+        (a network that explains little is no yardstick: a ratio to its share is
+        unbounded), less where the network finds more; None when neither explains
+        anything."""
+        best = max(self.physics, self.blackbox)
+        if not best > 0:
+            return None
+        return float(min(max(100 * self.physics / best, 0.0), 100.0))
 
     def as_dict(self) -> dict[str, Any]:
         return {"model": self.model, "signal": self.signal,
                 "heldout_explained_share_blackbox": self.blackbox,
                 "heldout_explained_share_physics": self.physics,
-                "physics_recovers_pct_of_blackbox": self.physics_recovers_pct}
+                "physics_pct_of_best": self.physics_pct_of_best}

@@ -238,13 +238,14 @@ class Judge:
         if pvalue >= self.settings.alpha / max(n_tests, 1):
             reason = f"not significant on training runs (p = {pvalue:.2g})"
         elif gain < self.settings.min_gain:
-            reason = (f"held-out {channel} gain {100 * gain:.1f} % below "
-                      f"{100 * self.settings.min_gain:.0f} %")
+            reason = (f"held-out {channel} squared error drops {100 * gain:.1f} %, below "
+                      f"the {100 * self.settings.min_gain:.0f} % required (selection.min_gain)")
         elif explained < self.settings.min_share:
             reason = (f"explains {100 * explained:.1f} % of the nominal held-out {channel} "
                       f"error, below {100 * self.settings.min_share:.0f} %")
         elif ci[0] <= 0:
-            reason = f"held-out gain interval includes zero ({100 * ci[0]:.1f} %)"
+            reason = (f"the 95 % interval of its held-out RMSE drop reaches below zero "
+                      f"({100 * (1 - np.sqrt(max(1 - ci[0], 0.0))):.1f} %)")
         elif total_after >= total_before:
             reason = "worse on held-out runs over all channels"
         return Judgement(effect, label, tuple(effects), n_params, tr, ho, lr, pvalue,
@@ -502,8 +503,8 @@ class _Search:
     def _log(self, step: list[Judgement]) -> None:
         if self.log:
             for j in sorted(step, key=lambda j: -j.bic_drop)[:6]:
-                self.log.info("  %-48s LR %10.1f BIC %+10.1f gain %6.1f %% %s", j.label,
-                              j.lr, j.bic_drop, 100 * j.heldout_gain,
+                self.log.info("  %-48s LR %10.1f BIC %+10.1f held-out RMSE drop %6.1f %% %s",
+                              j.label, j.lr, j.bic_drop, 100 * j.heldout_rmse_drop,
                               "PASS" if j.passed else j.reason)
 
 

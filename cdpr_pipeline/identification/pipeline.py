@@ -227,6 +227,36 @@ class Identification:
         return out
 
 
+def identification_inputs(dataset: Dataset, settings: ResolvedReading,
+                          holdout: Sequence[str] | None = (),
+                          runs: Sequence[str] | None = None,
+                          extra: Sequence[Dataset] = ()) -> tuple[Split, WinchRegression]:
+    """The split and the fit regression :func:`identify_dataset` fits, after every check
+    it makes of the data before fitting (``cdpr validate`` asks the same).
+
+    Parameters as :func:`identify_dataset`; ``settings`` resolved.
+
+    Raises
+    ------
+    DataValidationError
+        For a run shorter than :func:`identification_needs`, torque columns that look
+        exchanged (:func:`check_torque_labels`), or a channel whose velocity never
+        reverses in the fit (:func:`check_reversals`).
+    """
+    needs, why = identification_needs(dataset, settings)
+    check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "identify",
+                      why, dataset.root)
+    check_torque_labels(dataset, settings)
+    data_split = identification_split(dataset, holdout, runs, settings)
+    fit_reg = dataset_regression(data_split.trajectories("train", dataset), dataset.rig,
+                                 settings)
+    if extra:
+        fit_reg = WinchRegression.concatenate(
+            [fit_reg] + [dataset_regression(d, d.rig, settings) for d in extra])
+    check_reversals(fit_reg, dataset, list(data_split.train))
+    return data_split, fit_reg
+
+
 def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
                      split: WaveletSplit | None, holdout: Sequence[str] | None = (),
                      runs: Sequence[str] | None = None,
@@ -247,26 +277,14 @@ def identify_dataset(dataset: Dataset, identifier, settings: RegressionSettings,
     Raises
     ------
     DataValidationError
-        Before any fit, for a run shorter than :func:`identification_needs`, torque
-        columns that look exchanged (:func:`check_torque_labels`), or a channel whose
-        velocity never reverses in the fit (:func:`check_reversals`).
+        Before any fit, for a dataset :func:`identification_inputs` refuses.
     """
     # filter, decimation and Coulomb law chosen once from the whole dataset (by the
     # command, or here when called on its own), so the fit and the held-out runs see the
     # same regression
     settings = as_resolved(settings, dataset.trajectories, dataset.rig)
-    needs, why = identification_needs(dataset, settings)
-    check_run_lengths(dataset.trajectories, needs, dataset.rig.sample_rate_hz, "identify",
-                      why, dataset.root)
-    check_torque_labels(dataset, settings)
-    data_split = identification_split(dataset, holdout, runs, settings)
+    data_split, fit_reg = identification_inputs(dataset, settings, holdout, runs, extra)
     fit_names, held_names = list(data_split.train), list(data_split.heldout)
-    fit_reg = dataset_regression(data_split.trajectories("train", dataset), dataset.rig,
-                                 settings)
-    parts = [fit_reg] + [dataset_regression(d, d.rig, settings) for d in extra]
-    if extra:
-        fit_reg = WinchRegression.concatenate(parts)
-    check_reversals(fit_reg, dataset, fit_names)
     # a redundant cable robot's internal forces: fitted per row and taken out first
     fit_reg = fit_reg.without_internal_forces()
     est = identifier.fit(lowpass_regression(fit_reg, split))

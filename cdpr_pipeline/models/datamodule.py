@@ -15,7 +15,7 @@ from torch.utils.data import DataLoader, Dataset, RandomSampler
 
 from cdpr_pipeline.data.io import Dataset as MeasuredDataset
 from cdpr_pipeline.data.io import load_dataset
-from cdpr_pipeline.data.split import Split, model_split
+from cdpr_pipeline.data.split import Split, window_split
 from cdpr_pipeline.models.features import (
     FeatureLayout,
     RunArrays,
@@ -120,16 +120,14 @@ class TrajectoryDataModule(L.LightningDataModule):
             self.path, allow_gaps=hp.allow_gaps, min_samples=hp.min_samples)
         has_desired = all(tr.desired is not None for tr in self.dataset)
         self.layout = FeatureLayout.for_rig(self.dataset.rig, has_desired)
-        self.split: Split = model_split(
-            self.dataset.trajectories, hp.val_fraction, hp.test_fraction,
-            list(hp.test_families), hp.split_seed, gap=self.gap,
-            min_samples=max(self.window + 3, int(hp.min_samples)), source=str(self.path))
+        # the same split `cdpr validate` judges the data by
+        self.split: Split = window_split(
+            self.dataset.trajectories, self.window, val_fraction=hp.val_fraction,
+            test_fraction=hp.test_fraction, test_families=list(hp.test_families),
+            seed=hp.split_seed, gap=self.gap, min_samples=int(hp.min_samples),
+            source=str(self.path))
         self.runs = {tr.name: run_arrays(tr, self.layout)
                      for trs in self.split.materialise(self.dataset).values() for tr in trs}
-        short = [n for n, r in self.runs.items() if r.n_samples < self.window + 3]
-        if short:
-            raise ValueError(f"{self.path}: runs {short} are shorter than window+3 = "
-                             f"{self.window + 3} samples; lower data.window")
         # scaling from training runs only: nothing of validation or test leaks into it
         self.scaler = Standardizer.fit([self.runs[n] for n in self.split.train], self.layout)
         self.data_digest = dataset_digest(self.path)

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import logging
+import warnings
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from functools import partial
 
 import lightning as L
@@ -10,6 +13,59 @@ import torch
 from torch import nn
 
 from cdpr_pipeline.models.datamodule import WindowDataset
+
+#: Lightning's notices that say nothing about the run (which devices exist: conf/trainer
+#: chooses; an advert for its cloud logger)
+LIGHTNING_NOTICES = ("GPU available:", "TPU available:", "HPU available:", "💡 Tip:")
+#: loggers Lightning writes those notices to (pytorch's rank-zero helper, and fabric's)
+_NOTICE_LOGGERS = ("lightning.pytorch.utilities.rank_zero", "lightning.fabric.utilities.rank_zero")
+#: Python warnings of Lightning about itself, not about the run: its own use of a torch
+#: function that torch deprecated
+_LIGHTNING_WARNINGS = (r"`isinstance\(treespec, LeafSpec\)` is deprecated",)
+
+
+class _DropNotices(logging.Filter):
+    """Drops the records of :data:`LIGHTNING_NOTICES`."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith(LIGHTNING_NOTICES)
+
+
+def quiet_lightning() -> None:
+    """Print each of Lightning's messages once, without its device notices and adverts.
+
+    ``import lightning`` gives the ``lightning`` logger a console handler of its own and
+    lets it propagate too, so under a configured root logger (a ``cdpr`` command) every
+    message was printed twice; ``lightning.pytorch`` imported before logging was set up
+    keeps its messages to its own handler (not in the command's log file). Under a root
+    logger with handlers, those handlers go and the messages propagate. Idempotent.
+    """
+    for name in _NOTICE_LOGGERS:
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, _DropNotices) for f in logger.filters):
+            logger.addFilter(_DropNotices())
+    if not logging.getLogger().handlers:
+        return                # no console of the application's: Lightning's own prints
+    for name in ("lightning", "lightning.pytorch", "lightning.fabric"):
+        own = logging.getLogger(name)
+        for handler in [h for h in own.handlers if type(h) is logging.StreamHandler]:
+            own.removeHandler(handler)
+        own.propagate = True  # to the command's console and log file, once
+
+
+@contextmanager
+def quiet_fit(*, validates: bool = True) -> Iterator[None]:
+    """Around ``Trainer(...)`` and ``trainer.fit``: :func:`quiet_lightning`, and none of
+    Lightning's warnings about itself (nor, with ``validates=False``, the one that a
+    fit without validation data skips validation: a fixed number of epochs is meant)."""
+    quiet_lightning()
+    with warnings.catch_warnings():
+        for message in _LIGHTNING_WARNINGS:
+            warnings.filterwarnings("ignore", message=message)
+        if not validates:
+            warnings.filterwarnings("ignore", message="You defined a `validation_step` but "
+                                    "have no `val_dataloader`")
+        yield
 
 
 class ForecastModule(L.LightningModule):
@@ -119,8 +175,9 @@ def fit_window_network(make_net: Callable[[], nn.Module], inputs: list, targets:
         module = ForecastModule(net, partial(torch.optim.Adam, lr=lr))
         sampler = torch.utils.data.RandomSampler(ds, num_samples=min(max_windows, len(ds)))
         loader = torch.utils.data.DataLoader(ds, batch_size=batch_size, sampler=sampler)
-        trainer = L.Trainer(max_epochs=epochs, logger=False, enable_checkpointing=False,
-                            enable_progress_bar=False, enable_model_summary=False,
-                            accelerator=accelerator, devices=1)
-        trainer.fit(module, loader)
+        with quiet_fit(validates=False):
+            trainer = L.Trainer(max_epochs=epochs, logger=False, enable_checkpointing=False,
+                                enable_progress_bar=False, enable_model_summary=False,
+                                accelerator=accelerator, devices=1)
+            trainer.fit(module, loader)
     return module.net.cpu().eval()

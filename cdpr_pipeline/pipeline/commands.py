@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from omegaconf import DictConfig
 
 from cdpr_pipeline.command import hydra_command
-from cdpr_pipeline.errors import CommandExit
+from cdpr_pipeline.errors import CommandExit, ConfigError
 from cdpr_pipeline.pipeline.params import PARAMS_FILE, pipeline_params, write_params
 from cdpr_pipeline.pipeline.repro import repro
 from cdpr_pipeline.pipeline.stage_runner import run_stage
@@ -41,6 +41,8 @@ def stage_main(argv: Sequence[str] | None = None) -> None:
 
     Raises
     ------
+    ConfigError
+        If the arguments are not one stage name (and ``--params FILE``).
     SystemExit
         With status 1 if the stage failed or is unknown (the error is logged).
     """
@@ -52,8 +54,18 @@ def stage_main(argv: Sequence[str] | None = None) -> None:
     params_file = PARAMS_FILE
     if "--params" in args:
         i = args.index("--params")
+        if i + 1 == len(args):
+            raise ConfigError("--params needs a file (cdpr stage NAME --params params.yaml)")
         params_file = args[i + 1]
         del args[i:i + 2]
+    settings = [a for a in args if "=" in a]
+    if settings:     # a stage runs its section of params.yaml as it is
+        raise ConfigError(f"unknown setting {settings[0].split('=', 1)[0].lstrip('+~')} "
+                          "(cdpr stage takes NAME[.ITEM] and --params FILE; settings go "
+                          "to cdpr params key=value)")
+    if len(args) != 1 or args[0].startswith("-"):
+        raise ConfigError(f"one stage expected (cdpr stage NAME[.ITEM] [--params FILE]), "
+                          f"not {' '.join(args) or 'none'}")
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s][%(name)s] %(message)s")
     try:
         run_stage(args[0], params_file)

@@ -1,13 +1,12 @@
 """A stage's declared inputs: the config keys ``conf/pipeline.yaml`` names as its input
-paths, their state (for the resume stamp), the input to blame for a failure, and which of
-them earlier stages skipped."""
+paths, the input to blame for a failure, and which of them earlier stages skipped (their
+state, for the resume stamp, is :func:`cdpr_pipeline.outputs.inputs_state`)."""
 
 from __future__ import annotations
 
 import copy
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from cdpr_pipeline.pipeline.skip import skipped_reason
@@ -95,28 +94,6 @@ def input_paths(config: Mapping[str, Any], keys: Sequence[str]) -> dict[str, str
     for key in keys:
         found |= _labelled(key, config_value(config, key))
     return found
-
-
-def inputs_state(paths: Mapping[str, str]) -> list:
-    """Size and modification time of every file under the input paths: cheap, and
-    enough to tell a resumed stage that its inputs changed.
-
-    Parameters
-    ----------
-    paths : Mapping
-        ``label -> path`` (see :func:`input_paths`); missing paths count as empty.
-
-    Returns
-    -------
-    list
-        ``(label, file, size, mtime_ns)`` per file, in a fixed order.
-    """
-    state = []
-    for key, top in sorted(paths.items()):
-        root = Path(top)
-        files = [root] if root.is_file() else sorted(q for q in root.rglob("*") if q.is_file())
-        state += [(key, str(q), q.stat().st_size, q.stat().st_mtime_ns) for q in files]
-    return state
 
 
 def blame(err: BaseException, inputs: Mapping[str, str]) -> str:

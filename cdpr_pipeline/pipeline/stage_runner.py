@@ -23,13 +23,12 @@ from typing import Any
 from hydra.utils import get_method
 from omegaconf import OmegaConf
 
-from cdpr_pipeline.outputs import empty_dir, rebase_paths, staged_output
+from cdpr_pipeline.outputs import empty_dir, inputs_state, rebase_paths, staged_output
 from cdpr_pipeline.pipeline.inputs import (
     SkippedInputs,
     blame,
     check_skipped_inputs,
     input_paths,
-    inputs_state,
 )
 from cdpr_pipeline.pipeline.mlflow_logging import log_skipped, log_stage_outputs
 from cdpr_pipeline.pipeline.params import PARAMS_FILE, read_section

@@ -88,14 +88,20 @@ def evaluate(expression: str, variables: Mapping[str, np.ndarray]) -> np.ndarray
     return np.broadcast_to(value, np.shape(reference)).astype(float)
 
 
-def to_infix(expression: str, subscript: str = "") -> str:
-    """``expression`` written for people; ``subscript`` is appended to variable names.
+def to_infix(expression: str, subscript: str = "",
+             names: Mapping[str, str] | None = None) -> str:
+    """``expression`` written for people; ``subscript`` is appended to variable names,
+    or fills the ``{i}`` of their entry in ``names`` (a rig's words for them, e.g.
+    ``{"theta": "q{i}", "omega": "q{i}'"}`` for a drive axis).
 
     Examples
     --------
     >>> to_infix("mul(abs_(omega), sin_k(theta, 8))", "2")
     '|omega2| sin(8 theta2)'
+    >>> to_infix("mul(abs_(omega), sin_k(theta, 8))", "2", {"theta": "q{i}", "omega": "q{i}'"})
+    "|q2'| sin(8 q2)"
     """
+    names = names or {}
 
     def walk(node: ast.expr) -> str:
         if isinstance(node, ast.Constant):
@@ -104,6 +110,8 @@ def to_infix(expression: str, subscript: str = "") -> str:
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
             return "-" + walk(node.operand)
         if isinstance(node, ast.Name):
+            if node.id in names:
+                return names[node.id].format(i=subscript)
             return node.id + subscript
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
                 and node.func.id in FUNCTIONS:

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from cdpr_pipeline.data.rig import CdprRig, Rig, WinchParams
+from cdpr_pipeline.data.units import JOINT_UNITS, WINCH_UNITS, ChannelUnits
 
 if TYPE_CHECKING:  # pragma: no cover
     from cdpr_pipeline.sim.effects import Effect
@@ -156,6 +157,11 @@ class Plant:
     #: whether the simulator runs it in closed loop under the rig's controller (the
     #: virtual lab, closed-loop re-simulation)
     closed_loop: ClassVar[bool] = True
+    #: what a user calls one channel's drive, and its plural (:attr:`Rig.drive_word`)
+    drive_word: ClassVar[str] = "winch"
+    drive_words: ClassVar[str] = "winches"
+    #: a channel's position and speed as a formula writes them (``{i}``: its number)
+    variable_names: ClassVar[dict[str, str]] = {"theta": "theta{i}", "omega": "omega{i}"}
 
     anchors: np.ndarray
     drum_radius: np.ndarray
@@ -236,6 +242,11 @@ class Plant:
     @property
     def n(self) -> int:
         return int(self.anchors.shape[0])
+
+    @property
+    def channel_units(self) -> tuple[ChannelUnits, ...]:
+        """Every winch turns in rad with torques in N m (:attr:`Rig.channel_units`)."""
+        return (WINCH_UNITS,) * self.n
 
     @property
     def elastic(self) -> bool:
@@ -472,11 +483,16 @@ class Drives:
     closed_loop: ClassVar[bool] = False
     #: no cables to stretch (:attr:`Plant.elastic`)
     elastic: ClassVar[bool] = False
+    drive_word: ClassVar[str] = "axis"
+    drive_words: ClassVar[str] = "axes"
+    variable_names: ClassVar[dict[str, str]] = {"theta": "q{i}", "omega": "q{i}'"}
 
     winch: WinchParams
     sign_sharpness: float | None = SIGN_SHARPNESS
     actuator_time_constant: float | np.ndarray = 0.0
     effects: tuple[Effect, ...] = ()
+    #: per axis its units (:attr:`Rig.channel_units`); empty: every axis prismatic
+    units: tuple[ChannelUnits, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "actuator_time_constant",
@@ -486,6 +502,11 @@ class Drives:
     def n(self) -> int:
         return self.winch.n
 
+    @property
+    def channel_units(self) -> tuple[ChannelUnits, ...]:
+        """Per axis the units of its position and force (:attr:`units`)."""
+        return tuple(self.units) or (JOINT_UNITS["prismatic"],) * self.n
+
     @cached_property    # read on every derivative call (frozen: computed once)
     def lags(self) -> np.ndarray:
         """The actuator lag of every axis (n,), 0 where an axis has none."""
@@ -493,8 +514,9 @@ class Drives:
 
     @classmethod
     def stated(cls, rig: Rig, sign_sharpness: float | None) -> Drives:
-        """The axes as rig.yaml states them (:meth:`Plant.stated`)."""
-        return cls(rig.nominal_winch, sign_sharpness=sign_sharpness)
+        """The axes as rig.yaml states them (:meth:`Plant.stated`), with their units."""
+        return cls(rig.nominal_winch, sign_sharpness=sign_sharpness,
+                   units=tuple(rig.channel_units))
 
     def replace(self, **changes: Any) -> Drives:
         return replace(self, **changes)

@@ -55,6 +55,7 @@ from cdpr_pipeline.tracking import (
     latest_runs,
     log_metrics,
     make_logger,
+    run_name,
     tracking_uri,
 )
 
@@ -493,7 +494,8 @@ def compare(cfg: DictConfig) -> Comparison:
     (out / "runs.csv").write_text(run_list.to_csv(index=False))
     files.append(out / "runs.csv")
 
-    logger = make_logger(cfg.tracking.experiment, run_name="compare", uri=cfg.tracking.uri,
+    logger = make_logger(cfg.tracking.experiment, run_name=run_name("compare", cfg.data.path),
+                         uri=cfg.tracking.uri,
                          tags={"cdpr_task": "compare", "data_digest": digest or ""})
     with finished_or_failed(logger):
         logger.log_hyperparams({"models": ",".join(columns), "data.path": str(path),

@@ -30,9 +30,16 @@ from cdpr_pipeline.discovery.diagnosis import (
     diagnosis_split,
 )
 from cdpr_pipeline.discovery.report import render
+from cdpr_pipeline.discovery.summary import GAIN_KEY, gain_text
 from cdpr_pipeline.models.blackbox import NetworkBlackBox
 from cdpr_pipeline.sim.model_file import write_model
-from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
+from cdpr_pipeline.tracking import (
+    finished_or_failed,
+    flatten_params,
+    log_metrics,
+    make_logger,
+    run_name,
+)
 from cdpr_pipeline.wavelet.split import WaveletSplit
 
 log = logging.getLogger(__name__)
@@ -92,6 +99,23 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def diagnosis_record(d: Diagnosis, dataset_path: str, split: Split | None = None,
+                     model_file: str = "extended_model.yaml") -> dict[str, Any]:
+    """The content of ``diagnosis.json`` (``docs/diagnosis-format.md``), JSON-safe.
+
+    ``split``: the diagnosis's split (:func:`diagnosis_split`); when it cut runs into
+    time blocks, ``split`` lists them (run, samples, seconds).
+    """
+    record = d.as_json(model_file)
+    record["dataset"] = str(dataset_path)
+    if split is not None and split.blocks:
+        if [list(split.train), list(split.heldout)] != [list(d.train), list(d.heldout)]:
+            raise RuntimeError(f"split {split.as_dict()} is not the diagnosis's "
+                               f"({d.train}, {d.heldout})")
+        record["split"] = split.as_dict()
+    return _plain(record)
+
+
 def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str,
                   split: Split | None = None) -> dict[str, Path]:
     """diagnosis.json, report.html and extended_model.yaml in ``out_dir``.
@@ -102,14 +126,8 @@ def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str,
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": out_dir / "diagnosis.json", "html": out_dir / "report.html",
              "model": out_dir / "extended_model.yaml", "metrics": out_dir / "metrics.json"}
-    record = d.as_json(paths["model"].name)
-    record["dataset"] = str(dataset_path)
-    if split is not None and split.blocks:
-        if [list(split.train), list(split.heldout)] != [list(d.train), list(d.heldout)]:
-            raise RuntimeError(f"split {split.as_dict()} is not the diagnosis's "
-                               f"({d.train}, {d.heldout})")
-        record["split"] = split.as_dict()
-    paths["json"].write_text(json.dumps(_plain(record), indent=1))
+    record = diagnosis_record(d, dataset_path, split, paths["model"].name)
+    paths["json"].write_text(json.dumps(record, indent=1))
     paths["metrics"].write_text(json.dumps(_plain(summary_metrics(d)), indent=1))
     paths["html"].write_text(render(d))
     write_model(paths["model"], d.rig, d.effects, source=f"cdpr diagnose of {dataset_path}",
@@ -118,8 +136,11 @@ def write_outputs(d: Diagnosis, out_dir: Path, dataset_path: str,
 
 
 def summary_metrics(d: Diagnosis) -> dict[str, float]:
-    """Flat figures for ``dvc metrics show`` and MLflow."""
-    out = {"causes": len(d.causes), "gain_relative": d.gain.relative,
+    """Flat figures for ``dvc metrics show`` and MLflow: the gain as the held-out RMSE
+    drop (``heldout_rmse_drop_pct`` with its 95 % interval), the RMSE before and after."""
+    out = {"causes": len(d.causes), GAIN_KEY: 100 * d.gain.relative,
+           f"{GAIN_KEY}_ci95_lo": 100 * d.gain.ci95[0],
+           f"{GAIN_KEY}_ci95_hi": 100 * d.gain.ci95[1],
            "gain_before": d.gain.before, "gain_after": d.gain.after}
     # seconds of every phase (``time_total_s`` the whole diagnosis, start-up apart)
     out.update({f"time_{phase.replace(' ', '_').replace('-', '_')}_s": v
@@ -150,16 +171,20 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
     d = diagnose(data, settings)
     d.timings.update({"startup cpu": startup, "loading": loading})
     paths = write_outputs(d, Path(cfg.out_dir), cfg.data.path, diagnosis_split(data, settings))
-    log.info("verdict: %s", d.verdict)
+    log.info("verdict: %s; %s", d.verdict, gain_text(d.gain))
     log.info("%s", d.sentence)
     t0 = time.perf_counter()
-    logger = make_logger(cfg.tracking.experiment, run_name=f"diagnose-{Path(cfg.data.path).name}",
+    logger = make_logger(cfg.tracking.experiment, run_name=run_name("diagnose", cfg.data.path),
                          uri=cfg.tracking.uri, tags={"cdpr_task": "diagnose",
                                                      "verdict": d.verdict})
     with finished_or_failed(logger):
         logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
+        # the one gain figure, named as everywhere else (GAIN_NAME: the held-out RMSE drop)
         metrics = {"gain/before": d.gain.before, "gain/after": d.gain.after,
-                   "gain/relative": d.gain.relative, "causes/count": len(d.causes)}
+                   f"gain/{GAIN_KEY}": 100 * d.gain.relative,
+                   f"gain/{GAIN_KEY}_ci95_lo": 100 * d.gain.ci95[0],
+                   f"gain/{GAIN_KEY}_ci95_hi": 100 * d.gain.ci95[1],
+                   "causes/count": len(d.causes)}
         metrics.update({f"time/{phase.replace(' ', '_')}_s": v
                         for phase, v in d.timings.items()})
         for part in ("train", "heldout"):
@@ -174,7 +199,7 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
         log_metrics(logger.experiment, logger.run_id, metrics)
         for p in paths.values():
             logger.experiment.log_artifact(logger.run_id, str(p))
-    log.info("outputs in %s, logged to MLflow in %.1f s", cfg.out_dir, time.perf_counter() - t0)
+    log.info("logged to MLflow in %.1f s", time.perf_counter() - t0)
     return d
 
 

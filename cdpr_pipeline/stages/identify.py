@@ -23,7 +23,13 @@ from cdpr_pipeline.identification.pipeline import (
     identify_dataset,
     true_winch_params,
 )
-from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
+from cdpr_pipeline.tracking import (
+    finished_or_failed,
+    flatten_params,
+    log_metrics,
+    make_logger,
+    run_name,
+)
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +76,8 @@ def identify(cfg: DictConfig) -> Identification:
     tmp.write_text(json.dumps(result.as_json(), indent=1))
     tmp.replace(path)
 
-    logger = make_logger(cfg.tracking.experiment, run_name=f"identify-{cfg.method}",
+    logger = make_logger(cfg.tracking.experiment,
+                         run_name=run_name("identify", cfg.data.path, cfg.method),
                          uri=cfg.tracking.uri, tags={"cdpr_task": "identify",
                                                      "method": cfg.method})
     with finished_or_failed(logger):

@@ -31,7 +31,13 @@ from cdpr_pipeline.models.reconstruction import (
     reconstruction_scores,
 )
 from cdpr_pipeline.tables import to_markdown
-from cdpr_pipeline.tracking import finished_or_failed, flatten_params, log_metrics, make_logger
+from cdpr_pipeline.tracking import (
+    finished_or_failed,
+    flatten_params,
+    log_metrics,
+    make_logger,
+    run_name,
+)
 
 log = logging.getLogger(__name__)
 
@@ -118,7 +124,8 @@ def reconstruct(cfg: DictConfig) -> dict:
     files.append(_plot(np.arange(len(one)), one.target, preds_one, out / "reconstruction.png",
                        unit))
 
-    logger = make_logger(cfg.tracking.experiment, run_name=f"reconstruct-{method}",
+    logger = make_logger(cfg.tracking.experiment,
+                         run_name=run_name("reconstruct", cfg.data.path, method),
                          uri=cfg.tracking.uri, tags={"cdpr_task": "reconstruct",
                                                      "method": method})
     with finished_or_failed(logger):

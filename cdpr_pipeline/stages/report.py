@@ -167,7 +167,7 @@ def build_report(cfg: DictConfig) -> dict:
         summary["best_onestep_rmse"] = comparison[best_model]["onestep_rmse"]
     if diagnosis is not None:
         summary["diagnosis_verdict"] = diagnosis["verdict"]
-        summary["diagnosis_gain_relative"] = diagnosis["gain"]["relative"]
+        summary["diagnosis_heldout_rmse_drop_pct"] = 100 * diagnosis["gain"]["relative"]
     summary["stages_ran"] = int((stages["status"] == "ran").sum())
     summary["stages_skipped"] = int((stages["status"] == "skipped").sum())
     if "max error vs truth (%)" in table3:

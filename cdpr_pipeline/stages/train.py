@@ -27,8 +27,14 @@ from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.models.datamodule import TrajectoryDataModule
 from cdpr_pipeline.models.evaluation import evaluate, plot_predictions
 from cdpr_pipeline.models.forecast import Forecaster
-from cdpr_pipeline.models.module import ForecastModule, TimeToBest
-from cdpr_pipeline.tracking import flatten_params, log_metrics, make_logger, mlflow_client
+from cdpr_pipeline.models.module import ForecastModule, TimeToBest, quiet_fit
+from cdpr_pipeline.tracking import (
+    flatten_params,
+    log_metrics,
+    make_logger,
+    mlflow_client,
+    run_name,
+)
 
 log = logging.getLogger(__name__)
 
@@ -78,16 +84,18 @@ def _train_network(cfg: DictConfig, net: torch.nn.Module, dm: TrajectoryDataModu
     callbacks = [instantiate(c) for c in cfg.callbacks.values()] if cfg.get("callbacks") else []
     timer = TimeToBest()
     callbacks.append(timer)
-    trainer: L.Trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks,
-                                     default_root_dir=str(out_dir),
-                                     enable_progress_bar=not cfg.quiet)
     last = out_dir / "checkpoints" / "last.ckpt"
     ckpt = str(last) if cfg.resume and last.exists() else None
     if ckpt:
         log.info("resuming from %s", ckpt)
-    # our own checkpoint: its hyper-parameters hold Hydra partials, which torch's
-    # weights-only loading refuses
-    trainer.fit(module, datamodule=dm, ckpt_path=ckpt, weights_only=False if ckpt else None)
+    with quiet_fit():
+        trainer: L.Trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks,
+                                         default_root_dir=str(out_dir),
+                                         enable_progress_bar=not cfg.quiet)
+        # our own checkpoint: its hyper-parameters hold Hydra partials, which torch's
+        # weights-only loading refuses
+        trainer.fit(module, datamodule=dm, ckpt_path=ckpt,
+                    weights_only=False if ckpt else None)
     best = Path(trainer.checkpoint_callback.best_model_path) \
         if trainer.checkpoint_callback and trainer.checkpoint_callback.best_model_path else None
     if best and best.exists():
@@ -128,7 +136,8 @@ def _train(cfg: DictConfig) -> TrainResult:
     net_config = OmegaConf.to_container(cfg.model.net, resolve=True)
     net = instantiate(cfg.model.net)(layout=dm.layout)
     name = str(cfg.model.name)
-    logger = make_logger(cfg.tracking.experiment, run_name=name, uri=cfg.tracking.uri,
+    logger = make_logger(cfg.tracking.experiment, run_name=run_name("train", cfg.data.path, name),
+                         uri=cfg.tracking.uri,
                          tags={"cdpr_task": "train", "model": name,
                                "data_digest": dm.data_digest,
                                "data_path": str(Path(cfg.data.path).resolve())},

@@ -1,28 +1,28 @@
 """Virtual-lab datasets with hidden effects, simulated in memory for diagnosis tests.
 
-Seeds are drawn at random (``CDPR_TEST_SEED`` fixes them) and printed on failure, so a
-failing draw can be replayed; magnitudes come from each effect's documented ranges.
+Each test's seed comes from :func:`~cdpr_pipeline.testing.draws.draw_seed` (the commit and
+the test's id; ``CDPR_TEST_SEED`` replays one) and is printed on failure; magnitudes come
+from each effect's documented ranges.
 """
 
 from __future__ import annotations
 
-import os
-import secrets
+import dataclasses
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import Dataset
+from cdpr_pipeline.data.reading import as_resolved
 from cdpr_pipeline.discovery.candidates import candidates_for
-from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings
+from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnosis_split
 from cdpr_pipeline.discovery.freeform import FreeFormSearch
+from cdpr_pipeline.discovery.residuals import Model, nominal_model, predict
+from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
 from cdpr_pipeline.sim.candidate_forms import DataScale
 from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.lab import simulate_lab
-
-
-def draw_seed() -> int:
-    return int(os.environ.get("CDPR_TEST_SEED", secrets.randbelow(2 ** 31)))
 
 
 def lab_dataset(rig, effects: list[Effect], seed: int, duration_s: float | None = None
@@ -61,3 +61,55 @@ def candidate_effects(rig, signals, seed: int) -> list[list[Effect]]:
         x = np.clip(cand.starts[0] + 2 * cand.x_scale * rng.normal(size=cand.n_params), lo, hi)
         sets.append(list(cand.build(x)))
     return sets + [[e for s in sets[::2] for e in s]]
+
+
+# --------------------------------------------------------------- torque contributions
+def heldout_signals(dataset: Dataset, settings: DiagnosisSettings,
+                    heldout: Sequence[str] | None = None) -> tuple[list[RunSignals], Model]:
+    """The held-out runs (``heldout``, else those ``settings`` choose) read as
+    :func:`~cdpr_pipeline.discovery.diagnosis.diagnose` reads them, and the nominal
+    model it extends."""
+    settings = dataclasses.replace(settings, regression=as_resolved(
+        settings.regression, dataset.trajectories, dataset.rig))
+    split = diagnosis_split(dataset, settings)
+    names = set(split.heldout if heldout is None else heldout)
+    runs = [r for r in split.cut_all(dataset.trajectories) if r.name in names]
+    return (dataset_signals(runs, dataset.rig, settings.regression),
+            nominal_model(dataset.rig, settings.regression.sign_sharpness))
+
+
+def added_torque(model: Model, nominal: Model) -> Callable[[RunSignals], np.ndarray]:
+    """Per run, what ``model`` adds to ``nominal``'s torque (full rate, (N, n)), at the
+    run's recorded motion."""
+    torque = frozenset({"torque"})
+    return lambda s: (predict(model, nominal, s, torque)["torque"]
+                      - predict(nominal, nominal, s, torque)["torque"])
+
+
+def torque_rows(signals: Sequence[RunSignals],
+                full_rate: Callable[[RunSignals], np.ndarray]) -> np.ndarray:
+    """``full_rate`` of every run as the torque residual sees it: its weights and
+    projection (on a redundant cable robot the internal-force direction is no torque
+    the data determine) and its filter, on the statistics rows, stacked (rows, n)."""
+    return np.concatenate([s.rows(s.torque_weighted(full_rate(s))) for s in signals])
+
+
+def relative_errors(fitted: np.ndarray, true: np.ndarray, channels: Sequence[int]
+                    ) -> dict[str, float]:
+    """Per channel (0-based ``channels``, named ``u1``...), the RMS of ``fitted - true``
+    over the RMS of ``true`` (rows, n)."""
+    size = np.sqrt(np.mean(true ** 2, axis=0))
+    wrong = np.sqrt(np.mean((fitted - true) ** 2, axis=0))
+    return {f"u{c + 1}": float(wrong[c] / size[c]) if size[c] > 0 else float("inf")
+            for c in channels}
+
+
+def contribution_errors(diagnosis, dataset: Dataset, settings: DiagnosisSettings,
+                        effects: Sequence, channels: Sequence[int]) -> dict[str, float]:
+    """Of a lab diagnosis: per channel, how far the torque its extended model adds on the
+    held-out runs is from the torque the hidden ``effects`` add
+    (:func:`relative_errors`): any form of the same torque counts."""
+    held, nominal = heldout_signals(dataset, settings, diagnosis.heldout)
+    fitted = torque_rows(held, added_torque(diagnosis.extended, diagnosis.nominal))
+    true = torque_rows(held, added_torque(nominal.with_effects(list(effects)), nominal))
+    return relative_errors(fitted, true, channels)

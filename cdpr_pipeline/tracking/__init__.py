@@ -11,10 +11,11 @@ from cdpr_pipeline.tracking.mlflow import (
     log_params_once,
     make_logger,
     mlflow_client,
+    run_name,
     stage_run,
     tracking_uri,
 )
 
 __all__ = ["DEFAULT_TRACKING_URI", "PARENT_RUN_ENV", "experiment_id", "finished_or_failed",
            "flatten_params", "latest_runs", "log_metrics", "log_params_once", "make_logger",
-           "mlflow_client", "stage_run", "tracking_uri"]
+           "mlflow_client", "run_name", "stage_run", "tracking_uri"]

@@ -23,6 +23,8 @@ from typing import Any
 
 import pandas as pd
 
+from cdpr_pipeline.outputs import final_paths
+
 #: MLflow's default store (``mlflow.store.tracking.DEFAULT_TRACKING_URI``): relative to the
 #: working directory; :func:`tracking_uri` makes it absolute when it is used
 DEFAULT_TRACKING_URI = "sqlite:///mlflow.db"
@@ -81,15 +83,32 @@ def artifact_location(uri: str) -> str | None:
 
 def flatten_params(tree: Mapping[str, Any], prefix: str = "") -> dict[str, str]:
     """Nested config -> ``{"model.net.layers": "4", ...}`` (MLflow params are strings;
-    Lightning's MLFlowLogger cuts each value to 250 characters)."""
+    Lightning's MLFlowLogger cuts each value to 250 characters).
+
+    A path into the output the command is writing names where it will be found (the final
+    ``out_dir``, not its ``.partial`` work directory: :func:`~cdpr_pipeline.outputs.final_paths`).
+    """
     out: dict[str, str] = {}
-    for key, value in tree.items():
+    for key, value in final_paths(tree).items():
         name = f"{prefix}{key}"
         if isinstance(value, Mapping):
             out |= flatten_params(value, f"{name}.")
         else:
             out[name] = str(value)
     return out
+
+
+def run_name(command: str, dataset: str | Path | None, detail: str | None = None) -> str:
+    """How a command's MLflow run is named: ``diagnose:<dataset folder>``, with a detail
+    that tells runs of one command on one dataset apart (``identify:emps (lsm)``).
+
+    >>> run_name("diagnose", "/data/emps/")
+    'diagnose:emps'
+    >>> run_name("train", "data/lab", "tcn")
+    'train:lab (tcn)'
+    """
+    name = f"{command}:{Path(dataset).resolve().name}" if dataset else command
+    return f"{name} ({detail})" if detail else name
 
 
 class RunLogger:

@@ -6,7 +6,8 @@ Each case corrupts a copy of a shipped dataset of one kind -- the foreign cable 
 ``axes``) -- and asserts for every command: a non-zero exit, a message naming the file,
 the column (or rig.yaml key) and the row where they apply, no 300-digit numbers, the
 dataset and a pre-filled ``out_dir`` byte-identical afterwards, an end within 60 s, and
-no traceback (the last check, see ``test_bad_input``).
+no traceback (the last check, see ``test_bad_input``). ``validate``'s verdict for
+``identify`` and ``diagnose`` (its per-command lines) must be what those commands do.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from cdpr_pipeline.cli import main as cdpr
 from cdpr_pipeline.data.convert import convert_emps
 from cdpr_pipeline.resources import emps_path, foreign_rig_path
 
-COMMANDS = ("validate", "identify", "diagnose")
+COMMANDS = ("validate", "identify", "diagnose")    # validate first: its verdicts are compared
 LIMIT_S = 60.0
 CF = "trajectories/000_flat_circle.csv"      # foreign rig: 2000 samples at 200 Hz
 CS = "trajectories/001_spiral.csv"
@@ -239,9 +240,9 @@ CDPR = [
     Case("no_trajectories", "cdpr", remove("trajectories"), ("trajectories/",)),
     Case("header_only", "cdpr", truncate(0, CF, CS), (CF, "column 't'")),
     Case("too_few_samples", "cdpr", truncate(40, CF, CS), (CF, "column 't'", "50")),
-    # identify: long enough for two runs' regressions, but no velocity reversal
-    Case("half_second_runs", "cdpr", truncate(100, CF, CS), ("trajectories/", "column"),
-         accepted=frozenset({"validate"})),
+    # identify: long enough for two runs' regressions, but no velocity reversal; too
+    # short for diagnose and for train's blocks: no command can use it
+    Case("half_second_runs", "cdpr", truncate(100, CF, CS), ("trajectories/", "column")),
     Case("all_zero_torques", "cdpr", both(*(set_column(f"u{i}", 0.0, CF, CS)
                                             for i in (1, 2, 3))),
          (CF, "column 'u1'", "row 2", "0 in every sample")),
@@ -250,6 +251,16 @@ CDPR = [
     Case("u2_u3_swapped_everywhere", "cdpr", both(swap_columns("u2", "u3", CF),
                                                   swap_columns("u2", "u3", CS)),
          (CF, CS, "column 'u2'", "in every run"), accepted=frozenset({"validate"})),
+    Case("platform_at_anchor", "cdpr", both(*(cell(CF, 700, c, v) for c, v in
+                                              zip("xyz", ("-0.5", "-0.3", "3.0"),
+                                                  strict=True))),
+         (CF, "column 'x'", "row 700", "anchor 1")),
+    Case("torque_spike_1e6", "cdpr", cell(CF, 900, "u1", "1e6"), (CF, "column 'u1'", "row 900")),
+    Case("torque_spike_2_31", "cdpr", cell(CS, 901, "u3", str(2**31)),
+         (CS, "column 'u3'", "row 901")),
+    # train can cut one 3 s run into blocks; identify and diagnose need longer
+    Case("single_3s_run", "cdpr", both(remove(CS), truncate(600, CF)),
+         (CF, "column 't'", "3 s"), accepted=frozenset({"validate"})),
     Case("platform_never_moves", "cdpr",
          still(["x", "y", "z", "xd", "yd", "zd", "l1", "l2", "l3"], CF, CS),
          (CF, "column 'x'", "never moves")),
@@ -292,6 +303,11 @@ AXES = [
     Case("too_few_samples", "axes", truncate(30, AF), (AF, "column 't'", "50")),
     Case("half_second_runs", "axes", truncate(500, AF, AP), ("trajectories/", "column"),
          accepted=frozenset({"validate"})),
+    Case("torque_spike_1e6", "axes", cell(AF, 7000, "u1", "1e6"), (AF, "column 'u1'", "row 7000")),
+    Case("torque_spike_2_31", "axes", cell(AP, 7001, "u1", str(-2**31)),
+         (AP, "column 'u1'", "row 7001")),
+    Case("single_3s_run", "axes", both(remove(AP), truncate(3000, AF)),
+         (AF, "column '"), accepted=frozenset({"validate"})),
     Case("all_zero_force", "axes", set_column("u1", 0.0, AF, AP),
          (AF, "column 'u1'", "row 2", "0 in every sample")),
     Case("axis_never_moves", "axes", still(["q1", "qd1"], AF, AP),
@@ -345,6 +361,13 @@ def run_command(argv: list[str]) -> tuple[int | None, str, float]:
     return result["code"], out.getvalue(), time.perf_counter() - start
 
 
+def validate_says(text: str, command: str) -> bool:
+    """Whether ``cdpr validate``'s output says ``command`` can use the data (no verdict
+    at all: the data is invalid, which no command can use)."""
+    verdict = re.search(rf"^\s+{command}\s+(yes|no)\b", text, re.MULTILINE)
+    return verdict is not None and verdict.group(1) == "yes"
+
+
 @pytest.mark.parametrize("case", CASES, ids=[f"{c.kind}-{c.name}" for c in CASES])
 def test_bad_input(case: Case, bases, tmp_path, monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)     # Hydra's own run folder goes here
@@ -353,6 +376,7 @@ def test_bad_input(case: Case, bases, tmp_path, monkeypatch) -> None:
     case.corrupt(data)
     before = _digest(data)
     tracebacks = []
+    results = {}
     for sub in COMMANDS:
         out_dir = tmp_path / f"out_{sub}"
         out_dir.mkdir()
@@ -363,6 +387,7 @@ def test_bad_input(case: Case, bases, tmp_path, monkeypatch) -> None:
             if sub == "diagnose":
                 argv.append("blackbox.enabled=false")
         code, text, seconds = run_command(argv)
+        results[sub] = code, text
         assert code is not None and seconds < LIMIT_S, f"{sub} still running after {seconds} s"
         assert _digest(data) == before, f"{sub} changed the dataset"
         assert _digest(out_dir) == {"sentinel.txt": hashlib.sha256(
@@ -375,6 +400,10 @@ def test_bad_input(case: Case, bases, tmp_path, monkeypatch) -> None:
         assert not re.search(r"\d{30}", text), f"{sub} printed a 30-digit number"
         if "Traceback" in text:
             tracebacks.append(sub)
+    # validate speaks for the commands: its verdict is what the command does
+    for sub in ("identify", "diagnose"):
+        assert validate_says(results["validate"][1], sub) == (results[sub][0] == 0), (
+            f"validate and {sub} disagree on {case.name}:\n{results['validate'][1][-3000:]}")
     # last, so that every other property is checked first: the CLI's plain error
     # messages (exit 2, no traceback) come with the `UserError` handling in cli.py
     assert not tracebacks, f"traceback printed by {tracebacks}"

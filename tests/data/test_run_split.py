@@ -152,8 +152,10 @@ def test_only_test_families_are_cut_too():
 
 def test_too_short_run_names_the_dataset_and_the_run():
     runs = lab(["a"], seconds=1.0)
-    with pytest.raises(ValueError, match=r"my_rig: run 000_a has 100 samples .* too short"):
+    with pytest.raises(ValueError, match=r"(?s)dataset my_rig.*trajectories/000_a.csv, "
+                       r"column 't': run 000_a has 100 samples .* too short") as info:
         model_split(runs, 0.1, 0.1, [], seed=0, gap=WINDOW, min_samples=35, source="my_rig")
+    assert [p.kind for p in info.value.problems] == ["window_split"]
     with pytest.raises(ValueError, match=r"my_rig: run 000_a has 100 samples"):
         heldout_split(runs, min_samples=80, source="my_rig")
     # one short run among several: named with its file, before any filtering fails on it

@@ -4,12 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from cdpr_pipeline.testing.lab_cases import draw_seed, lab_dataset
-
-
-@pytest.fixture
-def seed() -> int:
-    return draw_seed()
+from cdpr_pipeline.testing.lab_cases import lab_dataset
 
 
 @pytest.fixture(scope="session")

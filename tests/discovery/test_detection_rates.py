@@ -21,7 +21,6 @@ from cdpr_pipeline.testing.foreign_cases import (
     foreign_settings,
     grade,
 )
-from cdpr_pipeline.testing.lab_cases import draw_seed
 
 SEEDS = 3
 
@@ -74,8 +73,8 @@ def _report(cases: list[dict], first: int) -> tuple[str, dict]:
 
 
 @pytest.mark.slow
-def test_detection_and_false_alarm_rates(paper_rig, tmp_path):
-    first = draw_seed()
+def test_detection_and_false_alarm_rates(paper_rig, tmp_path, seed):
+    first = seed
     settings = foreign_settings()
     cases = _lab_cases(paper_rig, first, settings) + _independent_cases(tmp_path, first,
                                                                         settings)

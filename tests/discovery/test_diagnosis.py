@@ -1,5 +1,5 @@
-"""Hidden-effect tests: simulate the lab with one effect hidden (magnitude and seed drawn
-at random within the documented ranges), diagnose, and require the right verdict, the
+"""Hidden-effect tests: simulate the lab with one effect hidden (its magnitude drawn from
+the test's seed within the documented ranges), diagnose, and require the right verdict, the
 fitted physical parameter, and a held-out gain whose interval excludes zero.
 
 The fast suite draws one case of each kind; ``tests/discovery/test_detection_rates.py``
@@ -13,17 +13,37 @@ import pytest
 
 from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.sim.effects import EFFECTS, Effect, make_effect
-from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset, rng_for
+from cdpr_pipeline.testing.lab_cases import (
+    contribution_errors,
+    fast_settings,
+    lab_dataset,
+    rng_for,
+)
 
 VOCABULARY = sorted(n for n, c in EFFECTS.items() if c.in_vocabulary and c.drawable)
 OUTSIDE = sorted(n for n, c in EFFECTS.items() if not c.in_vocabulary and c.drawable)
 
 
-def check_parameters(effect: Effect, cause: dict) -> None:
-    """The fitted physical parameter is the one the simulator was given."""
+#: the torque-side effects, judged by the torque they add on the held-out runs (any form
+#: of it counts: ``c w [w > 0]`` is ``c w - c w [w < 0]``), per winch within 10 % (RMS) of
+#: the hidden one's: the strictest size tolerance these checks had (Stribeck's static
+#: ratio); measured 0.0-1.9 % on seeds 101-103 of each
+TORQUE_SIDE = {"stribeck_friction", "asymmetric_viscous_friction", "winch_parameter_error"}
+CONTRIBUTION_TOLERANCE = 0.10
+
+
+def check_parameters(effect: Effect, cause: dict, d, data, case: str = "") -> None:
+    """The fitted physical parameter is the one the simulator was given; for a
+    torque-side effect, the torque it adds."""
     p = cause["params"]
     name = effect.name
-    if name == "anchor_offset":
+    if name in TORQUE_SIDE:
+        winches = [effect.cable - 1] if name == "winch_parameter_error" \
+            else [c - 1 for c in effect.cables or range(1, 4)]     # the lab: 3 winches
+        errors = contribution_errors(d, data, fast_settings(), [effect], winches)
+        assert max(errors.values()) <= CONTRIBUTION_TOLERANCE, \
+            f"{case}: torque off by {errors} (tolerance {CONTRIBUTION_TOLERANCE})"
+    elif name == "anchor_offset":
         assert p["cable"] == effect.cable
         assert np.allclose(p["offset_m"], effect.offset_m, atol=3e-3)
     elif name == "cable_elasticity":
@@ -47,32 +67,17 @@ def check_parameters(effect: Effect, cause: dict) -> None:
         # drawn on every winch with one time constant: every winch is found, each with it
         assert p["cables"] == [1, 2, 3]
         assert p["time_constant_s"] == pytest.approx([effect.time_constant_s] * 3, rel=0.2)
-    elif name == "stribeck_friction":
-        # drawn on every winch with one ratio: every winch is found, each with that ratio
-        assert p["cables"] == [1, 2, 3]
-        assert p["static_ratio"] == pytest.approx([effect.static_ratio] * 3, rel=0.1)
-    elif name == "asymmetric_viscous_friction":
-        assert p["cables"] == [1, 2, 3]
-        signed = [d * r for d, r in zip(p["direction"], p["ratio"], strict=True)]
-        assert signed == pytest.approx([effect.direction * effect.ratio] * 3, abs=0.1)
     elif name == "cogging":
         # drawn on every winch alike: every winch is found, each with N and A
         assert p["cables"] == [1, 2, 3]
         assert p["periods"] == [effect.periods] * 3
         assert p["amplitude"] == pytest.approx([effect.amplitude] * 3, rel=0.1)
-    elif name == "winch_parameter_error":
-        changes = {c["winch"]: c for c in p["winches"]}
-        assert effect.cable in changes
-        c = changes[effect.cable]
-        for key in ("inertia", "viscous", "coulomb"):
-            scale = getattr(effect, f"{key}_scale")
-            if scale != 1.0:
-                assert c["new"][key] == pytest.approx(c["old"][key] * scale, rel=0.05)
 
 
-def _diagnose(paper_rig, effects, seed):
-    d = diagnose(lab_dataset(paper_rig, effects, seed), fast_settings())
-    return d, d.as_json()
+def _diagnose(paper_rig, effects, seed, with_data: bool = False):
+    data = lab_dataset(paper_rig, effects, seed)
+    d = diagnose(data, fast_settings())
+    return (d, d.as_json(), data) if with_data else (d, d.as_json())
 
 
 def _assert_gain(record, case):
@@ -95,9 +100,9 @@ def test_a_hidden_vocabulary_effect_is_named(paper_rig, seed):
     name = VOCABULARY[rng_for(seed).integers(len(VOCABULARY))]
     effect = make_effect(name, rng_for(seed + 1), paper_rig.n)
     case = f"seed {seed}: hidden {effect.describe()}"
-    d, record = _diagnose(paper_rig, [effect], seed)
+    d, record, data = _diagnose(paper_rig, [effect], seed, with_data=True)
     assert record["verdict"] == name, f"{case}; diagnosed: {d.sentence}"
-    check_parameters(effect, record["causes"][0])
+    check_parameters(effect, record["causes"][0], d, data, f"{case}; diagnosed: {d.sentence}")
     _assert_gain(record, case)
 
 

@@ -17,7 +17,7 @@ from cdpr_pipeline.discovery.residuals import nominal_model, residuals, signal_s
 from cdpr_pipeline.discovery.selection import Judgement, Selection, SelectionSettings
 from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.sim.effects import DrumRadiusError, PayloadMassError
-from cdpr_pipeline.testing.lab_cases import draw_seed, fast_settings, lab_dataset, rng_for
+from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset, rng_for
 
 
 # ------------------------------------------------------------------ the step on its own
@@ -29,11 +29,11 @@ def _cause(effect, channel, bic_drop):
 
 
 @pytest.fixture(scope="module")
-def payload_lab(paper_rig):
+def payload_lab(paper_rig, request, seed_of):
     """A lab whose only hidden effect is a payload mass error (size drawn from its range,
     10-30 %, either sign): its nominal model, held-out runs, their nominal residuals and
     the columns' scales, and the true effect."""
-    seed = draw_seed()
+    seed = seed_of(request.node)
     rng = rng_for(seed)
     true = PayloadMassError(float(rng.choice([-1, 1]) * rng.uniform(0.1, 0.3)))
     data = lab_dataset(paper_rig, [true], seed, duration_s=6.0)
@@ -97,10 +97,9 @@ def test_never_worse_withdraws_the_harmful_cause_beside_a_helpful_one(payload_la
 # ------------------------------------------------------------------ in the diagnosis
 
 
-def test_a_cause_that_makes_held_out_runs_worse_is_withdrawn(paper_rig, monkeypatch):
+def test_a_cause_that_makes_held_out_runs_worse_is_withdrawn(paper_rig, monkeypatch, seed):
     """Whatever the selection proposes, a cause whose held-out gain is not above zero with
     95 % confidence is withdrawn: verdict none, an extended model without it."""
-    seed = draw_seed()
     data = lab_dataset(paper_rig, [], seed, duration_s=6.0)
     wrong = float(rng_for(seed).uniform(0.2, 0.5))       # a heavier platform than true
     harmful = Judgement("payload_mass_error", "payload_mass_error",
@@ -118,11 +117,10 @@ def test_a_cause_that_makes_held_out_runs_worse_is_withdrawn(paper_rig, monkeypa
     assert "withdrawn" in d.sentence
 
 
-def _drum_and_payload(paper_rig, monkeypatch):
+def _drum_and_payload(paper_rig, monkeypatch, seed):
     """A lab with a drum radius error and a payload mass error (sizes drawn from the
     effects' ranges: drum 1-3 %, payload 10-30 %, either sign), and the selection fixed
     to both, each judged on the lengths (the drum's joint re-fit improved them)."""
-    seed = draw_seed()
     rng = rng_for(seed)
     drum = DrumRadiusError(float(rng.choice([-1, 1]) * rng.uniform(0.01, 0.03)))
     payload = PayloadMassError(float(rng.choice([-1, 1]) * rng.uniform(0.1, 0.3)))
@@ -138,12 +136,12 @@ def _drum_and_payload(paper_rig, monkeypatch):
     return data, f"seed {seed}: {drum.describe()}, {payload.describe()}"
 
 
-def test_a_cause_is_kept_for_what_it_adds_on_any_channel(paper_rig, monkeypatch):
+def test_a_cause_is_kept_for_what_it_adds_on_any_channel(paper_rig, monkeypatch, seed):
     """A payload error found after a drum radius error was judged on the lengths (the
     drum's joint re-fit improved them), added nothing there, and was withdrawn although
     it explains the torque (seed 507 of the two-effect lab test). Each cause must add
     to the others on the held-out channel where it adds most."""
-    data, drawn = _drum_and_payload(paper_rig, monkeypatch)
+    data, drawn = _drum_and_payload(paper_rig, monkeypatch, seed)
     d = diagnose(data, fast_settings())
     case = f"{drawn}: {d.sentence}"
     # both kept; their order is by held-out contribution (test_ranking): measured on seed
@@ -153,11 +151,10 @@ def test_a_cause_is_kept_for_what_it_adds_on_any_channel(paper_rig, monkeypatch)
     assert d.gain.withdrawn == (), case
 
 
-def test_an_unusable_stated_model_is_re_identified_first(paper_rig):
+def test_an_unusable_stated_model_is_re_identified_first(paper_rig, seed):
     """The rig.yaml of a lab without hidden effects states winch friction many times too
     large (a wrong data sheet): the stated model's torque error is over 100 %; the
     diagnosis re-identifies every winch first, says so, and finds the true parameters."""
-    seed = draw_seed()
     rng = rng_for(seed)
     data = lab_dataset(paper_rig, [], seed, duration_s=6.0)
     w = paper_rig.winch_nominal
@@ -178,14 +175,14 @@ def test_an_unusable_stated_model_is_re_identified_first(paper_rig):
         0, abs=0.1 * d.nominal_metrics.heldout.relative_error_pct)
 
 
-def test_a_cause_whose_own_interval_reaches_zero_is_withdrawn(paper_rig, monkeypatch):
+def test_a_cause_whose_own_interval_reaches_zero_is_withdrawn(paper_rig, monkeypatch, seed):
     """Each cause's own addition must have a 95 % interval above zero, not only a point
     estimate over ``min_gain``: the two true causes of the test above are both kept, and
     when the first interval asked for (the weaker cause's, checked first) is made to reach
     below zero, that cause alone is withdrawn while its point estimate still passes."""
     import dataclasses
 
-    data, drawn = _drum_and_payload(paper_rig, monkeypatch)
+    data, drawn = _drum_and_payload(paper_rig, monkeypatch, seed)
     real_gain, own = never_worse_module.heldout_gain, []
 
     def uncertain_first(*args, **kwargs):

@@ -10,15 +10,14 @@ from __future__ import annotations
 import pytest
 
 from cdpr_pipeline.testing.foreign_cases import foreign_settings, null_datasets, run_null, summarise
-from cdpr_pipeline.testing.lab_cases import draw_seed
 
 #: datasets per simulator: lab, independent cable robots, independent drive axes
 COUNTS = (6, 8, 6)
 
 
 @pytest.mark.slow
-def test_false_alarms_at_most_5_percent(paper_rig, tmp_path):
-    first = draw_seed()
+def test_false_alarms_at_most_5_percent(paper_rig, tmp_path, seed):
+    first = seed
     settings = foreign_settings()
     specs = null_datasets(*COUNTS, first)
     assert len(specs) >= 20

@@ -4,7 +4,7 @@ largest held-out contribution; issue 21, item 5).
 Each cause's contribution is its Shapley share of the extended model's held-out gain
 (:func:`~cdpr_pipeline.discovery.never_worse.heldout_contributions`). The expected order
 comes from the *true* effects' contributions on the same held-out runs, not from the
-fitted ones. Magnitudes are drawn from the effects' documented ranges, seeds at random
+fitted ones. Magnitudes are drawn from the effects' documented ranges, seeds from the commit
 (``CDPR_TEST_SEED`` replays one).
 """
 

@@ -10,7 +10,7 @@ The diagnosis tests read the data with the command's configuration
 (``conf/diagnose.yaml``, closed loop and black box off) and, to keep them affordable,
 without the free-form search (it runs after the named candidates and cannot add or
 remove a named lag). Lags are drawn in 3-12 ms (at most what the independent
-generator's loop stays stable with, ``0.3 / w_c``), seeds at random
+generator's loop stays stable with, ``0.3 / w_c``), seeds from the commit
 (``CDPR_TEST_SEED`` replays one).
 """
 
@@ -40,13 +40,13 @@ def _settings():
 
 # ------------------------------------------------------------------------ the reading
 @pytest.mark.parametrize("ratio", [1, 2, 4, 10])
-def test_a_held_command_is_read_as_the_torque_acting_around_each_sample(ratio):
+def test_a_held_command_is_read_as_the_torque_acting_around_each_sample(ratio, seed):
     """A smooth command, computed by a controller ``ratio`` times faster than the
     recording and held over each control period: the torque averaged over each sample's
     triangle (the window of the compact second difference) is what the reading gives
     from the recorded samples alone, to second order; read as sampled, or as held over
     the whole sample when the controller is faster, it is off by a first-order delay."""
-    rng = np.random.default_rng()
+    rng = np.random.default_rng(seed)
     fs = float(rng.uniform(100, 1000))
     f = float(rng.uniform(0.02, 0.05)) * fs         # well inside the band, as motion is
     fine = 200 * ratio                              # integration points per sample

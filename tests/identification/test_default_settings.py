@@ -78,13 +78,13 @@ def test_resolved_settings_follow_the_rate_and_the_motion(caplog):
     assert s3.filter.cutoff_hz == pytest.approx(8.0) and s3.decimate == 2
 
 
-def test_the_wider_speed_band_finds_a_reversal_where_it_is():
+def test_the_wider_speed_band_finds_a_reversal_where_it_is(seed):
     """A friction jump at a reversal puts a kink in the speed (deceleration ``a1`` before
     zero speed, acceleration ``a2`` after it, drawn). Filtered at the motion's cut-off
     the speed crosses zero off the reversal by a share of the filter's width; the speed
     band four times wider (``speed_cutoff_hz``) brings it three to four times closer, while
     the acceleration stays that of the narrow band."""
-    rng = np.random.default_rng()
+    rng = np.random.default_rng(seed)
     fs, cutoff = 300.0, float(rng.uniform(5.0, 15.0))
     a1, a2 = float(rng.uniform(0.5, 2.0)), float(rng.uniform(3.0, 6.0))
     t0 = float(rng.uniform(-0.5, 0.5)) / fs                  # the reversal, between samples

@@ -18,8 +18,6 @@ larger, the spread read from the reported standard deviation times
 from __future__ import annotations
 
 import json
-import os
-import secrets
 
 import numpy as np
 import pytest
@@ -41,8 +39,7 @@ STD_UNDERSTATEMENT = 2.5
 
 @pytest.mark.parametrize("n_axes, rate, inertia, viscous, noise", CASES)
 def test_default_identification_of_foreign_axes(tmp_path, n_axes, rate, inertia, viscous,
-                                                noise, new_mlflow_store):
-    seed = int(os.environ.get("CDPR_TEST_SEED", secrets.randbelow(2 ** 31)))
+                                                noise, new_mlflow_store, seed):
     rig = random_axes_rig(seed, n_axes=n_axes, rate_hz=rate, inertia=inertia,
                           viscous=viscous)
     data = tmp_path / "axes"

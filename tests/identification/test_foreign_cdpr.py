@@ -32,7 +32,6 @@ import pytest
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.stages.identify import identify
 from cdpr_pipeline.testing.foreign_cases import foreign_case
-from cdpr_pipeline.testing.lab_cases import draw_seed
 
 #: assumed ratio of the true spread to the LSM standard deviation (measured for F_v on
 #: axes, ``test_foreign_axes``; assumed here for every parameter)
@@ -42,9 +41,10 @@ FLOOR = 0.02
 
 
 @pytest.mark.parametrize("n_cables", [3, 4])
-def test_default_identification_of_foreign_cable_robots(tmp_path, n_cables, new_mlflow_store):
+def test_default_identification_of_foreign_cable_robots(tmp_path, n_cables, new_mlflow_store,
+                                                         seed):
     # a draw that slackens a cable is redrawn from the next seed (foreign_case)
-    case = foreign_case(tmp_path, "cdpr", [], draw_seed(), n_runs=5, duration_s=15.0,
+    case = foreign_case(tmp_path, "cdpr", [], seed, n_runs=5, duration_s=15.0,
                         n=n_cables)
     data, truth, seed = case.path, case.truth, case.seed
     identify(compose_config("identify", [f"data.path={data}", f"out_dir={tmp_path / 'id'}",

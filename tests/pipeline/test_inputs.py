@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import pytest
 
+from cdpr_pipeline.outputs import inputs_state
 from cdpr_pipeline.pipeline.inputs import (
     blame,
     check_skipped_inputs,
     config_value,
     input_paths,
-    inputs_state,
 )
 from cdpr_pipeline.pipeline.skip import write_skip_markers
 

@@ -3,8 +3,6 @@ own numerics, and that smoothing does not show at the scale of the data."""
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from cdpr_pipeline.data.reading import DerivativeFilter, clear_of_reach
@@ -22,7 +20,7 @@ def _run(rig, seed):
 
 
 def test_hard_sign_rig_is_simulated_and_its_smoothing_is_numerical_only(paper_rig,
-                                                                         monkeypatch):
+                                                                         monkeypatch, seed):
     rig = paper_rig.replace(coulomb_sharpness=None)        # rig.yaml states no law: sign
     plant = Plant.from_rig(rig)
     assert np.isinf(plant.sign_sharpness)
@@ -32,8 +30,6 @@ def test_hard_sign_rig_is_simulated_and_its_smoothing_is_numerical_only(paper_ri
     smooth = integration_plant(plant, dt)
     # the band where tanh(k w) is not +-1 (|k w| < 3) is under a hundredth of a rad/s
     assert 3.0 / smooth.sign_sharpness < 0.01
-    # replay a draw with CDPR_TEST_SEED
-    seed = int(os.environ.get("CDPR_TEST_SEED", np.random.default_rng().integers(2**31)))
     coarse = _run(rig, seed)
     assert np.isinf(coarse.nominal.sign_sharpness)       # the model stays the stated one
     # twice as sharp (and twice the sub-steps): once moving, the recorded motion agrees (RMS)

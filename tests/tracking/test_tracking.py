@@ -1,10 +1,14 @@
-"""Tracking helpers: where runs and their artifacts go."""
+"""Tracking helpers: where runs and their artifacts go, what they are named, which paths
+they log."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from mlflow.tracking import MlflowClient
 
-from cdpr_pipeline.tracking import experiment_id, tracking_uri
+from cdpr_pipeline.outputs import final_paths, rebase_paths, staged_output
+from cdpr_pipeline.tracking import experiment_id, flatten_params, run_name, tracking_uri
 from cdpr_pipeline.tracking.mlflow import (
     DEFAULT_TRACKING_URI,
     artifact_location,
@@ -48,3 +52,24 @@ def test_metric_names_mlflow_refuses_are_made_acceptable(tmp_path):
     got = client.get_run(run.info.run_id).data.metrics
     assert got == {"time/signals_motion_band_s": 1.5, "gain/relative": 0.25}
     assert metric_name("a b/c:d-e.f") == "a b/c:d-e.f" and metric_name("x*y") == "x_y"
+
+
+def test_runs_are_named_after_the_command_and_the_dataset_folder(tmp_path):
+    assert run_name("diagnose", tmp_path / "emps") == "diagnose:emps"
+    assert run_name("diagnose", f"{tmp_path / 'emps'}/") == "diagnose:emps"
+    assert run_name("identify", ".", "lsm") == f"identify:{Path.cwd().name} (lsm)"
+    assert run_name("report", None) == "report"
+
+
+def test_params_logged_while_an_output_is_written_name_its_final_directory(tmp_path):
+    """A command works in <out_dir>.partial; what it logs names out_dir, where the user
+    finds the files (the issue: MLflow showed the .partial path)."""
+    out = tmp_path / "diag"
+    tree = {"out_dir": str(out), "data": {"path": str(tmp_path / "lab")}}
+    with staged_output(out, "stamp") as work:
+        assert work != out
+        inside = rebase_paths(tree, str(out), str(work))
+        assert flatten_params(inside) == {"out_dir": str(out),
+                                          "data.path": str(tmp_path / "lab")}
+        assert final_paths(str(work / "report.html")) == str(out / "report.html")
+    assert flatten_params(inside)["out_dir"] == str(work)     # outside: as given

@@ -95,9 +95,12 @@ class FreeFormResult:
         for it (a width, a harmonic), which were fitted to the same data."""
         return int(sum(term_cost(t.expression) for t in self.terms))
 
-    def describe(self) -> str:
+    def describe(self, model: Any = None) -> str:
+        """The terms as formulas, variables in ``model``'s words (``theta1``/``omega1``
+        on a winch, ``q1``/``q1'`` on an axis: its ``variable_names``)."""
+        names = None if model is None else model.variable_names
         return "; ".join(f"u{t.cable}: {t.coefficient:+.4g} "
-                         f"{to_infix(t.expression, str(t.cable))}" for t in self.terms)
+                         f"{to_infix(t.expression, str(t.cable), names)}" for t in self.terms)
 
 
 def symbolic_torque(terms: Sequence[FreeFormTerm]) -> SymbolicWinchTorque:

@@ -52,7 +52,7 @@ families share.
 from __future__ import annotations
 
 from cdpr_pipeline.sim.effects.actuator import ActuatorLag
-from cdpr_pipeline.sim.effects.base import Effect, per_winch
+from cdpr_pipeline.sim.effects.base import Effect, Size, per_winch
 from cdpr_pipeline.sim.effects.cable import CableElasticity
 from cdpr_pipeline.sim.effects.friction import (
     AsymmetricViscousFriction,
@@ -78,7 +78,7 @@ from cdpr_pipeline.sim.effects.winch import WinchParameterError
 __all__ = [
     "ALIASES", "EFFECTS", "OUTSIDE", "VOCABULARY", "ActuatorLag", "AnchorOffset",
     "AsymmetricViscousFriction", "CableElasticity", "CoggingTorque", "DrumRadiusError",
-    "Effect", "PayloadMassError", "PositionDependentLoad", "QuadraticDamping",
+    "Effect", "PayloadMassError", "PositionDependentLoad", "QuadraticDamping", "Size",
     "StribeckFriction", "SymbolicWinchTorque", "WinchParameterError", "effect_class",
     "make_effect", "per_winch", "vocabulary_names",
 ]
@@ -86,6 +86,6 @@ __all__ = [
 # The public name of every effect class is this package's: truth records
 # ("class": "cdpr_pipeline.sim.effects.AnchorOffset"), Hydra targets and pickles name
 # the class where users import it, whichever family module defines it.
-for _cls in (Effect, *EFFECTS.values()):
+for _cls in (Effect, Size, *EFFECTS.values()):
     _cls.__module__ = __name__
 del _cls

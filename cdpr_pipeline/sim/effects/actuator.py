@@ -13,6 +13,7 @@ from cdpr_pipeline.sim.effects.base import (
     Effect,
     _affected,
     _map,
+    drive,
     per_winch,
 )
 
@@ -39,6 +40,9 @@ class ActuatorLag(Effect):
     lab_draws: ClassVar[str] = "3-10 ms"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"time_constant_s": (0.003, 0.010)}
     refit_variant: ClassVar[bool] = True
+    quantities: ClassVar[dict[str, str]] = {"time_constant_s": "s"}
+    #: a lag leaves a residual that follows the rate of the commanded torque
+    explanatory_variable: ClassVar[str] = "du/dt"
 
     time_constant_s: float | list[float] = 0.005
     cables: list[int] | None = None
@@ -83,11 +87,19 @@ class ActuatorLag(Effect):
 
     def describe(self, plant=None):
         if self.cables is None and np.ndim(self.time_constant_s) == 0:
-            return (f"the drives deliver torque with a first-order lag of "
+            return (f"the drives deliver {_delivered(plant)} with a first-order lag of "
                     f"{1000 * self.time_constant_s:.1f} ms")
         cables = _affected(self.cables, [self.time_constant_s], plant)
         k = len(cables) if cables else 1
         tau = per_winch(self.time_constant_s, None, k)
-        parts = [f"{f'winch {cables[j]}' if cables else 'every winch'}: "
+        parts = [f"{drive(plant, cables[j] if cables else None)}: "
                  f"{1000 * tau[j]:.1f} ms" for j in range(k)]
-        return "the drives deliver torque with a first-order lag (" + ", ".join(parts) + ")"
+        return (f"the drives deliver {_delivered(plant)} with a first-order lag ("
+                + ", ".join(parts) + ")")
+
+
+def _delivered(plant) -> str:
+    """What the drives of ``plant`` deliver: torque, force, or force/torque (axes of
+    both joint types)."""
+    words = {u.force_word for u in (plant.channel_units if plant is not None else ())}
+    return words.pop() if len(words) == 1 else "force/torque" if words else "torque"

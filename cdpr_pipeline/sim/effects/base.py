@@ -15,6 +15,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from cdpr_pipeline.data.units import ChannelUnits
 from cdpr_pipeline.sim.candidate_forms import Candidate
 from cdpr_pipeline.sim.plant import Plant
 
@@ -137,6 +138,62 @@ def _described_sizes(size: Any, ratio: Any, k: int, nominal: np.ndarray | None,
             ratio = offset + relative if offset else relative
     return size, ratio
 
+def drive(plant: Any, channel: int | None = None, plural: bool = False) -> str:
+    """What a user calls a channel's drive on ``plant`` (``winch 2``, ``axis 1``,
+    ``every axis``; ``winch`` without a model)."""
+    word = "winch" if plant is None else plant.drive_word
+    if channel is None:
+        return ("winches" if plant is None else plant.drive_words) if plural else \
+            f"every {word}"
+    return f"{word} {channel}"
+
+
+def unit(plant: Any, channel: int | None, quantity: str) -> str:
+    """The unit of ``quantity`` (:meth:`~cdpr_pipeline.data.units.ChannelUnits.of`)
+    on 1-based ``channel`` of ``plant`` (its first channel for None); the unit of a
+    newton-metre winch without a model."""
+    units = plant.channel_units if plant is not None else ()
+    if not units:
+        return ChannelUnits("N m", "rad").of(quantity)
+    return units[(channel or 1) - 1].of(quantity)
+
+
+def with_unit(value: float, plant: Any, channel: int | None, quantity: str,
+              fmt: str = ".3g") -> str:
+    """``value`` formatted with its unit on ``channel`` of ``plant``."""
+    u = unit(plant, channel, quantity)
+    text = format(float(value), fmt)
+    return f"{text} {u}" if u else text
+
+
+@dataclass(frozen=True)
+class Size:
+    """One fitted size of an effect, as a report states it.
+
+    Attributes
+    ----------
+    channel : int or None
+        The 1-based channel (winch, axis, cable) it belongs to; None: the effect as a
+        whole (a platform mass, one value on every channel).
+    name : str
+        The parameter's name, as :meth:`Effect.params` or :meth:`Effect.derived` write
+        it (``extra_static``, ``new_viscous``).
+    value : float
+    quantity : str
+        What it is (:data:`~cdpr_pipeline.data.units.QUANTITIES`, e.g. ``force``, or a
+        fixed unit such as ``s``): its unit is that of its channel.
+    neutral : float or None
+        The value at which it does nothing (0 for an extra force, the stated value for
+        a re-identified parameter), None for a shape (a Stribeck velocity).
+    """
+
+    channel: int | None
+    name: str
+    value: float
+    quantity: str
+    neutral: float | None = 0.0
+
+
 @dataclass
 class Effect:
     """Base class of all hidden effects."""
@@ -182,6 +239,17 @@ class Effect:
     plant_change: ClassVar[str] = ""
     #: what the virtual lab draws (empty: not drawn by the lab)
     lab_draws: ClassVar[str] = ""
+    #: the quantity of each size parameter (:class:`Size`), by field name: a quantity of
+    #: the channel it acts on (``force``, ``speed``, ...) or a fixed unit (``s``, ``m``)
+    quantities: ClassVar[dict[str, str]] = {}
+    #: the fields of :attr:`quantities` that are shapes (a Stribeck velocity): no value
+    #: of theirs makes the effect vanish (:attr:`Size.neutral` None)
+    shape_fields: ClassVar[frozenset[str]] = frozenset()
+    #: the signal the residual it leaves follows, which the report plots the residual
+    #: against: ``position``, ``speed``, ``acceleration``, ``du/dt``, ``tension``,
+    #: ``tension x length``, ``cable length`` or ``platform x|y|z`` (the diagnosis's
+    #: signatures, ``discovery.diagnosis``)
+    explanatory_variable: ClassVar[str] = "speed"
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -244,6 +312,30 @@ class Effect:
         "new": {...}}``, the winch's I_m, F_v, F_c, d before and after, from the
         ``nominal`` :class:`~cdpr_pipeline.data.rig.WinchParams`; None otherwise."""
         return None
+
+    def sizes(self, plant: Any) -> list[Size]:
+        """The fitted sizes a report states, per channel of ``plant`` (the model the
+        sizes are relative to). By default every field named in :attr:`quantities`:
+        one value per affected channel (``cables``, every channel when None) or one
+        for them all (channel None), or the channel of a ``cable`` field."""
+        values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        cables = values.get("cables")
+        own = None if values.get("cable") is None else int(values["cable"])
+        if own is None and cables is not None and len(cables) == 1:
+            own = int(cables[0])
+        out = []
+        for key, quantity in self.quantities.items():
+            value = values.get(key)
+            if value is None:
+                continue
+            neutral = None if key in self.shape_fields else 0.0
+            if np.ndim(value) == 0:
+                out.append(Size(own, key, float(value), quantity, neutral))
+                continue
+            channels = cables or list(range(1, len(value) + 1))
+            out += [Size(int(c), key, float(v), quantity, neutral)
+                    for c, v in zip(channels, value, strict=True)]
+        return out
 
     def scaled(self, s: float) -> Effect:
         """The effect with its strength scaled by ``s`` (1: unchanged; detection studies

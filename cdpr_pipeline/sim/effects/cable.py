@@ -51,6 +51,10 @@ class CableElasticity(Effect):
     elastic_cables: ClassVar[bool] = True
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"ea_n": (1.0e4, 5.0e4)}
     log_uniform: ClassVar[frozenset[str]] = frozenset({"ea_n"})
+    #: the stiffness (a rigid cable is EA infinite: no value makes it vanish)
+    quantities: ClassVar[dict[str, str]] = {"ea_n": "N"}
+    shape_fields: ClassVar[frozenset[str]] = frozenset({"ea_n"})
+    explanatory_variable: ClassVar[str] = "tension x length"
 
     ea_n: float | list[float] = 2.0e4
     damping_time_s: float | None = 2e-3

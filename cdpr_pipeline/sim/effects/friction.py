@@ -18,7 +18,9 @@ from cdpr_pipeline.sim.effects.base import (
     _finite,
     _map,
     _relative,
+    drive,
     per_winch,
+    with_unit,
 )
 from cdpr_pipeline.sim.plant import Plant, smooth_sign
 
@@ -37,15 +39,17 @@ class StribeckFriction(Effect):
     name: ClassVar[str] = "stribeck_friction"
     expression: ClassVar[str] = "tau_f += (F_s - F_c) exp(-(w/w_s)^2) sign(w)"
     cause: ClassVar[str] = "friction rises at low speed"
-    signature: ClassVar[str] = (
-        "torque residual peaks near zero winch speed, decays with speed"
-    )
+    signature: ClassVar[str] = ("torque residual peaks near zero winch (axis) speed, "
+                                "decays with speed")
     plant_change: ClassVar[str] = "`(F_s - F_c) exp(-(w/w_s)^2) sign(w)` added"
     lab_draws: ClassVar[str] = "F_s/F_c 1.6-2.5, w_s 0.5-2 rad/s"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {
         "static_ratio": (1.6, 2.5), "stribeck_velocity": (0.5, 2.0)}
     replaces: ClassVar[dict[str, str]] = {"extra_static": "static_ratio"}
     refit_variant: ClassVar[bool] = True
+    quantities: ClassVar[dict[str, str]] = {"extra_static": "force",
+                                            "stribeck_velocity": "speed"}
+    shape_fields: ClassVar[frozenset[str]] = frozenset({"stribeck_velocity"})
 
     static_ratio: float | list[float] | None = 2.0
     stribeck_velocity: float | list[float] = 1.0      # rad/s (m/s for a linear axis)
@@ -115,8 +119,9 @@ class StribeckFriction(Effect):
     def describe(self, plant=None):
         if self.cables is None and self.extra_static is None and \
                 np.ndim(self.static_ratio) == 0 and np.ndim(self.stribeck_velocity) == 0:
-            return (f"friction on every winch rises to {self.static_ratio:.2f} x F_c near "
-                    f"zero speed (Stribeck velocity {self.stribeck_velocity:.3g})")
+            return (f"friction on {drive(plant)} rises to {self.static_ratio:.2f} x F_c near "
+                    f"zero speed (Stribeck velocity "
+                    f"{with_unit(self.stribeck_velocity, plant, None, 'speed')})")
         cables = _affected(self.cables, [self.extra_static, self.static_ratio,
                                          self.stribeck_velocity], plant)
         k = len(cables) if cables else 1
@@ -126,12 +131,13 @@ class StribeckFriction(Effect):
         size, ratio = _described_sizes(self.extra_static, self.static_ratio, k, fc, offset=1.0)
         parts = []
         for j in range(k):
-            bits = [] if size is None else [f"F_s - F_c = {size[j]:.3g}"]
+            c = cables[j] if cables else None
+            bits = [] if size is None else [
+                f"F_s - F_c = {with_unit(size[j], plant, c, 'force')}"]
             if ratio is not None and np.isfinite(ratio[j]):
                 bits.append(f"F_s = {ratio[j]:.2f} F_c")
-            bits.append(f"Stribeck velocity {speed[j]:.3g}")
-            parts.append(f"{f'winch {cables[j]}' if cables else 'every winch'} "
-                         f"({', '.join(bits)})")
+            bits.append(f"Stribeck velocity {with_unit(speed[j], plant, c, 'speed')}")
+            parts.append(f"{drive(plant, c)} ({', '.join(bits)})")
         return "friction rises near zero speed on " + "; ".join(parts)
 
 
@@ -157,6 +163,7 @@ class AsymmetricViscousFriction(Effect):
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"ratio": (0.3, 0.8)}
     replaces: ClassVar[dict[str, str]] = {"coefficient": "ratio"}
     refit_variant: ClassVar[bool] = True
+    quantities: ClassVar[dict[str, str]] = {"coefficient": "viscous"}
 
     ratio: float | list[float] | None = 0.5
     direction: int | list[int] = 1
@@ -221,7 +228,7 @@ class AsymmetricViscousFriction(Effect):
         sides = {1: "positive", -1: "negative"}
         if self.cables is None and self.coefficient is None and np.ndim(self.ratio) == 0 \
                 and np.ndim(self.direction) == 0:
-            return (f"viscous friction on every winch is {100 * self.ratio:+.0f} % of F_v "
+            return (f"viscous friction on {drive(plant)} is {100 * self.ratio:+.0f} % of F_v "
                     f"higher when the speed is {sides[int(self.direction)]}")
         cables = _affected(self.cables, [self.coefficient, self.ratio, self.direction], plant)
         k = len(cables) if cables else 1
@@ -231,11 +238,12 @@ class AsymmetricViscousFriction(Effect):
         size, ratio = _described_sizes(self.coefficient, self.ratio, k, fv)
         parts = []
         for j in range(k):
-            bits = [] if size is None else [f"{size[j]:+.3g}"]
+            c = cables[j] if cables else None
+            bits = [] if size is None else [with_unit(size[j], plant, c, "viscous", "+.3g")]
             if ratio is not None and np.isfinite(ratio[j]):
                 bits.append(f"{100 * ratio[j]:+.0f} % of F_v")
             text = bits[0] + (f" ({bits[1]})" if len(bits) > 1 else "")
-            parts.append(f"{f'winch {cables[j]}' if cables else 'every winch'}: {text} "
+            parts.append(f"{drive(plant, c)}: {text} "
                          f"when the speed is {sides[1 if direction[j] >= 0 else -1]}")
         return "viscous friction differs by direction: " + "; ".join(parts)
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from cdpr_pipeline.sim.effects.base import (
     Effect,
+    Size,
     _arr,
     _cable_mask,
     _candidate,
@@ -31,6 +32,7 @@ class AnchorOffset(Effect):
     lab_draws: ClassVar[str] = "1-3 cm, random direction"
     kinds: ClassVar[frozenset[str]] = frozenset({"cdpr"})
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"distance_m": (0.01, 0.03)}
+    quantities: ClassVar[dict[str, str]] = {"offset_m": "m"}
 
     cable: int = 1
     offset_m: list[float] = field(default_factory=lambda: [0.02, 0.0, 0.0])
@@ -47,6 +49,16 @@ class AnchorOffset(Effect):
         dist = rng.uniform(*cls.ranges["distance_m"])
         return {"cable": int(rng.integers(1, n_cables + 1)),
                 "offset_m": [float(x) for x in dist * direction]}
+
+    @property
+    def explanatory_variable(self) -> str:
+        """The platform coordinate along the largest component of the offset."""
+        return f"platform {'xyz'[int(np.argmax(np.abs(self.offset_m)))]}"
+
+    def sizes(self, plant):
+        """The offset's three components, m, on its cable."""
+        return [Size(self.cable, f"d{axis}", float(v), "m")
+                for axis, v in zip("xyz", self.offset_m, strict=True)]
 
     def scaled(self, s):
         return type(self)(self.cable, [s * v for v in self.offset_m])
@@ -83,6 +95,8 @@ class DrumRadiusError(Effect):
     kinds: ClassVar[frozenset[str]] = frozenset({"cdpr"})
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative": (0.01, 0.03)}
     signed: ClassVar[frozenset[str]] = frozenset({"relative"})
+    quantities: ClassVar[dict[str, str]] = {"relative": "ratio"}
+    explanatory_variable: ClassVar[str] = "cable length"
 
     relative: float | list[float] = 0.02
     cables: list[int] | None = None

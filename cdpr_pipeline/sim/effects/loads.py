@@ -11,9 +11,11 @@ import numpy as np
 from cdpr_pipeline.sim.candidate_forms import TORQUE
 from cdpr_pipeline.sim.effects.base import (
     Effect,
+    Size,
     _candidate,
     _map,
     per_winch,
+    unit,
 )
 
 
@@ -41,7 +43,7 @@ class PositionDependentLoad(Effect):
         "gravity, a spring, a cable carrier"
     )
     signature: ClassVar[str] = (
-        "torque residual follows `a sin(q) + b cos(q)` (rotary) or `k q + c` "
+        "torque residual follows `a sin(q) + b cos(q)` (rotary) or `a q + b` "
         "(prismatic)"
     )
     plant_change: ClassVar[str] = (
@@ -50,6 +52,9 @@ class PositionDependentLoad(Effect):
     lab_draws: ClassVar[str] = ""
     kinds: ClassVar[frozenset[str]] = frozenset({"axes"})
     drawable: ClassVar[bool] = False
+    #: ``a`` is a force (rotary: of ``sin q``) or a stiffness (prismatic: of ``q``)
+    quantities: ClassVar[dict[str, str]] = {"a": "force", "b": "force"}
+    explanatory_variable: ClassVar[str] = "position"
 
     a: float | list[float] = 0.0
     b: float | list[float] = 0.0
@@ -93,6 +98,20 @@ class PositionDependentLoad(Effect):
                 # a rotary load's amplitude and the angle where it is largest
                 "amplitude": [float(np.hypot(x, y)) if r else None
                               for x, y, r in zip(a, b, rotary, strict=True)]}
+
+    def sizes(self, plant):
+        """``a`` and ``b`` per affected axis: on a prismatic axis ``a`` is a stiffness
+        (force per unit of position), on a rotary joint a force like ``b``."""
+        n = plant.n
+        a = per_winch(self.a, self.cables, n)
+        b = per_winch(self.b, self.cables, n)
+        rotary = self.rotary(n)
+        out = []
+        for c in self.cables or range(1, n + 1):
+            i = int(c) - 1
+            out += [Size(int(c), "a", float(a[i]), "force" if rotary[i] else "stiffness"),
+                    Size(int(c), "b", float(b[i]), "force")]
+        return out
 
     def scaled(self, s):
         return dataclasses.replace(self, a=_map(self.a, lambda v: s * v),
@@ -138,9 +157,11 @@ class PositionDependentLoad(Effect):
         parts = []
         for c in cables:
             i = c - 1
+            force = unit(plant, c, "force")
             if rotary[i]:
                 parts.append(f"axis {c} (rotary): {a[i]:+.4g} sin(q) {b[i]:+.4g} cos(q) "
-                             f"(amplitude {np.hypot(a[i], b[i]):.4g})")
+                             f"{force} (amplitude {np.hypot(a[i], b[i]):.4g} {force})")
             else:
-                parts.append(f"axis {c} (prismatic): {a[i]:+.4g} q {b[i]:+.4g}")
+                parts.append(f"axis {c} (prismatic): {a[i]:+.4g} {unit(plant, c, 'stiffness')}"
+                             f" q {b[i]:+.4g} {force}")
         return "a position-dependent load: " + "; ".join(parts)

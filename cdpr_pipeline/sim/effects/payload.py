@@ -7,6 +7,7 @@ from typing import ClassVar
 
 from cdpr_pipeline.sim.effects.base import (
     Effect,
+    Size,
     _arr,
     _candidate,
 )
@@ -28,6 +29,7 @@ class PayloadMassError(Effect):
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative": (0.1, 0.3)}
     signed: ClassVar[frozenset[str]] = frozenset({"relative"})
     refit_variant: ClassVar[bool] = True
+    explanatory_variable: ClassVar[str] = "tension"
 
     relative: float = 0.2
 
@@ -42,5 +44,13 @@ class PayloadMassError(Effect):
         return [_candidate(cls.name, cls.name, lambda x: [cls(float(x[0]))],
                            [_arr(0.0)], _arr(-0.9), _arr(5.0), _arr(0.1), names=["relative"])]
 
+    def sizes(self, plant):
+        """The platform's mass, kg, against the stated one."""
+        return [Size(None, "mass", float(plant.mass * (1 + self.relative)), "kg",
+                     float(plant.mass))]
+
     def describe(self, plant=None):
-        return f"the platform mass is {100 * self.relative:+.1f} % off the nominal mass"
+        text = f"the platform mass is {100 * self.relative:+.1f} % off the nominal mass"
+        if plant is None:
+            return text
+        return f"{text} ({plant.mass:.4g} kg -> {plant.mass * (1 + self.relative):.4g} kg)"

@@ -16,7 +16,9 @@ from cdpr_pipeline.sim.effects.base import (
     _finite,
     _map,
     _relative,
+    drive,
     per_winch,
+    with_unit,
 )
 from cdpr_pipeline.sim.effects.loads import PositionDependentLoad
 
@@ -105,14 +107,17 @@ class CoggingTorque(Effect):
     signature: ClassVar[str] = (
         "torque residual periodic in the joint or winch angle, `sum a_k sin(k N q + "
         "phi_k)` with N periods per revolution (or per pitch); report N and the amplitude; "
-        "`params`: per winch (axis) `periods` N, `amplitude`, `phase_rad`, its size "
-        "relative to F_c and the `period` (rad, or m on a prismatic axis with `pitch_m`)")
+        "`params`: per winch (axis) `periods` N, `amplitude`, `phase_rad`, "
+        "`amplitude_ratio` (to F_c) and the `period` (rad, or m on a prismatic axis with "
+        "`pitch_m`); `sizes`: the amplitude with its standard error")
     plant_change: ClassVar[str] = ("`A sin(N theta + phi)` added to the winch torque "
                                    "(theta: motor angle, `2 pi q / pitch` on a prismatic "
                                    "axis)")
     lab_draws: ClassVar[str] = "A 0.08-0.2 N m, N 4-12 per revolution, every winch"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"amplitude": (0.08, 0.2),
                                                         "periods": (4, 12)}
+    quantities: ClassVar[dict[str, str]] = {"amplitude": "force"}
+    explanatory_variable: ClassVar[str] = "position"
 
     amplitude: float | list[float] = 0.1
     periods: int | list[int] = 8
@@ -243,12 +248,12 @@ class CoggingTorque(Effect):
         ratio = None if fc is None else _relative(amplitude, np.abs(fc))
         parts = []
         for j in range(k):
+            c = cables[j] if cables else None
             per = f"per pitch of {pitch[j]:.4g} m" if pitch[j] > 0 else "per revolution"
-            unit = "N" if pitch[j] > 0 else "N m"
-            size = f"amplitude {amplitude[j]:.4g} {unit}"
+            size = f"amplitude {with_unit(amplitude[j], plant, c, 'force', '.4g')}"
             if ratio is not None and np.isfinite(ratio[j]):
                 size += f" ({ratio[j]:.2f} F_c)"
             count = int(round(periods[j]))
-            parts.append(f"{f'winch {cables[j]}' if cables else 'every winch'}: "
+            parts.append(f"{drive(plant, c)}: "
                          f"{count} period{'' if count == 1 else 's'} {per}, {size}")
-        return "a torque periodic in position (cogging) on " + "; ".join(parts)
+        return "periodic in position on " + "; ".join(parts)

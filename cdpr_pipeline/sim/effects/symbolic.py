@@ -9,6 +9,9 @@ import numpy as np
 
 from cdpr_pipeline.sim.effects.base import (
     Effect,
+    Size,
+    drive,
+    unit,
 )
 from cdpr_pipeline.sim.expressions import evaluate_cached, to_infix
 
@@ -23,6 +26,8 @@ class SymbolicWinchTorque(Effect):
     in_vocabulary: ClassVar[bool] = False
     expression: ClassVar[str] = "tau_f += sum_j c_j f_j(theta, w)"
     drawable: ClassVar[bool] = False
+    #: its terms are in the channel's force or torque
+    quantities: ClassVar[dict[str, str]] = {"coefficient": "force"}
 
     #: ``[{"cable": 2, "expression": "sin_k(theta, 8)", "coefficient": 0.07}, ...]``
     terms: list[dict[str, Any]] = field(default_factory=list)
@@ -45,7 +50,30 @@ class SymbolicWinchTorque(Effect):
         return type(self)([{**t, "coefficient": s * float(t["coefficient"])}
                            for t in self.terms])
 
+    @property
+    def explanatory_variable(self) -> str:
+        """``position`` when no term depends on the speed, else ``speed``."""
+        speed = any("omega" in str(t["expression"]) for t in self.terms)
+        return "speed" if speed else "position"
+
+    def term_text(self, term: dict[str, Any], plant=None) -> str:
+        """A term's expression in the rig's words (``sin(8 q1)``, ``|omega2|``)."""
+        names = None if plant is None else plant.variable_names
+        return to_infix(term["expression"], str(term["cable"]), names)
+
+    def sizes(self, plant):
+        """Every term's coefficient, on its channel: what the term adds to its force or
+        torque per unit of its expression."""
+        return [Size(int(t["cable"]), f"coefficient of {self.term_text(t, plant)}",
+                     float(t["coefficient"]), "force") for t in self.terms]
+
     def describe(self, plant=None):
-        parts = [f"{t['coefficient']:+.4g} {to_infix(t['expression'], str(t['cable']))}"
-                 for t in self.terms]
-        return "extra winch torque " + " ".join(parts)
+        by_channel: dict[int, list[str]] = {}
+        for t in self.terms:
+            by_channel.setdefault(int(t["cable"]), []).append(
+                f"{float(t['coefficient']):+.4g} {self.term_text(t, plant)}")
+        parts = [f"{drive(plant, c)}: {' '.join(terms)} ({unit(plant, c, 'force')})"
+                 for c, terms in by_channel.items()]
+        words = sorted({u.force_word for u in plant.channel_units}) if plant else ["torque"]
+        return f"extra {plant.drive_word if plant else 'winch'} {'/'.join(words)}: " \
+            + "; ".join(parts)

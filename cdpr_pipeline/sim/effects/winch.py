@@ -11,10 +11,13 @@ from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.sim.candidate_forms import TORQUE
 from cdpr_pipeline.sim.effects.base import (
     Effect,
+    Size,
     _arr,
     _cable_mask,
     _candidate,
     _signed,
+    drive,
+    with_unit,
 )
 from cdpr_pipeline.sim.plant import Plant
 
@@ -38,6 +41,10 @@ class WinchParameterError(Effect):
     lab_draws: ClassVar[str] = "±20-40 %"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative_error": (0.2, 0.4)}
     reidentifies_winch: ClassVar[bool] = True
+
+    #: the quantity of each re-identified parameter (:meth:`sizes`)
+    quantities: ClassVar[dict[str, str]] = {"inertia": "inertia", "viscous": "viscous",
+                                            "coulomb": "force", "offset": "force"}
 
     cable: int = 1
     inertia_scale: float = 1.0
@@ -84,7 +91,7 @@ class WinchParameterError(Effect):
         coefficient is another effect being imitated, not a wrong data sheet. Sparse:
         a wrong F_c alone is one parameter against a free-form term's two."""
         return [_candidate(
-            cls.name, f"{cls.name}[winch {cable}]",
+            cls.name, f"{cls.name}[{rig.drive_word} {cable}]",
             lambda x, c=cable: [cls(c, float(x[0]), float(x[1]), float(x[2]), float(x[3]))],
             [_arr(1, 1, 1, 0)], _arr(0.0, 0.0, 0.0, -np.inf),
             _arr(np.inf, np.inf, np.inf, np.inf), _arr(0.1, 0.1, 0.1, 0.1), linear=True,
@@ -96,9 +103,33 @@ class WinchParameterError(Effect):
         # viscous, Coulomb and offset terms are a winch's own parameters
         return ["omega", "sign_(omega)", "one(omega)"]
 
-    def describe(self, plant=None) -> str:
-        parts = [f"{k.split('_')[0]} x{v:.3f}" for k, v in self.params().items()
-                 if k.endswith("_scale") and v != 1.0]
+    def new_values(self, plant: Plant) -> dict[str, tuple[float, float]]:
+        """Per parameter of :attr:`quantities` its stated value on ``plant`` and the
+        re-identified one, for those this effect changes."""
+        i = self.cable - 1
+        w = plant.winch
+        change = {"inertia": self.inertia_scale, "viscous": self.viscous_scale,
+                  "coulomb": self.coulomb_scale}
+        out = {k: (float(getattr(w, k)[i]), float(getattr(w, k)[i]) * v)
+               for k, v in change.items() if v != 1.0}
         if self.offset_delta:
-            parts.append(f"offset {self.offset_delta:+.3f} N m")
-        return f"winch {self.cable}: " + ", ".join(parts)
+            out["offset"] = (float(w.offset[i]), float(w.offset[i]) + self.offset_delta)
+        return out
+
+    def sizes(self, plant):
+        """The re-identified values of the parameters it changes, each with its stated
+        value as the one at which it changes nothing."""
+        return [Size(self.cable, k, new, self.quantities[k], old)
+                for k, (old, new) in self.new_values(plant).items()]
+
+    def describe(self, plant=None) -> str:
+        if plant is None:
+            parts = [f"{k.split('_')[0]} x{v:.3f}" for k, v in self.params().items()
+                     if k.endswith("_scale") and v != 1.0]
+            if self.offset_delta:
+                parts.append(f"offset {self.offset_delta:+.3g}")
+        else:
+            parts = [f"{k} {with_unit(old, plant, self.cable, self.quantities[k], '.4g')} -> "
+                     f"{with_unit(new, plant, self.cable, self.quantities[k], '.4g')}"
+                     for k, (old, new) in self.new_values(plant).items()]
+        return f"{drive(plant, self.cable)}: " + ", ".join(parts)

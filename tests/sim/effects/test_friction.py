@@ -58,8 +58,8 @@ def test_descriptions_give_the_size_in_both_forms(nominal_plant):
     fc, fv = nominal_plant.winch.coulomb, nominal_plant.winch.viscous
     relative = StribeckFriction(static_ratio=[2.5], stribeck_velocity=0.4, cables=[2])
     assert relative.describe(nominal_plant) == (
-        f"friction rises near zero speed on winch 2 (F_s - F_c = {1.5 * fc[1]:.3g}, "
-        "F_s = 2.50 F_c, Stribeck velocity 0.4)")
+        f"friction rises near zero speed on winch 2 (F_s - F_c = {1.5 * fc[1]:.3g} N m, "
+        "F_s = 2.50 F_c, Stribeck velocity 0.4 rad/s)")
     absolute = StribeckFriction(static_ratio=None, extra_static=[0.3], stribeck_velocity=0.4,
                                 cables=[2])
     assert f"F_s = {1 + 0.3 / fc[1]:.2f} F_c" in absolute.describe(nominal_plant)
@@ -67,6 +67,6 @@ def test_descriptions_give_the_size_in_both_forms(nominal_plant):
     asym = AsymmetricViscousFriction(ratio=None, coefficient=[0.05, 0.01], direction=[1, -1],
                                      cables=[3, 1])
     assert asym.describe(nominal_plant) == (
-        f"viscous friction differs by direction: winch 3: +0.05 ({100 * 0.05 / fv[2]:+.0f} % "
-        f"of F_v) when the speed is positive; winch 1: +0.01 ({100 * 0.01 / fv[0]:+.0f} % of "
-        "F_v) when the speed is negative")
+        f"viscous friction differs by direction: winch 3: +0.05 N m s/rad "
+        f"({100 * 0.05 / fv[2]:+.0f} % of F_v) when the speed is positive; winch 1: +0.01 "
+        f"N m s/rad ({100 * 0.01 / fv[0]:+.0f} % of F_v) when the speed is negative")

@@ -1,0 +1,100 @@
+"""How long CI takes: ``.ci/run`` on a clean clone of the committed code, timed per step.
+
+CI runs ``.ci/run`` on a clean clone of main with nothing installed. This script does the
+same here: it clones ``HEAD`` into a scratch directory (with ``../shared`` beside it, as
+CI has it), runs ``CI=true bash .ci/run`` once per OpenBLAS kernel asked for, and writes
+what each step took, the test counts and the exit status to ``docs/measurements.md``
+(section ``ci``). The README quotes no CI figure of its own; it points here.
+
+    python -m benchmarks.bench_ci                          # the machine's own kernel
+    python -m benchmarks.bench_ci --coretype default Prescott
+
+Each run takes as long as CI (about 10 minutes on 2 cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+from benchmarks.measurements import ROOT, invoked_as, record
+
+#: ``ci: <step> took M min S s`` lines that ``.ci/run`` prints
+STEP = re.compile(r"^ci: (.+?) took (\d+) min (\d+) s", re.MULTILINE)
+#: pytest's closing line, e.g. ``== 717 passed, 3 deselected in 226.1s ==``
+SUMMARY = re.compile(r"=+ (.*?) in [\d.]+s", re.MULTILINE)
+
+
+def clean_clone(workdir: Path) -> Path:
+    """A clone of ``HEAD`` in ``workdir/p``, with ``workdir/shared`` pointing at the
+    checkout's ``../shared`` (what the CI machine has beside the clone)."""
+    clone = workdir / "p"
+    subprocess.run(["git", "clone", "-q", str(ROOT), str(clone)], check=True)
+    shared = ROOT.parent / "shared"
+    if shared.exists():
+        (workdir / "shared").symlink_to(shared.resolve())
+    return clone
+
+
+def run_ci(coretype: str) -> dict[str, object]:
+    """One ``.ci/run`` on a fresh clone; ``coretype`` ``default`` leaves OpenBLAS's own
+    choice, any other value is set as ``OPENBLAS_CORETYPE``."""
+    env = dict(os.environ, CI="true")
+    env.pop("OPENBLAS_CORETYPE", None)
+    if coretype != "default":
+        env["OPENBLAS_CORETYPE"] = coretype
+    with tempfile.TemporaryDirectory(prefix="cdpr-ci-") as tmp:
+        clone = clean_clone(Path(tmp))
+        start = time.perf_counter()
+        proc = subprocess.run(["bash", ".ci/run"], cwd=clone, env=env, capture_output=True,
+                              text=True, check=False)
+        wall = time.perf_counter() - start
+    out = proc.stdout + proc.stderr
+    steps = {m.group(1): 60 * int(m.group(2)) + int(m.group(3)) for m in STEP.finditer(out)}
+    summaries = [m.group(1) for m in SUMMARY.finditer(out)]
+    if proc.returncode:
+        print(out[-4000:])
+    return {"coretype": coretype, "rc": proc.returncode, "wall_s": wall, "steps": steps,
+            "summaries": summaries}
+
+
+def _minutes(seconds: float) -> str:
+    seconds = int(round(seconds))
+    return f"{seconds // 60} min {seconds % 60:02d} s"
+
+
+def table(runs: list[dict[str, object]]) -> str:
+    """Markdown: one row per run, its steps' times, the test summaries and the status."""
+    names = list(dict.fromkeys(name for r in runs for name in r["steps"]))
+    head = ["OPENBLAS_CORETYPE", *names, "in all", "tests", "exit"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in runs:
+        cells = [str(r["coretype"]), *(_minutes(r["steps"][n]) if n in r["steps"] else "-"
+                                       for n in names),
+                 _minutes(r["wall_s"]), "; ".join(r["summaries"]) or "-", str(r["rc"])]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--coretype", nargs="+", default=["default"],
+                        help="OpenBLAS kernels to run CI under ('default': OpenBLAS's choice)")
+    args = parser.parse_args()
+    runs = [run_ci(c) for c in args.coretype]
+    body = table(runs) + (
+        "\n\n`.ci/run` on a clean clone of the commit, with nothing installed beforehand: "
+        "`make install`, the fast suite (`make test`), then the end-to-end pipeline tests "
+        "(`make test-pipeline`); each row is one clean clone.")
+    record("ci", "CI on a clean clone", body, command=invoked_as())
+    if any(r["rc"] for r in runs):
+        raise SystemExit(1)
+
+
+if __name__ == "__main__":
+    main()
