@@ -270,8 +270,8 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
 
     def passing(target: np.ndarray, best_sse: np.ndarray, winches: list[int]) -> list[int]:
         sse0 = np.maximum(np.sum(target ** 2, axis=0), 1e-300)
-        return [i for i in winches
-                if rows * np.log(sse0[i] / max(best_sse[i], 1e-300)) > form.k * np.log(rows)
+        return [i for i in winches if np.isfinite(best_sse[i])
+                and rows * np.log(sse0[i] / max(best_sse[i], 1e-300)) > form.k * np.log(rows)
                 and best_sse[i] <= (1 - min_gain) * sse0[i]]
 
     columns: dict[tuple, list[np.ndarray]] = {}
@@ -300,8 +300,13 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
     best, best_sse = search(r0, list(range(n)))
     kept = passing(r0, best_sse, list(range(n)))
     if not kept:
+        # the best winch the effect may act on (a winch no variant fits keeps an
+        # infinite sum of squares)
         sse0 = np.maximum(np.sum(r0 ** 2, axis=0), 1e-300)
-        kept = [int(np.argmax(rows * np.log(sse0 / np.maximum(best_sse, 1e-300))))]
+        able = np.isfinite(best_sse)
+        gain = np.full(n, -np.inf)
+        gain[able] = rows * np.log(sse0[able] / np.maximum(best_sse[able], 1e-300))
+        kept = [int(np.argmax(gain))]
     if mixes and len(kept) > 1:
         kept, values = _joint_winches(kept, best, r0, form.k, bounds, column, min_gain)
         best = with_values(values)
