@@ -29,6 +29,15 @@ MOST_PERIODS = 48
 #: period counts per winch whose closed-form fits are compared exactly (model
 #: evaluations), the best of the harmonic scan (:func:`harmonic_shares`)
 SCREENED = 3
+#: a count above the band at the winch's RMS speed (:func:`in_band`) is tried only when
+#: its plain harmonic explains this share of the winch's residual rows: the per-winch
+#: practical significance (``selection.min_winch_gain``). Above the band the filtered
+#: torque is left mostly at the reversals, where a model's artefacts lie too: on the
+#: lab's effect-free runs the exact fits of such counts (17-46) explained 5-10 % of a
+#: winch's training residual, significant, though their plain harmonics explained at
+#: most 2.7 %; a cogging above the band (11-12 periods on the command's reading of the
+#: lab) explained 21-32 %
+MATERIAL_SHARE = 0.05
 
 
 def harmonic_shares(angle: np.ndarray, residual: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -58,9 +67,8 @@ def in_band(speed: np.ndarray, per_unit: float, band_hz: float) -> float:
     """The most periods per revolution whose torque lies within ``band_hz`` at the
     channel's RMS speed (``speed`` in the position's unit per s, ``per_unit`` radians of
     motor angle per unit): ``N`` periods pass at ``N |w| / (2 pi)`` Hz. Above it, such a
-    torque shows in the rows only where the channel turns slowly, around its
-    reversals, where a model's artefacts lie too (the lab's effect-free runs had
-    ``N`` = 17-46 fit them, significant on the training runs)."""
+    torque shows in the rows mostly where the channel turns slowly, around its
+    reversals, where a model's artefacts lie too (:data:`MATERIAL_SHARE`)."""
     rms = float(np.sqrt(np.mean(np.square(speed)))) * per_unit
     return 2 * np.pi * band_hz / rms if rms > 0 else np.inf
 
@@ -93,8 +101,10 @@ class CoggingTorque(Effect):
     closed form) at a period count chosen per winch among 1 to :data:`MOST_PERIODS` by
     a harmonic scan of the residual, or rig.yaml's ``cogging_periods`` where it states
     one. The scan keeps to the counts whose frequency at the winch's RMS speed lies
-    within the band the statistics rows keep (:func:`in_band`); a cogging above it is
-    found when the diagnosis looks again on a wider band (``follow_residual``). A
+    within the band the regression reads (:func:`in_band`), and to those above it whose
+    plain harmonic explains a material share of the residual (:data:`MATERIAL_SHARE`);
+    a weaker cogging above it is found when the diagnosis looks again on a wider band
+    (``follow_residual``). A
     prismatic axis without ``pitch_m`` has no angle: a force periodic in its position is
     left to the free-form search (``unnamed``, with its wavenumber).
     """
@@ -190,15 +200,14 @@ class CoggingTorque(Effect):
                    band_hz: float) -> list[list[int]]:
             out: list[list[int]] = []
             for i, grid in enumerate(counts):
-                if len(grid) > 1:
-                    grid = [g for g in grid if g <= in_band(speeds[:, i], per_unit[i],
-                                                            band_hz)]
                 if len(grid) <= 1:
                     out.append(list(grid))
                     continue
                 shares = harmonic_shares(per_unit[i] * positions[:, i], residual[:, i],
                                          np.asarray(grid, float))
-                out.append([grid[k] for k in np.argsort(-shares, kind="stable")[:SCREENED]])
+                top = in_band(speeds[:, i], per_unit[i], band_hz)
+                out.append([grid[k] for k in np.argsort(-shares, kind="stable")
+                            if grid[k] <= top or shares[k] >= MATERIAL_SHARE][:SCREENED])
             return out
 
         return [winch_candidate(
