@@ -18,6 +18,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.optimize._numdiff import approx_derivative
 
+from cdpr_pipeline.discovery.bands import analysed_band_hz
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,
@@ -179,12 +180,10 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
     components = (False, True) if form.quadrature else (False,)
     if form.screen is not None:
         # the channels' positions and speeds at the statistics rows, and the band the
-        # regression reads (the derivative filter's cut-off: a decimation's narrower
-        # pass band attenuates what lies above it, the same in data and model), for the
-        # screen to place the variants it proposes
+        # rows keep, for the screen to place the variants it proposes
         positions = np.concatenate([s.theta[s.row_index()] for s in ctx.train])
         speeds = np.concatenate([s.omega[s.row_index()] for s in ctx.train])
-        band_hz = float(ctx.train[0].settings.filter.cutoff_hz)
+        band_hz = analysed_band_hz(ctx.train[0].settings, ctx.train[0].fs)
 
     mixes = any(s.mixes for s in ctx.train)
 

@@ -89,7 +89,7 @@ class WinchForm:
         ``(positions, speeds, residual, band_hz) -> per winch a list of variants`` worth
         fitting, best first (an empty list: the effect cannot act on that winch), from
         the statistics rows' channel positions and speeds, the residual to explain (all
-        (rows, n)) and the band the regression reads (Hz): for a variant chosen among many (a
+        (rows, n)) and the band the rows keep (Hz): for a variant chosen among many (a
         period count), where fitting each would cost a model evaluation. Replaces
         :attr:`variants`; the choice counts as a parameter.
     quadrature_name : str

@@ -30,14 +30,24 @@ MOST_PERIODS = 48
 #: evaluations), the best of the harmonic scan (:func:`harmonic_shares`)
 SCREENED = 3
 #: a count above the band at the winch's RMS speed (:func:`in_band`) is tried only when
-#: its plain harmonic explains this share of the winch's residual rows: the per-winch
-#: practical significance (``selection.min_winch_gain``). Above the band the filtered
-#: torque is left mostly at the reversals, where a model's artefacts lie too: on the
-#: lab's effect-free runs the exact fits of such counts (17-46) explained 5-10 % of a
-#: winch's training residual, significant, though their plain harmonics explained at
-#: most 2.7 %; a cogging above the band (11-12 periods on the command's reading of the
-#: lab) explained 21-32 %
+#: its plain harmonic explains this share of the winch's residual rows (and passes BIC
+#: there, :func:`material_share`): the per-winch practical significance
+#: (``selection.min_winch_gain``). Above the band the filtered torque is left mostly at
+#: the reversals, where a model's artefacts lie too: on the lab's effect-free runs the
+#: exact fits of such counts (17-46) explained 5-10 % of a winch's training residual,
+#: significant, though their plain harmonics explained at most 2.7 %; a cogging above
+#: the band (11-12 periods on the command's reading of the lab) explained 21-32 %
 MATERIAL_SHARE = 0.05
+
+
+def material_share(rows: int) -> float:
+    """The share of a winch's residual a plain harmonic above the band must explain on
+    ``rows`` rows: :data:`MATERIAL_SHARE`, and what beats BIC for its three parameters
+    (sine, cosine, count), ``rows log(1 / (1 - share)) > 3 log(rows)``: on a few
+    hundred rows the best of 48 counts explains several % by chance (160 rows of a
+    single effect-free lab run: 6.9 %, and the exact fit of that count passed on the
+    training rows)."""
+    return max(MATERIAL_SHARE, float(-np.expm1(-3.0 * np.log(max(rows, 2)) / max(rows, 2))))
 
 
 def harmonic_shares(angle: np.ndarray, residual: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -206,8 +216,9 @@ class CoggingTorque(Effect):
                 shares = harmonic_shares(per_unit[i] * positions[:, i], residual[:, i],
                                          np.asarray(grid, float))
                 top = in_band(speeds[:, i], per_unit[i], band_hz)
+                material = material_share(len(residual))
                 out.append([grid[k] for k in np.argsort(-shares, kind="stable")
-                            if grid[k] <= top or shares[k] >= MATERIAL_SHARE][:SCREENED])
+                            if grid[k] <= top or shares[k] >= material][:SCREENED])
             return out
 
         return [winch_candidate(
