@@ -11,9 +11,16 @@ on the machine it ran on, which matters on a machine shared with other jobs (the
 time then says more than the wall time).
 
     python -m benchmarks.bench_diagnose [--cases none stribeck_friction hard:stribeck_friction]
+    python -m benchmarks.bench_diagnose --matrix [--shapes 4cables-500Hz-tanh500 ...]
 
 A case ``hard:EFFECT`` states no Coulomb law in rig.yaml (the spec's default, a hard
 sign) at 250 Hz, the blind sets' setting. Figures go to docs/measurements.md.
+
+``--matrix`` measures the rig shapes users have instead (:mod:`benchmarks.diagnose_matrix`:
+the independent generator's cable robots of 3 to 8 cables and drive axes, at 250 Hz to
+1 kHz, hard sign and ``tanh(500 w)``; target a median of 20 s, at most 30 s, and 1 GB of
+memory per shape); ``--shapes`` runs some of them, and their rows replace theirs in the
+section ``diagnose-matrix``, the other shapes' rows staying as they were measured.
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import resource
 import subprocess
 import sys
@@ -30,7 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.measurements import record
+from benchmarks import diagnose_matrix
+from benchmarks.measurements import DOCUMENT, invoked_as, record
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.sim.effects import make_effect
 from cdpr_pipeline.sim.lab import simulate_lab
@@ -94,19 +103,65 @@ def run_case(case: str, tmp: Path) -> dict:
             "verdict": verdict, "ref_wall": ref_wall, "ref_cpu": ref_cpu, "log": log}
 
 
+def run_matrix(names: list[str] | None, no_record: bool) -> None:
+    """``--matrix``: the shapes named (all when None), one ``cdpr diagnose`` each."""
+    shapes = diagnose_matrix.matrix()
+    known = {s.name: s for s in shapes}
+    unknown = sorted(set(names or ()) - set(known))
+    if unknown:
+        raise SystemExit(f"unknown shapes {unknown}; known: {list(known)}")
+    rows: dict[str, str] = {}
+    with tempfile.TemporaryDirectory(prefix="bench_diagnose_matrix_") as tmp:
+        for shape in [known[n] for n in names] if names else shapes:
+            r = diagnose_matrix.run_shape(shape, Path(tmp))
+            rows[shape.name] = diagnose_matrix.table_row(r)
+            print(rows[shape.name], flush=True)
+    if no_record:
+        return
+    text = DOCUMENT.read_text() if DOCUMENT.exists() else ""
+    found = re.search(r"<!-- begin diagnose-matrix -->(.*?)<!-- end diagnose-matrix -->",
+                      text, re.DOTALL)
+    lines = diagnose_matrix.merge_rows(found.group(1) if found else None, rows)
+    walls = sorted(float(line.split("|")[2]) for line in lines)
+    peaks = [float(line.split("|")[4]) for line in lines]
+    body = [diagnose_matrix.HEADER, *lines, "",
+            f"{len(lines)} of {len(shapes)} shapes measured; wall time median "
+            f"{walls[len(walls) // 2]:.1f} s, slowest {walls[-1]:.1f} s (target: median at "
+            f"most {TARGET_S:.0f} s, slowest at most 30 s); peak memory at most "
+            f"{max(peaks):.0f} MB (target 1024 MB). Five runs of 15 s per shape from the "
+            f"independent generator (seed {diagnose_matrix.SEED}, one hidden Stribeck "
+            f"friction), `cdpr diagnose` with command defaults (black box on, closed loop "
+            f"where rig.yaml states the computed-torque controller), start-up included. "
+            f"Wall times depend on the load (the column: the one-minute load average over "
+            f"the shape's run); CPU seconds much less; the reference is a fixed workload "
+            f"measured in the benchmark's process just before each shape. Rows measured "
+            f"by separate invocations (--shapes) keep their own load; this run's command "
+            f"and commit are above."]
+    record("diagnose-matrix", "Speed of cdpr diagnose across rig shapes", "\n".join(body),
+           command=invoked_as())
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", nargs="+",
                         default=["none", "stribeck_friction", "hard:stribeck_friction"])
+    parser.add_argument("--matrix", action="store_true",
+                        help="the rig shapes of benchmarks.diagnose_matrix instead of --cases")
+    parser.add_argument("--shapes", nargs="+",
+                        help="with --matrix: only these shapes (names as the table lists)")
     parser.add_argument("--no-record", action="store_true",
                         help="print only; leave docs/measurements.md alone")
     args = parser.parse_args()
+    if args.matrix:
+        run_matrix(args.shapes, args.no_record)
+        return
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench_diagnose_") as tmp:
         for case in args.cases:
             r = run_case(case, Path(tmp))
-            order = ["startup_cpu", "loading", "signals", "candidates", "free_form",
-                     "validity", "closed_loop", "black_box", "total"]
+            order = ["startup", "loading", "signals", "candidates", "free_form",
+                     "validity", "closed_loop", "black_box", "writing", "mlflow", "other",
+                     "total"]
             parts = ", ".join(f"{k.replace('_', ' ')} {r['phases'][k]:.1f}" for k in order
                               if k in r["phases"])
             first = "n/a" if r["first_log"] is None else f"{r['first_log']:.1f} s"

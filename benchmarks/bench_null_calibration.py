@@ -23,13 +23,27 @@ statistics are recorded, with the thresholds the selection holds them to
 * the diagnosis's final ``gain`` interval (the never-worse rule) and its verdict: any
   verdict but ``none`` is a false alarm.
 
-    python -m benchmarks.bench_null_calibration [--lab 6 --cdpr 10 --axes 8]
-        [--first-seed 5000] [--settings cli|fast] [--out results/null_calibration.json]
+``--grid R`` draws the calibration grid instead (``foreign_cases.null_grid``): lab cable
+robot, independent cable robot and independent drive axes (the lab simulates no drive
+axes), each with one to five runs, short (10 s) and long (30 s) runs, ``R`` replicates
+with a seed each. Each verdict gate's rate on these nulls is measured
+(``foreign_cases.gate_rates``): the validity tests that send a diagnosis to the second
+look on a wider band, a cause named there, the materiality of a failing column
+(``unexplained_noise_ratio``, ``unexplained_min_error_pct``: ``unexplained``), the
+unusable-model threshold, and the verdict itself; per generator and kind, per run count
+and per run length. ``--part i/k`` runs the i-th of k consecutive shares of the datasets (parts run
+one after another or side by side), ``--merge a.json b.json ...`` summarises parts together.
+
+    python -m benchmarks.bench_null_calibration [--lab 6 --cdpr 10 --axes 8 | --grid 2]
+        [--part 1/3] [--first-seed 5000] [--settings cli|fast]
+        [--out results/null_calibration.json]
+    python -m benchmarks.bench_null_calibration --merge p1.json p2.json --out all.json
 
 Prints the measured null distribution of each statistic (quantiles, and the fraction
 beyond each threshold next to the rate the threshold assumes) and the false-alarm rate
 per simulator; writes everything, per dataset and per candidate, as JSON, and the summary
-table into its section of docs/measurements.md.
+table into its section of docs/measurements.md (not for a ``--part``: its share is no
+calibration).
 """
 
 from __future__ import annotations
@@ -42,13 +56,14 @@ import platform
 import tempfile
 from pathlib import Path
 
-from benchmarks.measurements import invoked_as, record
+from benchmarks.measurements import commit, invoked_as, record
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.stages.simulate import rig_from_config
 from cdpr_pipeline.testing.foreign_cases import (
     add_settings_option,
     named_settings,
     null_datasets,
+    null_grid,
     run_null,
     summarise,
 )
@@ -92,6 +107,7 @@ def print_summary(summary: dict) -> None:
               f"{pct(v['passed'])} {100 * v['max_gain']:6.1f} %")
     if s["false_alarms"]:
         print("\nfalse alarms:\n  " + "\n  ".join(s["false_alarms"]))
+    print("\n".join(gates_markdown(summary)))
 
 
 def summary_markdown(summary: dict, alpha: float, min_gain: float) -> str:
@@ -115,6 +131,7 @@ def summary_markdown(summary: dict, alpha: float, min_gain: float) -> str:
             f"{pct(g['at_least_min_gain'])} | {pct(c['above_zero'])} "
             f"({pct(c['nominal_above_zero'])}) | {len(s['false_alarms'])} of "
             f"{s['datasets']} |")
+    lines += gates_markdown(summary)
     q = summary["all"]["heldout_gain"]["quantiles"]
     lines += ["", "Held-out gain of the first-step candidates, quantiles: "
               + ", ".join(f"{k} {100 * v:.2f} %" for k, v in q.items()) + "."]
@@ -123,11 +140,75 @@ def summary_markdown(summary: dict, alpha: float, min_gain: float) -> str:
     return "\n".join(lines)
 
 
+def gates_markdown(summary: dict) -> list[str]:
+    """Each verdict gate's rate on the nulls, per group, as markdown lines (none when the
+    records carry no looks: the datasets of the old counts)."""
+    if "gates" not in summary["all"]:
+        return []
+    g = summary["all"]["gates"]
+    nr, un = g["noise_ratio"], g["unusable"]
+
+    def pct(x: float) -> str:
+        return f"{100 * x:.1f} %"
+
+    lines = ["", f"Verdict gates on the same nulls (target: at most 1 % each for the gates "
+             f"that decide a verdict). Validity: a held-out column fails a validity test "
+             f"(no verdict on its own: the second look on a wider band runs); second look: "
+             f"it names a cause (a false alarm); materiality: a failing column of the "
+             f"motion band at >= {nr['threshold']:g} x the noise and "
+             f">= {nr['min_error_pct']:g} % of its signal (`unexplained`), with the "
+             f"largest failing noise ratio there and, for comparison, on the wider look "
+             f"(which decides nothing); unusable: nominal training error "
+             f"> {un['threshold']:g} %; verdict: anything but `none`.", "",
+             "Per dataset, a first-step candidate crossing each selection gate on its "
+             "own: the likelihood ratio (p < alpha/m), the held-out gain (>= min_gain), "
+             "its bootstrap interval (lower end > 0), and all of them (a cause named).", "",
+             "| group | datasets | LR p < alpha/m | gain >= min_gain | interval > 0 | all "
+             "selection gates | validity fails (second look runs) | second look names a "
+             "cause | material failing column | largest failing noise ratio (wider look) "
+             "| unusable | verdict not none |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, s in summary.items():
+        if "gates" not in s:
+            continue
+        g = s["gates"]
+        lines.append(
+            f"| {name} | {g['datasets']} | "
+            f"{pct(s['pvalue']['datasets_with_any_below_bonferroni'])} | "
+            f"{pct(s['heldout_gain'].get('datasets_with_any', 0.0))} | "
+            f"{pct(s['ci_lower']['datasets_with_any_above_zero'])} | "
+            f"{pct(s['passed_all_tests']['datasets_with_any'])} | "
+            f"{pct(g['validity']['rate'])} | "
+            f"{pct(g['second_look_cause']['rate'])} | {pct(g['noise_ratio']['rate'])} | "
+            f"{g['noise_ratio']['largest']:.1f} ({g['noise_ratio']['largest_wider_look']:.0f})"
+            f" | {pct(g['unusable']['rate'])} | "
+            f"{pct(g['verdict']['rate'])} |")
+    q1, q2 = nr["quantiles_first_look"], nr["quantiles_wider_look"]
+    lines += ["", "Noise ratio of the worst failing column, quantiles: motion band "
+              + (", ".join(f"{k} {v:.1f}" for k, v in q1.items()) or "none failed")
+              + "; wider band " + (", ".join(f"{k} {v:.1f}" for k, v in q2.items())
+                                   or "not run") + f". Largest nominal training error "
+              f"{un['largest_train_error_pct']:.1f} %."]
+    return lines
+
+
+def thresholds_of(settings) -> dict[str, float]:
+    """The verdict thresholds :func:`~cdpr_pipeline.testing.foreign_cases.gate_rates`
+    measures, as ``settings`` holds them."""
+    return {"noise_ratio": settings.unexplained_noise_ratio,
+            "min_error_pct": settings.unexplained_min_error_pct,
+            "unusable_error_pct": settings.unusable_error_pct}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--lab", type=int, default=6, help="lab datasets")
     parser.add_argument("--cdpr", type=int, default=10, help="independent cable-robot datasets")
     parser.add_argument("--axes", type=int, default=8, help="independent drive-axes datasets")
+    parser.add_argument("--grid", type=int, default=0,
+                        help="replicates of the calibration grid (instead of the counts)")
+    parser.add_argument("--part", default="1/1",
+                        help="i/k: the i-th of k consecutive shares of the datasets")
+    parser.add_argument("--merge", type=Path, nargs="+", help="summarise these parts' JSON")
     parser.add_argument("--first-seed", type=int, default=5000)
     add_settings_option(parser)
     parser.add_argument("--out", type=Path, default=Path("results/null_calibration.json"))
@@ -135,31 +216,48 @@ def main() -> None:
     logging.basicConfig(level=logging.WARNING)
 
     settings = named_settings(args.settings)
-    paper_rig = rig_from_config(compose_config("simulate").rig)
-    specs = null_datasets(args.lab, args.cdpr, args.axes, args.first_seed)
-    records = []
-    with tempfile.TemporaryDirectory() as tmp:
-        for spec in specs:
-            rec = run_null(spec, settings, Path(tmp), paper_rig)
-            records.append(rec)
-            top = max(rec["candidates"], key=lambda c: c["gain"], default=None)
-            best = (f"best first-step gain {100 * top['gain']:.1f} % ({top['variant']}, "
-                    f"p {top['pvalue']:.2g})" if top else "")
-            print(f"{rec['rig']:55s} seed {rec['seed']}: verdict {rec['verdict']:22s} "
-                  f"{rec['diagnose_s']:5.1f} s; {best}", flush=True)
     sel = settings.selection
-    summary = summarise(records, sel.alpha, sel.min_gain)
+    provenance = ""
+    if args.merge:
+        parts = [json.loads(p.read_text()) for p in args.merge]
+        records = [r for p in parts for r in p["datasets"]]
+        part = "1/1"
+        provenance = "".join(f"\n\nPart {p['part']}: `{p['command']}`, commit {p['commit']}."
+                             for p in parts if "command" in p)
+    else:
+        part = args.part
+        i, k = (int(x) for x in part.split("/"))
+        paper_rig = rig_from_config(compose_config("simulate").rig)
+        specs = (null_grid(args.grid, args.first_seed) if args.grid
+                 else null_datasets(args.lab, args.cdpr, args.axes, args.first_seed))
+        records = []
+        with tempfile.TemporaryDirectory() as tmp:
+            for spec in specs[(i - 1) * len(specs) // k:i * len(specs) // k]:
+                rec = run_null(spec, settings, Path(tmp), paper_rig)
+                records.append(rec)
+                top = max(rec["candidates"], key=lambda c: c["gain"], default=None)
+                best = (f"best first-step gain {100 * top['gain']:.1f} % ({top['variant']}, "
+                        f"p {top['pvalue']:.2g})" if top else "")
+                runs = (f"{rec['n_runs']} x {rec['duration_s']:g} s"
+                        if "n_runs" in rec else "")
+                print(f"{rec['rig']:55s} {runs:10s} seed {rec['seed']}: verdict "
+                      f"{rec['verdict']:22s} {rec['diagnose_s']:5.1f} s; {best}", flush=True)
+    summary = summarise(records, sel.alpha, sel.min_gain, thresholds_of(settings))
     print_summary(summary)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({
         "benchmark": "null calibration of cdpr diagnose",
         "settings": args.settings, "alpha": sel.alpha, "min_gain": sel.min_gain,
+        "thresholds": thresholds_of(settings), "part": part,
+        "command": invoked_as(), "commit": commit(),
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
                     "load_avg_at_end": os.getloadavg()},
         "datasets": records, "summary": summary}, indent=1))
     print(f"\nwritten {args.out}")
-    record("null-calibration", "Null calibration of cdpr diagnose",
-           summary_markdown(summary, sel.alpha, sel.min_gain), command=invoked_as())
+    if part == "1/1":
+        record("null-calibration", "Null calibration of cdpr diagnose",
+               summary_markdown(summary, sel.alpha, sel.min_gain) + provenance,
+               command=invoked_as())
 
 
 if __name__ == "__main__":

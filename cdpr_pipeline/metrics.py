@@ -48,6 +48,14 @@ def mae(y_true, y_pred) -> np.ndarray:
     return np.mean(np.abs(p - y), axis=0)
 
 
+def fit_percent(y_true, y_pred) -> np.ndarray:
+    """Normalised RMSE fit, as MATLAB's ``compare``: ``100 (1 - |y - yhat| / |y -
+    mean(y)|)``; 100 is a perfect fit, 0 no better than the mean, negative worse."""
+    y, p = _pair(y_true, y_pred)
+    spread = np.linalg.norm(y - y.mean(axis=0), axis=0)
+    return 100.0 * (1.0 - np.linalg.norm(y - p, axis=0) / np.maximum(spread, 1e-300))
+
+
 def mape(y_true, y_pred) -> np.ndarray:
     """Mean absolute percentage error, %; samples with ``y_true == 0`` are skipped (it is
     undefined there). Positions are in the rig's frame, so MAPE depends on where its

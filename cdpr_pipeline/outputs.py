@@ -208,7 +208,8 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
 
     If the block raises (or the process dies) ``out_dir`` stays as it was and the work so
     far stays in ``<out_dir>.partial`` (resumed by a run with the same ``digest``; removed
-    if the block raised before writing anything but ``scratch``).
+    if the block raised before writing anything but ``scratch``, with the folders above
+    ``out_dir`` that the run created).
 
     Parameters
     ----------
@@ -231,6 +232,25 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
         The directory to write instead of ``out_dir``.
     """
     out_dir = Path(out_dir)
+    # folders above out_dir that this run creates (for its lock): a run that fails
+    # before writing anything removes them again, leaving nothing behind
+    created = [p for p in out_dir.parents if not p.exists()]
+    try:
+        with _staged(out_dir, digest, nested, scratch) as work:
+            yield work
+    except BaseException:
+        for folder in created:          # deepest first; only while empty
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        raise
+
+
+@contextmanager
+def _staged(out_dir: Path, digest: str, nested: bool, scratch: Sequence[str]
+            ) -> Iterator[Path]:
+    """:func:`staged_output` without the clean-up of the folders above ``out_dir``."""
     with output_lock(out_dir):
         partial = partial_dir(out_dir, digest)
         work = partial / out_dir.name if nested else partial
@@ -261,8 +281,13 @@ def staged_output(out_dir: Path, digest: str, *, nested: bool = False,
         _sibling(out_dir, ".partial.params").unlink(missing_ok=True)
 
 
-def rebase_paths(tree: Any, old: str, new: str) -> Any:
-    """Every string that is ``old`` or a path under it, moved under ``new``.
+def rebase_paths(tree: Any, old: str, new: str, key: str = "out_dir") -> Any:
+    """Every ``out_dir`` that is ``old``, and every string that is a path under ``old``,
+    moved under ``new``.
+
+    A value equal to ``old`` itself is moved only under the key ``out_dir``: another
+    setting may hold the same word (``cdpr convert format=emps out_dir=emps``) without
+    naming the output.
 
     Parameters
     ----------
@@ -270,6 +295,8 @@ def rebase_paths(tree: Any, old: str, new: str) -> Any:
         A config as plain containers.
     old, new : str
         Directory paths.
+    key : str
+        The key ``tree`` is the value of (recursion).
 
     Returns
     -------
@@ -277,10 +304,11 @@ def rebase_paths(tree: Any, old: str, new: str) -> Any:
         A copy of ``tree``.
     """
     if isinstance(tree, dict):
-        return {k: rebase_paths(v, old, new) for k, v in tree.items()}
+        return {k: rebase_paths(v, old, new, str(k)) for k, v in tree.items()}
     if isinstance(tree, list):
-        return [rebase_paths(v, old, new) for v in tree]
-    if isinstance(tree, str) and (tree == old or tree.startswith(old.rstrip("/") + "/")):
+        return [rebase_paths(v, old, new, key) for v in tree]
+    if isinstance(tree, str) and ((tree == old and key == "out_dir")
+                                  or tree.startswith(old.rstrip("/") + "/")):
         return new + tree[len(old.rstrip("/")):]
     return tree
 

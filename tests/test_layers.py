@@ -66,6 +66,8 @@ HEAVY = {
     ("cdpr_pipeline.stages.compare", "cdpr_pipeline.models.forecast"),
     ("cdpr_pipeline.stages.compare", "cdpr_pipeline.models.datamodule"),
     ("cdpr_pipeline.models.blackbox", "cdpr_pipeline.models.reconstruction"),
+    # Lightning only for a reconstruction fit that uses it (the black box's does not)
+    ("cdpr_pipeline.models.reconstruction", "cdpr_pipeline.models.module"),
 }
 #: top-layer modules whose functions load a command's modules on the call (PEP 562 in
 #: the package, the Python API): `import cdpr_pipeline` stays cheap

@@ -22,6 +22,14 @@ def test_rebase_moves_only_paths_under_the_output():
         "other": "results/xy", "data": ["data/lab"]}
 
 
+def test_rebase_leaves_a_setting_that_only_spells_the_output_alike():
+    """``cdpr convert format=emps out_dir=emps`` read the format as a path into the
+    output and failed with ``unknown format 'emps.partial/emps'``."""
+    tree = {"format": "emps", "out_dir": "emps", "log": "emps/convert.log"}
+    assert rebase_paths(tree, "emps", "emps.partial") == {
+        "format": "emps", "out_dir": "emps.partial", "log": "emps.partial/convert.log"}
+
+
 def test_partial_output_is_kept_for_the_same_params_only(tmp_path):
     out = tmp_path / "out"
     p = partial_dir(out, "aaa")

@@ -1,5 +1,6 @@
 """The ``cdpr-measured/1`` data contract: rig description, trajectories, I/O, validation."""
 
+from .axis_controller import AxisController
 from .errors import DataValidationError, Problem
 from .io import Dataset, load_dataset, read_rig, write_dataset
 from .rig import AxesRig, CdprRig, ControllerSpec, RecordedSignal, Rig, WinchParams
@@ -8,6 +9,7 @@ from .validation import ValidationReport, validate_dataset
 
 __all__ = [
     "AxesRig",
+    "AxisController",
     "CdprRig",
     "ControllerSpec",
     "DataValidationError",

@@ -3,7 +3,10 @@
 ``emps``: the EMPS benchmark (Janot, Gautier, Brunot 2019), a real prismatic drive axis,
 as an ``axes`` dataset: ``000_bangbang.csv`` from ``DATA_EMPS.mat`` (identification) and
 ``001_pulses.csv`` from ``DATA_EMPS_PULSES.mat`` (cross-test), force ``u1 = gtau * vir``.
-rig.yaml's nominal model is the published one: what a user of that rig has.
+rig.yaml's nominal model is the published one: what a user of that rig has; its
+controller is the published one in the ``position_loop`` schema (kp, kv, gtau). The
+cross-test file's force pulses are a voltage added to the controller's output (``vir``
+records it): they go to column ``fext1`` in newtons, as measured (:func:`emps_pulse_volts`).
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cdpr_pipeline.data.axis_controller import POSITION_LOOP
 from cdpr_pipeline.data.io import write_dataset
 from cdpr_pipeline.data.rig import AxesRig, WinchParams
 from cdpr_pipeline.data.trajectory import Trajectory
@@ -29,6 +33,29 @@ EMPS_PUBLISHED_RELATIVE_ERROR = {"training": 4.08, "cross_test": 5.98}
 EMPS_FILES = {"DATA_EMPS.mat": "000_bangbang", "DATA_EMPS_PULSES.mat": "001_pulses"}
 
 
+def emps_controller_law(d: dict, dt: float) -> np.ndarray:
+    """The EMPS controller's output in volts, ``vir = kv (kp (qg - qm) - qm')``, its
+    velocity the backward difference of ``qm`` over one sample (what the drive
+    computes: it leaves 0.057 V RMS of ``vir`` unexplained on either file, a central
+    difference 0.11 V)."""
+    qm, qg = (np.asarray(d[k], float).ravel() for k in ("qm", "qg"))
+    speed = np.concatenate([[0.0], np.diff(qm) / dt])
+    return d["kv"] * (d["kp"] * (qg - qm) - speed)
+
+
+def emps_pulse_volts(d: dict, dt: float) -> float:
+    """The volts a pulse adds to ``vir``: ``vir`` minus the controller law, averaged over
+    the samples where ``pulses_N`` is on (5.07 V on ``DATA_EMPS_PULSES.mat``, whose
+    ``pulses_N`` reads 5 while on), per unit of ``pulses_N``."""
+    pulses = np.asarray(d["pulses_N"], float).ravel()
+    on = pulses != 0.0
+    if not on.any():
+        return 0.0
+    law = emps_controller_law(d, dt)
+    return float(np.mean(np.asarray(d["vir"], float).ravel()[on] - law[on])
+                 / np.mean(pulses[on]))
+
+
 def _emps_run(path: Path, name: str) -> tuple[Trajectory, dict]:
     from scipy.io import loadmat
 
@@ -40,15 +67,24 @@ def _emps_run(path: Path, name: str) -> tuple[Trajectory, dict]:
     if missing:
         raise InputError(f"{path}: variables {missing} missing; is this an EMPS file?")
     col = lambda k: np.asarray(d[k], float).ravel()   # noqa: E731
-    gtau = float(np.asarray(d["gtau"]).ravel()[0])
-    extra = {"pulses_n": col("pulses_N")} if "pulses_N" in d else {}
-    traj = Trajectory(name, col("t"), col("qm")[:, None], (gtau * col("vir"))[:, None],
-                      desired=col("qg")[:, None], extra=extra)
-    ctrl = {"type": "position loop around velocity loop",
-            "law": "vir = kp*kv*(qg - qm) - kv*qm'", "gtau_n_per_v": gtau}
-    for k in ("kp", "kv"):
-        if k in d:
-            ctrl[k] = float(np.asarray(d[k]).ravel()[0])
+    d = {**d, **{k: float(np.asarray(d[k]).ravel()[0]) for k in ("gtau", "kp", "kv")
+                 if k in d}}
+    gtau = d["gtau"]
+    t = col("t")
+    dt = float(np.median(np.diff(t)))
+    external = None
+    if "pulses_N" in d and "kp" in d and "kv" in d:
+        # pulses_N is a voltage added to the controller's output, which vir records
+        external = (gtau * emps_pulse_volts(d, dt) * col("pulses_N"))[:, None]
+    traj = Trajectory(name, t, col("qm")[:, None], (gtau * col("vir"))[:, None],
+                      desired=col("qg")[:, None], external=external)
+    ctrl: dict = {"gtau_n_per_v": gtau}
+    if "kp" in d and "kv" in d:
+        # vir = kv (kp (qg - qm) - qm'): a P position loop around a P velocity loop, the
+        # velocity the backward difference of qm (a derivative on the measurement)
+        ctrl = {"type": POSITION_LOOP, "rate_hz": float(round(1.0 / dt)), "kp": d["kp"],
+                "velocity_loop": {"kv": d["kv"]}, "derivative": "measurement",
+                "drive_gain": gtau, "velocity_estimate": "difference"}
     return traj, ctrl
 
 

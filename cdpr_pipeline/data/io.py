@@ -227,7 +227,7 @@ def split_at_gaps(tr: Trajectory, sample_rate_hz: float, min_samples: int = 1
             tr, name=block_name(tr.name, t[a], t[b - 1]), t=tr.t[sl], position=tr.position[sl],
             torques=tr.torques[sl], desired=part(tr.desired), lengths=part(tr.lengths),
             velocity=part(tr.velocity), acceleration=part(tr.acceleration),
-            extra={k: v[sl] for k, v in tr.extra.items()}))
+            external=part(tr.external), extra={k: v[sl] for k, v in tr.extra.items()}))
     log.warning("%s: cut at %d time gap(s) into %s", tr.name, cuts.size,
                 ", ".join(p.name for p in parts))
     return parts
@@ -250,7 +250,8 @@ def _plain(value: Any) -> Any:
 
 
 #: the Trajectory fields a kind of rig may record (:attr:`Rig.signals`)
-_SIGNAL_FIELDS = ("position", "desired", "lengths", "torques", "velocity", "acceleration")
+_SIGNAL_FIELDS = ("position", "desired", "lengths", "torques", "velocity", "acceleration",
+                  "external")
 
 
 def _table(rig: Rig, tr: Trajectory) -> list[tuple[str, np.ndarray]]:

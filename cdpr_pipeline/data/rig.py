@@ -13,12 +13,15 @@ is an object of that layer, looked up by :attr:`Rig.kind`.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
 
 from cdpr_pipeline.data.units import WINCH_UNITS, ChannelUnits, axes_units
+
+from .axis_controller import AxisController
 
 FORMAT = "cdpr-measured/1"
 WINCH_KEYS = ("inertia", "viscous", "coulomb", "offset")
@@ -287,6 +290,12 @@ class ControllerSpec:
     feedforward: str = "winch_nominal"
     rate_hz: float = 300.0
 
+    @property
+    def why_not(self) -> None:
+        """A cable robot's controller always states a loop (see :class:`~cdpr_pipeline.
+        data.axis_controller.AxisController`, whose free-form blocks do not)."""
+        return None
+
     def as_dict(self) -> dict[str, Any]:
         return {
             "type": self.type,
@@ -316,11 +325,13 @@ CDPR_SIGNALS = (
     RecordedSignal("velocity", ("vx", "vy", "vz"), required=False),
     RecordedSignal("acceleration", ("ax", "ay", "az"), required=False),
 )
-#: the recorded signals of a run of drive axes
+#: the recorded signals of a run of drive axes; ``fext``: the part of ``u`` the
+#: controller did not command (a force injected at the drive, EMPS's pulses)
 AXES_SIGNALS = (
     RecordedSignal("position", "q"),
     RecordedSignal("desired", "qd", required=False),
     RecordedSignal("torques", "u"),
+    RecordedSignal("external", "fext", required=False),
 )
 
 
@@ -437,12 +448,17 @@ class CdprRig(_Signals):
 
 @dataclass(frozen=True)
 class AxesRig(_Signals):
-    """Nominal description of independent drive axes (``kind: axes``)."""
+    """Nominal description of independent drive axes (``kind: axes``).
+
+    ``controller`` is rig.yaml's block (:class:`~cdpr_pipeline.data.axis_controller.
+    AxisController`); a mapping given here is read as rig.yaml's block would be
+    (a ``ValueError`` naming the key when it breaks the schema).
+    """
 
     sample_rate_hz: float
     axes: tuple[str, ...]
     nominal: WinchParams
-    controller: dict[str, Any] | None = None
+    controller: AxisController | None = None
     virtual: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
     #: the stated Coulomb law (see :class:`CdprRig`); rig.yaml's ``nominal.coulomb_law``
@@ -460,6 +476,11 @@ class AxesRig(_Signals):
     torque_commanded = False
     drive_word = "axis"
     drive_words = "axes"
+
+    def __post_init__(self) -> None:
+        if isinstance(self.controller, Mapping):
+            object.__setattr__(self, "controller",
+                               AxisController.from_dict(self.controller, len(self.axes)))
 
     @property
     def n(self) -> int:
@@ -487,7 +508,7 @@ class AxesRig(_Signals):
 
     @property
     def controller_rate_hz(self) -> float | None:
-        return (self.controller or {}).get("rate_hz")
+        return None if self.controller is None else self.controller.rate_hz
 
     def frame_bounds(self) -> None:
         """Drive axes have no frame: their range is what the runs record."""
@@ -504,7 +525,7 @@ class AxesRig(_Signals):
         if self.coulomb_sharpness is not None:
             out["nominal"]["coulomb_law"] = coulomb_law_dict(self.coulomb_sharpness)
         if self.controller is not None:
-            out["controller"] = dict(self.controller)
+            out["controller"] = self.controller.as_dict()
         if self.virtual:
             out["virtual"] = True
         out.update({k: v for k, v in self.extra.items() if k not in out})

@@ -126,7 +126,7 @@ class Segment:
         return replace(traj, name=self.name, t=traj.t[sl], position=traj.position[sl],
                        torques=traj.torques[sl], desired=part(traj.desired),
                        lengths=part(traj.lengths), velocity=part(traj.velocity),
-                       acceleration=part(traj.acceleration),
+                       acceleration=part(traj.acceleration), external=part(traj.external),
                        extra={k: v[sl] for k, v in traj.extra.items()})
 
     def as_dict(self) -> dict[str, Any]:
@@ -453,6 +453,34 @@ class RunTooShortError(DataValidationError, ValueError):
 
 
 # ------------------------------------------------------- identification and diagnosis
+def crosstest_runs(runs: Sequence[Trajectory], names: Sequence[str] | None,
+                   source: str = "dataset") -> list[Trajectory]:
+    """The runs set aside as an untouched cross-test: those named (run names or
+    families) in ``names``; they take no part in any fit or choice, only in the final
+    report. Empty for no names.
+
+    Raises
+    ------
+    ValueError
+        If a name matches no run, or every run would be set aside.
+    """
+    if isinstance(names, str):
+        names = [names]
+    wanted = [n for n in (names or []) if n]
+    if not wanted:
+        return []
+    runs = list(runs)
+    missing = sorted(set(wanted) - {tr.name for tr in runs} - {tr.family for tr in runs})
+    if missing:
+        raise ValueError(f"{source}: cross-test list: no run or family named {missing}; "
+                         f"runs: {[tr.name for tr in runs]}")
+    out = [tr for tr in runs if tr.name in wanted or tr.family in wanted]
+    if len(out) == len(runs):
+        raise ValueError(f"{source}: every run is set aside as a cross-test "
+                         f"({[tr.name for tr in out]}); the diagnosis needs runs to fit on")
+    return out
+
+
 def heldout_split(runs: Sequence[Trajectory], heldout: Sequence[str] | None = None, *,
                   train_runs: Sequence[str] | None = None,
                   fraction: float = HELDOUT_FRACTION, min_heldout_s: float = MIN_HELDOUT_S,

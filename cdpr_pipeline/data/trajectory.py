@@ -35,7 +35,9 @@ class Trajectory:
     For ``kind: cdpr``: ``position``/``desired`` are ``(N, 3)`` platform positions,
     ``lengths`` ``(N, n)`` encoder (reeled-out) cable lengths, ``torques`` ``(N, n)``.
     For ``kind: axes``: ``position`` is ``(N, n)`` (``q1..qn``), ``desired`` the reference
-    ``qd1..qdn`` or ``None``, ``lengths`` is ``None``, ``torques`` the applied ``u1..un``.
+    ``qd1..qdn`` or ``None``, ``lengths`` is ``None``, ``torques`` the applied ``u1..un``,
+    ``external`` the recorded ``fext1..fextn`` (the part of ``u`` the controller did not
+    command) or ``None``.
     ``extra`` keeps every other numeric column of the file by its header name.
     """
 
@@ -47,6 +49,7 @@ class Trajectory:
     lengths: np.ndarray | None = None
     velocity: np.ndarray | None = None
     acceleration: np.ndarray | None = None
+    external: np.ndarray | None = None
     extra: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property

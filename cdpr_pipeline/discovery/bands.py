@@ -15,17 +15,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.signal import welch
 
-from cdpr_pipeline.data.reading import RegressionSettings
 from cdpr_pipeline.discovery.signals import RunSignals
-
-
-def analysed_band_hz(regression: RegressionSettings, fs: float) -> float:
-    """The band the statistics rows keep: the decimation's pass band ``0.4 fs / q``
-    (:func:`~cdpr_pipeline.data.reading.resolve_settings`), or the
-    derivative filter's cut-off without decimation."""
-    q = int(regression.decimate)
-    return 0.4 * fs / q if q > 1 else float(regression.filter.cutoff_hz)
-
 
 #: the top share of the band (below Nyquist) whose median power is the white noise floor:
 #: motion and model errors have no power there

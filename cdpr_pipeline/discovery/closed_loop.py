@@ -1,83 +1,175 @@
-"""Closed-loop re-simulation of the recorded desired trajectories.
+"""The recorded runs re-simulated with the models: what they predict for the motion.
 
-What the user's simulation predicts for a run: the model (nominal, or extended) driven
-by the rig's own controller (which believes rig.yaml) along the recorded ``xd, yd, zd``,
-with exact sensors. Measured minus simulated platform position and motor torque show
-what the model gets wrong in the loop, where errors accumulate and the controller
-reacts. Same simulator as the virtual lab.
+In closed loop (:func:`resimulate`) a model (nominal, or extended) is driven by the
+rig's own controller, which believes rig.yaml, along the recorded reference (a cable
+robot's ``xd, yd, zd``, the axes' ``qd``) with exact sensors; measured minus simulated
+position and force show what the model gets wrong in the loop, where errors accumulate
+and the controller reacts. Same simulators as the virtual lab
+(:mod:`~cdpr_pipeline.sim.simulator`, :mod:`~cdpr_pipeline.sim.axes_loop`).
+
+Without a stated controller, drive axes get an n-step-ahead simulation
+(:func:`n_step_ahead`): the model driven by the recorded force, restarted from the
+measured state every ``N`` samples, ``N`` a quarter period of the motion's bandwidth
+(:func:`motion_horizon`). :func:`compare_motion` puts either into the diagnosis, with
+what the extended model buys as the controller's feedforward where rig.yaml states one.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
-from cdpr_pipeline.data.rig import CdprRig, Rig
+from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.sim.plant import Plant, plant_kind
+from cdpr_pipeline.discovery.plots import ClosedLoopPlot
+from cdpr_pipeline.discovery.residuals import Model, channel_names
+from cdpr_pipeline.discovery.results import (
+    ClosedLoopComparison,
+    ClosedLoopErrors,
+    Discrepancy,
+    FeedforwardTracking,
+    RunMotionErrors,
+)
+from cdpr_pipeline.sim.axes_loop import (
+    AxesLoop,
+    AxesReferences,
+    forced_response,
+    substeps_for,
+)
 from cdpr_pipeline.sim.sensors import Sensors
-from cdpr_pipeline.sim.simulator import BatchSimulator, auto_substeps, implicit_friction
+from cdpr_pipeline.sim.simulator import BatchSimulator
 from cdpr_pipeline.sim.trajectories import SampledDesired
 
 log = logging.getLogger(__name__)
 
 _EXACT = Sensors(mocap_noise_m=0.0, encoder_counts_per_rev=0, torque_noise_nm=0.0)
+#: share of the (detrended) position's power below the motion bandwidth
+BANDWIDTH_SHARE = 0.99
+#: fewest samples of an n-step-ahead horizon
+MIN_HORIZON = 10
 
 
-def can_resimulate(rig: Rig, trajectories: Sequence[Trajectory]) -> str | None:
-    """None when closed-loop re-simulation is possible, else why not."""
-    if not plant_kind(rig).closed_loop:
-        return "only cable robots (kind: cdpr) are re-simulated"
-    if rig.controller is None:
+def can_resimulate(rig: Rig, trajectories: Sequence[Trajectory],
+                   blocks: bool = False) -> str | None:
+    """None when closed-loop re-simulation is possible, else why not. ``blocks``: the
+    runs are time blocks (a cable robot's re-simulation starts from rest; an axis starts
+    from its measured state and needs no rest)."""
+    controller = rig.controller
+    if controller is None:
         return "rig.yaml has no controller"
-    ratio = rig.controller.rate_hz / rig.sample_rate_hz
+    if controller.why_not is not None:
+        return controller.why_not
+    if rig.controller_rate_hz is None:
+        return "rig.yaml's controller states no rate_hz"
+    ratio = rig.controller_rate_hz / rig.sample_rate_hz
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
         return "the controller rate is not a multiple of the sample rate"
     if any(tr.desired is None for tr in trajectories):
         return "a run has no desired trajectory"
+    if blocks and rig.kind == "cdpr":
+        return ("the runs are cut into time blocks; the closed loop re-simulates whole "
+                "runs from rest")
     return None
 
 
-def resimulate(model: Plant, nominal: Plant, rig: CdprRig,
-               trajectories: Sequence[Trajectory], settle_s: float = 1.0,
-               label: str = "model") -> dict[str, dict[str, np.ndarray]]:
-    """Simulated ``position`` (N, 3) and ``torque`` (N, n) of every run, keyed by name.
+def position_units(rig: Rig) -> tuple[str, ...]:
+    """The unit of every position coordinate: m for a cable robot's platform; an axis's
+    own (:attr:`~cdpr_pipeline.data.rig.Rig.channel_units`: rig.yaml's ``units``, else
+    its joint type)."""
+    if rig.shared_position_units:
+        return ("m",) * len(rig.position_names)
+    return tuple(u.position for u in rig.channel_units)
 
-    Runs of equal length are simulated as one batch. A model that needs more than
-    :data:`~cdpr_pipeline.sim.simulator.MAX_SUBSTEPS` sub-steps per control tick raises
+
+def force_units(rig: Rig) -> tuple[str, ...]:
+    """The unit of every force or torque channel ``u`` (:attr:`~cdpr_pipeline.data.rig.
+    Rig.channel_units`)."""
+    return tuple(u.force for u in rig.channel_units)
+
+
+def _start_state(tr: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """An axis run's measured position and velocity (forward difference) at its first
+    sample."""
+    q = tr.position
+    dt = float(np.median(np.diff(tr.t)))
+    v = (q[1] - q[0]) / dt if len(q) > 1 else np.zeros(q.shape[1])
+    return q[0].copy(), v
+
+
+def _resimulate_axes(model: Model, rig: Rig, trajectories: Sequence[Trajectory],
+                     feedforward: Model, label: str) -> dict[str, dict[str, np.ndarray]]:
+    groups: dict[int, list[Trajectory]] = {}
+    for tr in trajectories:
+        groups.setdefault(tr.n_samples, []).append(tr)
+    out: dict[str, dict[str, np.ndarray]] = {}
+    loop = AxesLoop(model, rig.controller, rig.sample_rate_hz, feedforward=feedforward)
+    for runs in groups.values():
+        start = [_start_state(tr) for tr in runs]
+        external = None
+        if any(tr.external is not None for tr in runs):
+            external = np.stack([np.zeros_like(tr.torques) if tr.external is None
+                                 else tr.external for tr in runs], axis=1)
+        refs = AxesReferences(np.stack([tr.desired for tr in runs], axis=1),
+                              np.stack([s[0] for s in start]),
+                              np.stack([s[1] for s in start]), external)
+        result = loop.run(refs)
+        for b, tr in enumerate(runs):
+            out[tr.name] = {"position": result.position[:, b], "torque": result.force[:, b]}
+    log.info("closed loop: re-simulated the %s on %d axis run(s) (%d sub-step(s) per "
+             "control tick, friction implicit)", label, len(trajectories), result.substeps)
+    return out
+
+
+def resimulate(model: Model, nominal: Model, rig: Rig,
+               trajectories: Sequence[Trajectory], settle_s: float = 1.0,
+               label: str = "model", feedforward: Model | None = None
+               ) -> dict[str, dict[str, np.ndarray]]:
+    """Simulated ``position`` (N, 3 or n) and ``torque`` (N, n) of every run, by name
+    (and a cable robot's encoder ``lengths``, N, n).
+
+    ``nominal`` is what the controller believes (its feedforward, for drive axes
+    ``feedforward`` when given). A cable robot's runs start settled at rest
+    (``settle_s``); an axis run starts from its measured state. Runs of equal length
+    are simulated as one batch. A model that needs more than :data:`~cdpr_pipeline.sim.
+    simulator.MAX_SUBSTEPS` sub-steps per control tick raises
     :class:`~cdpr_pipeline.sim.simulator.SimulationCostError` before simulating.
     """
+    if not model.cables:
+        return _resimulate_axes(model, rig, trajectories,
+                                nominal if feedforward is None else feedforward, label)
     sim = BatchSimulator(model, nominal, rig.controller, _EXACT, rig.sample_rate_hz,
                          settle_s=settle_s)
     dt = 1.0 / rig.controller.rate_hz
-    substeps = auto_substeps(model, dt)
+    substeps = sim.substeps_for(dt)
     groups: dict[int, list[Trajectory]] = {}
     for tr in trajectories:
         groups.setdefault(tr.n_samples, []).append(tr)
     log.info("closed loop: re-simulating the %s on %d runs (%d batch%s, %d sub-step%s per "
              "control tick, %s)", label, len(trajectories), len(groups),
              "" if len(groups) == 1 else "es", substeps, "" if substeps == 1 else "s",
-             "friction implicit (ROS2)" if implicit_friction(model) else "RK4")
+             "friction implicit (ROS2)" if sim.implicit(dt) else "RK4")
     out: dict[str, dict[str, np.ndarray]] = {}
     rng = np.random.default_rng(0)           # exact sensors draw nothing
     for runs in groups.values():
         t = runs[0].t - runs[0].t[0]
         desired = SampledDesired(t, np.stack([tr.desired for tr in runs]),
                                  [tr.family for tr in runs])
-        result = sim.run(desired, rng)
+        result = sim.run(desired, rng, truth_keys=("position", "u_cmd"))
         n = min(len(t), result.t.size)
         for b, tr in enumerate(runs):
             out[tr.name] = {"position": result.truth["position"][b, :n],
-                            "torque": result.truth["u_cmd"][b, :n]}
+                            "torque": result.truth["u_cmd"][b, :n],
+                            "lengths": result.measured["lengths"][b, :n]}
     return out
 
 
 def closed_loop_errors(measured: Sequence[Trajectory],
                        simulated: dict[str, dict[str, np.ndarray]]
                        ) -> dict[str, dict[str, np.ndarray]]:
-    """Measured minus simulated, per run: ``position`` (N, 3), ``torque`` (N, n)."""
+    """Measured minus simulated, per run: ``position`` (N, 3 or n), ``torque`` (N, n)."""
     out = {}
     for tr in measured:
         sim = simulated[tr.name]
@@ -85,3 +177,198 @@ def closed_loop_errors(measured: Sequence[Trajectory],
         out[tr.name] = {"position": tr.position[:n] - sim["position"],
                         "torque": tr.torques[:n] - sim["torque"]}
     return out
+
+
+# ------------------------------------------------------------------ n steps ahead
+@dataclass(frozen=True)
+class Horizon:
+    """An n-step-ahead horizon: ``samples`` (``seconds``), a quarter period of the
+    motion's ``bandwidth_hz``."""
+
+    samples: int
+    seconds: float
+    bandwidth_hz: float
+
+    def as_dict(self) -> dict[str, float | int | str]:
+        return {"samples": self.samples, "seconds": self.seconds,
+                "bandwidth_hz": self.bandwidth_hz,
+                "why": (f"restarted from the measured state every {self.samples} samples "
+                        f"({self.seconds:.3g} s): a quarter period of the motion's "
+                        f"bandwidth, {self.bandwidth_hz:.3g} Hz (the frequency below which "
+                        f"{100 * BANDWIDTH_SHARE:g} % of the detrended position's power "
+                        "lies)")}
+
+
+def motion_horizon(trajectories: Sequence[Trajectory], sample_rate_hz: float) -> Horizon:
+    """The n-step-ahead horizon of the recorded motion: a quarter period of the highest
+    frequency below which :data:`BANDWIDTH_SHARE` of any run's detrended position power
+    lies, at least :data:`MIN_HORIZON` samples and at most the shortest run."""
+    band = 0.0
+    for tr in trajectories:
+        q = tr.position - np.linspace(tr.position[0], tr.position[-1], tr.n_samples)
+        power = np.abs(np.fft.rfft(q, axis=0)) ** 2
+        f = np.fft.rfftfreq(tr.n_samples, 1.0 / sample_rate_hz)
+        share = np.cumsum(power, axis=0) / np.maximum(power.sum(axis=0), 1e-300)
+        idx = np.argmax(share >= BANDWIDTH_SHARE, axis=0)
+        band = max(band, float(np.max(f[idx])))
+    band = max(band, sample_rate_hz / (4.0 * max(tr.n_samples for tr in trajectories)))
+    samples = int(round(sample_rate_hz / (4.0 * band)))
+    samples = max(MIN_HORIZON, min(samples, min(tr.n_samples for tr in trajectories)))
+    return Horizon(samples, samples / sample_rate_hz, band)
+
+
+def n_step_ahead(model: Model, trajectories: Sequence[Trajectory], sample_rate_hz: float,
+                 horizon: int) -> dict[str, np.ndarray]:
+    """Every axis run's position (N, n) simulated ``horizon`` samples ahead: ``model``
+    driven open loop by the recorded force, held over each sample, restarted from the
+    measured position and velocity every ``horizon`` samples. All windows of all runs
+    advance as one batch."""
+    starts, forces, where = [], [], []
+    for tr in trajectories:
+        q, u = tr.position, tr.torques
+        v = np.gradient(q, tr.t, axis=0)
+        for j in range(0, tr.n_samples, horizon):
+            stop = min(j + horizon, tr.n_samples)
+            window = np.concatenate([u[j:stop], np.repeat(u[stop - 1:stop],
+                                                          horizon - (stop - j), axis=0)])
+            starts.append((q[j], v[j]))
+            forces.append(window)
+            where.append((tr.name, j, stop))
+    speed = np.sqrt(np.mean(np.concatenate([s[1][None] for s in starts]) ** 2, axis=0))
+    span = np.max(np.abs(np.concatenate([tr.position for tr in trajectories])), axis=0)
+    substeps = substeps_for(model, 1.0 / sample_rate_hz, speed, span)
+    predicted = forced_response(model, np.stack(forces, axis=1),
+                                np.stack([s[0] for s in starts]),
+                                np.stack([s[1] for s in starts]), sample_rate_hz, substeps)
+    out = {tr.name: np.empty_like(tr.position) for tr in trajectories}
+    for b, (name, j, stop) in enumerate(where):
+        out[name][j:stop] = predicted[:stop - j, b]
+    return out
+
+
+# ------------------------------------------------------------------ the diagnosis's view
+def _summary(err: dict[str, dict[str, np.ndarray]], names: Sequence[str], signal: str
+             ) -> tuple[float, ...]:
+    stacked = np.concatenate([err[n][signal] for n in names])
+    return tuple(float(v) for v in np.sqrt(np.mean(stacked ** 2, axis=0)))
+
+
+def _run_errors(tr: Trajectory, before: dict[str, np.ndarray], after: dict[str, np.ndarray],
+                held: bool, crosstest: bool = False) -> RunMotionErrors:
+    def rms(e: np.ndarray) -> tuple[float, ...]:
+        return tuple(float(v) for v in np.sqrt(np.mean(e ** 2, axis=0)))
+
+    def peak(e: np.ndarray) -> tuple[float, ...]:
+        return tuple(float(v) for v in np.max(np.abs(e), axis=0))
+
+    torque_rms = relative = None
+    if "torque" in before:
+        norm = max(float(np.linalg.norm(tr.torques)), 1e-300)
+        torque_rms = (rms(before["torque"]), rms(after["torque"]))
+        relative = (100 * float(np.linalg.norm(before["torque"])) / norm,
+                    100 * float(np.linalg.norm(after["torque"])) / norm)
+    return RunMotionErrors(held, (rms(before["position"]), rms(after["position"])),
+                           (peak(before["position"]), peak(after["position"])),
+                           torque_rms, relative, crosstest)
+
+
+def _feedforward(extended: Model, nominal: Model, rig: Rig,
+                 trajectories: Sequence[Trajectory]) -> FeedforwardTracking:
+    """Tracking errors on the extended model with the nominal and the extended model as
+    the controller's feedforward (:class:`~cdpr_pipeline.discovery.results.
+    FeedforwardTracking`)."""
+    rms, peak = {}, {}
+    sims = [resimulate(extended, nominal, rig, trajectories, label="extended model with "
+                       "the nominal feedforward", feedforward=nominal),
+            resimulate(extended, extended, rig, trajectories, label="extended model with "
+                       "the extended feedforward", feedforward=extended)]
+    for tr in trajectories:
+        errors = [tr.desired[:len(s[tr.name]["position"])] - s[tr.name]["position"]
+                  for s in sims]
+        rms[tr.name] = tuple(tuple(float(v) for v in np.sqrt(np.mean(e ** 2, axis=0)))
+                             for e in errors)
+        peak[tr.name] = tuple(tuple(float(v) for v in np.max(np.abs(e), axis=0))
+                              for e in errors)
+    return FeedforwardTracking(rms, peak)
+
+
+def _feedforward_reason(rig: Rig, extended_differs: bool) -> str | None:
+    """Why the feedforward comparison is not made, None when it is."""
+    if not extended_differs:
+        return "the extended model is the nominal one"
+    if rig.kind == "axes" and rig.controller.feedforward == "none":
+        return "rig.yaml's controller states no feedforward"
+    return None
+
+
+def compare_motion(nominal: Model, extended: Model, rig: Rig,
+                   trajectories: Sequence[Trajectory], held_names: Sequence[str],
+                   extended_differs: bool, blocks: bool = False,
+                   crosstest: Sequence[Trajectory] = ()
+                   ) -> tuple[ClosedLoopComparison, list[Discrepancy], ClosedLoopPlot | None]:
+    """Both models' motion against the measured one: in closed loop where rig.yaml
+    states a controller (:func:`can_resimulate`), else n steps ahead for drive axes.
+    ``crosstest``: runs set aside from every fit, compared too (and flagged). Returns
+    the comparison, one discrepancy row per column of the nominal model's errors (on
+    the runs the diagnosis used) and the data of the report's figure."""
+    used = {tr.name for tr in trajectories}
+    trajectories = [*trajectories, *(tr for tr in crosstest if tr.name not in used)]
+    aside = {tr.name for tr in crosstest}
+    why_not = can_resimulate(rig, trajectories, blocks)
+    coordinates = tuple(rig.position_names)
+    units = position_units(rig)
+    horizon = None
+    if why_not is None:
+        mode = "closed_loop"
+        err_nom = closed_loop_errors(trajectories, resimulate(
+            nominal, nominal, rig, trajectories, label="nominal model"))
+        err_ext = err_nom if not extended_differs else closed_loop_errors(
+            trajectories, resimulate(extended, nominal, rig, trajectories,
+                                     label="extended model"))
+    elif rig.kind == "axes":
+        mode = "n_step"
+        horizon = motion_horizon(trajectories, rig.sample_rate_hz)
+        log.info("motion: %s; n steps ahead instead: %s", why_not, horizon.as_dict()["why"])
+        sims = [n_step_ahead(m, trajectories, rig.sample_rate_hz, horizon.samples)
+                for m in ((nominal, extended) if extended_differs else (nominal,))]
+        err_nom = {tr.name: {"position": tr.position - sims[0][tr.name]}
+                   for tr in trajectories}
+        err_ext = err_nom if len(sims) == 1 else {
+            tr.name: {"position": tr.position - sims[1][tr.name]} for tr in trajectories}
+    else:
+        return ClosedLoopComparison(False, why_not), [], None
+    held = set(held_names)
+    runs = {tr.name: _run_errors(tr, err_nom[tr.name], err_ext[tr.name], tr.name in held,
+                                 tr.name in aside)
+            for tr in trajectories}
+    rows = []
+    signals = ("position", "torque") if mode == "closed_loop" else ("position",)
+    summaries = {}
+    for sig_name in signals:
+        allb = np.concatenate([err_nom[n][sig_name] for n in err_nom if n not in aside])
+        total = float(np.sum(allb ** 2)) or 1.0
+        cols = coordinates if sig_name == "position" else \
+            channel_names("torque", allb.shape[1])
+        rows += [Discrepancy(f"{mode}_{sig_name}", col,
+                             float(np.sqrt(np.mean(allb[:, i] ** 2))),
+                             float(np.sum(allb[:, i] ** 2) / total))
+                 for i, col in enumerate(cols)]
+        summaries[sig_name] = ClosedLoopErrors(_summary(err_nom, held_names, sig_name),
+                                               _summary(err_ext, held_names, sig_name))
+    feedforward, reason = None, None
+    if mode == "closed_loop":
+        reason = _feedforward_reason(rig, extended_differs)
+        if reason is None:
+            held_runs = [tr for tr in trajectories if tr.name in held or tr.name in aside]
+            feedforward = _feedforward(extended, nominal, rig, held_runs)
+    # the figure shows the untouched cross-test run when there is one
+    first = next(tr for tr in trajectories if tr.name == ([*aside] or held_names)[0])
+    plot = ClosedLoopPlot(first.name, err_nom[first.name]["position"],
+                          err_ext[first.name]["position"],
+                          first.t[:len(err_nom[first.name]["position"])] - first.t[0],
+                          coordinates, units, mode)
+    comparison = ClosedLoopComparison(
+        True, why_not, summaries["position"], summaries.get("torque"), mode, runs,
+        None if horizon is None else horizon.as_dict(), coordinates, units, feedforward,
+        reason)
+    return comparison, rows, plot

@@ -18,24 +18,29 @@ from typing import Any, Protocol
 import numpy as np
 
 from cdpr_pipeline.data.io import Dataset
-from cdpr_pipeline.data.reading import (
-    MAX_CUTOFF_FRACTION,
-    TRIM_PERIODS,
-    RegressionSettings,
-    as_resolved,
+from cdpr_pipeline.data.reading import RegressionSettings, as_resolved
+from cdpr_pipeline.data.split import (
+    HELDOUT_FRACTION,
+    MIN_HELDOUT_S,
+    Split,
+    crosstest_runs,
+    heldout_split,
 )
-from cdpr_pipeline.data.rig import CdprRig
-from cdpr_pipeline.data.split import HELDOUT_FRACTION, MIN_HELDOUT_S, Split, heldout_split
 from cdpr_pipeline.data.validation import check_run_lengths
-from cdpr_pipeline.discovery.bands import analysed_band_hz, power_band_hz, row_noise
-from cdpr_pipeline.discovery.closed_loop import can_resimulate, closed_loop_errors, resimulate
+from cdpr_pipeline.discovery.adequacy import (
+    analysed_band_hz,
+    columns_record,
+    heldout_columns,
+    unexplained_residual,
+    wider_band,
+)
+from cdpr_pipeline.discovery.closed_loop import compare_motion
 from cdpr_pipeline.discovery.damping import with_fitted_damping
 from cdpr_pipeline.discovery.fitting import FitContext, refit_effects
 from cdpr_pipeline.discovery.freeform.search import FreeFormSearch
 from cdpr_pipeline.discovery.never_worse import never_worse
 from cdpr_pipeline.discovery.plots import (
     BeforeAfterPlot,
-    ClosedLoopPlot,
     ColumnPlot,
     HeldoutRunPlot,
     Plots,
@@ -54,14 +59,12 @@ from cdpr_pipeline.discovery.results import (
     Band,
     BlackBoxShare,
     ClosedLoopComparison,
-    ClosedLoopErrors,
     Discrepancy,
     ErrorMetrics,
     HeldoutGain,
     ModelMetrics,
     ResidualValidity,
     Unexplained,
-    UnexplainedColumn,
     Unusable,
     ValidityComparison,
 )
@@ -121,6 +124,9 @@ class DiagnosisSettings:
     selection: SelectionSettings = field(default_factory=SelectionSettings)
     freeform: FreeFormSearch | None = field(default_factory=FreeFormSearch)
     heldout: list[str] | None = None
+    #: runs (names or families) set aside as an untouched cross-test: no fit or choice
+    #: sees them; the motion comparison reports on them (``split.crosstest``)
+    crosstest: list[str] | None = None
     closed_loop: bool = True
     blackbox: BlackBox | None = None
     max_lag: int = 20
@@ -129,24 +135,25 @@ class DiagnosisSettings:
     #: training relative torque error (%) above which the stated model is unusable and
     #: every winch is re-identified before causes are named
     unusable_error_pct: float = 100.0
-    #: a held-out torque column whose validity tests fail makes a diagnosis without
-    #: causes ``unexplained`` (not ``none``) only when its RMS error is material: at
-    #: least this many times the measurement noise the rows carry
-    #: (:func:`~cdpr_pipeline.discovery.bands.row_noise`). Effect-free data fail the
-    #: tests at hundreds of rows with errors of 0.5-5.6 times it (filter, tension and
-    #: noise artefacts: 12 independent datasets); a periodic torque above the analysed
-    #: band left 7-39 times it
+    #: with no cause on either look, a held-out torque column of the motion band that
+    #: fails a validity test makes the diagnosis ``unexplained`` (not ``none``) only when
+    #: its RMS error is material: at least this many times the measurement noise the rows
+    #: carry (:func:`~cdpr_pipeline.discovery.bands.row_noise`). The tests alone fail on
+    #: most effect-free datasets; this gate is calibrated on effect-free data of both
+    #: generators and rig kinds (``benchmarks/bench_null_calibration.py --grid``,
+    #: docs/method.md 3.5)
     unexplained_noise_ratio: float = 20.0
     #: ... and at least this share (%) of its measured signal's RMS (what "material"
     #: means where a recording carries no measurable noise)
     unexplained_min_error_pct: float = 0.1
-    #: the band follows the residual: a diagnosis that would be ``unexplained`` is made
-    #: once more on rows whose band is this many times wider (derivative cut-off and
-    #: decimation alike, at most 0.4 fs), the free-form angle harmonics as many times
-    #: more, the selection's alpha halved (a second look at the same data); a cause it
-    #: finds (never worse on held-out runs) is the verdict. An effect periodic in a winch
-    #: or axis angle lies at its wavenumber times the angle's rate, above a band derived
-    #: from the motion. 1 (or less): off
+    #: the band follows the residual: a diagnosis without cause whose held-out residual
+    #: fails a validity test (any size) is made once more on rows whose band is this many
+    #: times wider (derivative cut-off and decimation alike, at most 0.4 fs), the
+    #: free-form angle harmonics as many times more, the selection's alpha halved (a
+    #: second look at the same data); a cause it finds (never worse on held-out runs) is
+    #: the verdict (:mod:`~cdpr_pipeline.discovery.adequacy`). An effect periodic in a
+    #: winch or axis angle lies at its wavenumber times the angle's rate, above a band
+    #: derived from the motion. 1 (or less): off
     follow_residual: float = 4.0
 
 
@@ -158,11 +165,15 @@ def diagnosis_split(dataset: Dataset, settings: DiagnosisSettings | None = None)
     ``spiral`` or ``pulses`` are held out, else the last file. A single run holds out its
     last block (25 %, at least 3 s while half the run is left to train on); a block too
     short for the regression's trims and 100 rows raises. ``settings.regression`` as
-    :func:`diagnose` reads with it: resolved by the command, else resolved here.
+    :func:`diagnose` reads with it: resolved by the command, else resolved here. Runs
+    set aside as a cross-test (``settings.crosstest``) are in neither part.
     """
     settings = settings or DiagnosisSettings()
     regression = as_resolved(settings.regression, dataset.trajectories, dataset.rig)
-    return heldout_split(dataset.trajectories, settings.heldout, unknown="raise",
+    aside = {tr.name for tr in crosstest_runs(dataset.trajectories, settings.crosstest,
+                                              str(dataset.root))}
+    runs = [tr for tr in dataset.trajectories if tr.name not in aside]
+    return heldout_split(runs, settings.heldout, unknown="raise",
                          min_samples=min_block_samples(regression, dataset.rig.sample_rate_hz),
                          source=str(dataset.root))
 
@@ -263,11 +274,15 @@ class Diagnosis:
     #: tests with a material size (verdict ``unexplained``)
     unexplained: Unexplained | None = None
     #: the band the statistics rows kept and where it came from (``motion``, or
-    #: ``residual`` when :attr:`DiagnosisSettings.follow_residual` widened it)
+    #: ``residual`` when :attr:`DiagnosisSettings.follow_residual` widened it), with the
+    #: held-out columns of its look (``columns``) and the other look (``motion`` or
+    #: ``tried``)
     band: dict[str, Any] = field(default_factory=dict)
     #: per cause, its sizes per channel with their standard errors
     #: (:func:`~cdpr_pipeline.discovery.sizes.cause_sizes`)
     sizes: tuple[tuple[CauseComponent, ...], ...] = ()
+    #: runs set aside as an untouched cross-test (:attr:`DiagnosisSettings.crosstest`)
+    crosstest: tuple[str, ...] = ()
 
     @property
     def shares(self) -> list[GainShare]:
@@ -290,7 +305,8 @@ class Diagnosis:
         return {
             "format": FORMAT,
             "dataset": self.dataset,
-            "split": {"train": list(self.train), "heldout": list(self.heldout)},
+            "split": {"train": list(self.train), "heldout": list(self.heldout),
+                      **({"crosstest": list(self.crosstest)} if self.crosstest else {})},
             "nominal": {"params": self.rig_params(), "metrics": self.nominal_metrics.as_dict(),
                         **({"unusable": self.unusable.as_dict()} if self.unusable else {})},
             "discrepancies": [e.as_dict() for e in self.discrepancies],
@@ -545,29 +561,47 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         channel, _validity(before_held, held, channel, settings.max_lag, noise),
         _validity(after_held, held, channel, settings.max_lag, noise))
     extended_metrics = model_metrics(extended, nominal, train, held)
-    # no cause, yet the held-out residual fails the tests with a material size: the
-    # nominal model is inadequate and nothing tried says why (spec: `unexplained`)
+    # every held-out column of the nominal model: its size, where it sits, the tests it
+    # fails (adequacy): no cause, and a material column failing a test, is `unexplained`
+    fs = float(rig.sample_rate_hz)
+    analysed_hz = analysed_band_hz(settings.regression, fs)
+    held_columns = heldout_columns(before_held, held, validity.before,
+                                   settings.selection.alpha, channel)
+    failing = [c.channel for c in held_columns if c.failed_tests]
     unexplained = None if causes else unexplained_residual(
-        before_held, held, nominal, validity.before, settings)
+        held_columns, settings.unexplained_noise_ratio, settings.unexplained_min_error_pct,
+        settings.selection.alpha, analysed_hz)
     clock["validity"] = time.perf_counter() - t0
     log.info("never worse and validity: %.1f s", clock["validity"])
+    band = {"analysed_hz": analysed_hz,
+            "derivative_cutoff_hz": float(settings.regression.filter.cutoff_hz),
+            "decimate": int(settings.regression.decimate), "from": "motion",
+            "columns": columns_record(held_columns)}
+    # no cause, and a held-out column fails a validity test (of any size): the band
+    # follows the residual, a second look on a wider one; a cause found there passed
+    # every test a candidate passes (held-out gain, never worse) and is the verdict
+    wider = wider_band(settings, fs) if not causes and failing else None
+    again = None
+    if wider is not None:
+        again = _second_look(dataset, settings, wider, band, failing)
+        if again.causes:
+            clock["total"] = time.perf_counter() - start
+            return dataclasses.replace(again, timings={
+                **{f"{k} (motion band)": v for k, v in clock.items()}, **again.timings})
 
-    closed, closed_plot = ClosedLoopComparison(False), None
-    why_not = can_resimulate(rig, trajectories) if settings.closed_loop else "disabled"
-    if why_not is None and split.blocks:
-        # a block inside a run does not start at rest, where the re-simulation starts
-        why_not = ("the runs are cut into time blocks; the closed loop re-simulates whole "
-                   "runs from rest")
-        log.info("closed loop not re-simulated: %s", why_not)
-    if why_not is None:
+    closed, closed_plot = ClosedLoopComparison(False, "disabled"), None
+    if settings.closed_loop:
         t0 = time.perf_counter()
-        closed, rows, closed_plot = _closed_loop(nominal, extended, rig, trajectories,
-                                                 held_names, bool(causes))
+        closed, rows, closed_plot = compare_motion(
+            nominal, extended, rig, trajectories, held_names, bool(causes), split.blocks,
+            crosstest_runs(dataset.trajectories, settings.crosstest))
         found += rows
-        clock["closed loop"] = time.perf_counter() - t0
-        log.info("closed loop: %.1f s", clock["closed loop"])
-    else:
-        closed = ClosedLoopComparison(False, why_not)
+        if closed.available:
+            clock["closed loop"] = time.perf_counter() - t0
+            log.info("%s: %.1f s", "closed loop" if closed.mode == "closed_loop"
+                     else "n steps ahead", clock["closed loop"])
+        else:
+            log.info("closed loop not re-simulated: %s", closed.reason)
 
     blackbox = None
     if settings.blackbox is not None:
@@ -581,10 +615,13 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
     sizes = tuple(cause_sizes(causes, nominal, train, noise))
     clock["sizes"] = time.perf_counter() - t0
     clock["total"] = time.perf_counter() - start
-    alpha = settings.selection.alpha / max(len(validity.before), 1)
-    failing = [k for k, v in validity.before.items() if failed_tests(v, alpha)]
     sentence = summary_sentence(causes, nominal, gain, unusable, withdrawn, unexplained,
                                 failing, settings.unexplained_noise_ratio, sizes)
+    if again is not None:
+        sentence += (f" Sought again on 0-{again.band['analysed_hz']:.3g} Hz (the band "
+                     f"following the residual): no cause found there either.")
+        band = {**band, "tried": {**again.band, "verdict": again.verdict}}
+        clock = {**clock, **{f"{k} (wider band)": v for k, v in again.timings.items()}}
     measured = [measured_rows([s], channel) for s in held]
     plots = Plots(columns, BeforeAfterPlot(before_held.stacked(channel),
                                            after_held.stacked(channel), channel,
@@ -595,37 +632,41 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
                                        m - a[channel])
                         for s, m, b, a in zip(held, measured, before_held.by_run,
                                               after_held.by_run, strict=True)))
-    band = {"analysed_hz": analysed_band_hz(settings.regression, rig.sample_rate_hz),
-            "derivative_cutoff_hz": float(settings.regression.filter.cutoff_hz),
-            "decimate": int(settings.regression.decimate), "from": "motion"}
-    result = Diagnosis(str(dataset.root), rig, tuple(train_names), tuple(held_names), nominal,
-                       extended, tuple(causes), selection.steps, tuple(found), nominal_metrics,
-                       extended_metrics, gain, validity, closed, blackbox, sentence, clock,
-                       plots, tuple(extension), unusable, unexplained, band, sizes)
-    wider = _follow_residual(settings, float(rig.sample_rate_hz)) if unexplained else None
-    if wider is None:
-        return result
-    log.info("unexplained in the band from the motion (0-%.3g Hz): the causes are sought "
-             "again on 0-%.3g Hz (derivative cut-off %.3g Hz, decimation by %d, %d angle "
-             "harmonics, alpha %.3g)", band["analysed_hz"],
-             analysed_band_hz(wider.regression, rig.sample_rate_hz),
-             wider.regression.filter.cutoff_hz, wider.regression.decimate,
-             wider.freeform.harmonics if wider.freeform else 0, wider.selection.alpha)
-    again = diagnose(dataset, wider)
-    clock = {**{f"{k} (motion band)": v for k, v in clock.items()}, **again.timings}
+    return Diagnosis(str(dataset.root), rig, tuple(train_names), tuple(held_names), nominal,
+                     extended, tuple(causes), selection.steps, tuple(found), nominal_metrics,
+                     extended_metrics, gain, validity, closed, blackbox, sentence, clock,
+                     plots, tuple(extension), unusable, unexplained, band, sizes,
+                     crosstest=tuple(tr.name for tr in crosstest_runs(
+                         dataset.trajectories, settings.crosstest)))
+
+
+def _second_look(dataset: Dataset, settings: DiagnosisSettings, wider: DiagnosisSettings,
+                 band: dict[str, Any], failing: Sequence[str]) -> Diagnosis:
+    """The diagnosis on the wider band (:func:`~cdpr_pipeline.discovery.adequacy.
+    wider_band`), its band recorded as following the residual when it finds a cause.
+    The closed loop and the black box are left to the look whose verdict stands: run
+    once more on the wider band only when it finds a cause (the same data and settings
+    give the same causes)."""
+    fs = float(dataset.rig.sample_rate_hz)
+    log.info("no cause in the band from the motion (0-%.3g Hz), and the held-out residual "
+             "of %s fails a validity test: the causes are sought again on 0-%.3g Hz "
+             "(derivative cut-off %.3g Hz, decimation by %d, %d angle harmonics, alpha "
+             "%.3g)", band["analysed_hz"], ", ".join(failing),
+             analysed_band_hz(wider.regression, fs), wider.regression.filter.cutoff_hz,
+             wider.regression.decimate, wider.freeform.harmonics if wider.freeform else 0,
+             wider.selection.alpha)
+    again = diagnose(dataset, dataclasses.replace(wider, closed_loop=False, blackbox=None))
     if not again.causes:
-        log.info("nothing found on the wider band either: the verdict stays unexplained")
-        return dataclasses.replace(
-            result, timings=clock, band={**band, "tried": {**again.band,
-                                                           "verdict": again.verdict}},
-            sentence=result.sentence + f" Sought again on 0-{again.band['analysed_hz']:.3g} "
-            f"Hz (the band following the residual): no cause found there either.")
+        log.info("nothing found on the wider band either")
+        return again
+    if settings.closed_loop or settings.blackbox is not None:
+        again = diagnose(dataset, wider)
     widened = {**again.band, "from": "residual", "motion": band}
-    text = (f"The nominal model was unexplained in the band derived from the motion "
-            f"(0-{band['analysed_hz']:.3g} Hz); the causes were sought again on "
+    text = (f"No cause was found in the band derived from the motion "
+            f"(0-{band['analysed_hz']:.3g} Hz), where the held-out residual of "
+            f"{', '.join(failing)} failed a validity test; the causes were sought again on "
             f"0-{widened['analysed_hz']:.3g} Hz. ")
-    return dataclasses.replace(again, timings=clock, band=widened,
-                               sentence=text + again.sentence)
+    return dataclasses.replace(again, band=widened, sentence=text + again.sentence)
 
 
 def _cable_damping(causes: list[Judgement], nominal: Model, train: list[RunSignals]
@@ -645,95 +686,6 @@ def _cable_damping(causes: list[Judgement], nominal: Model, train: list[RunSigna
                 log.info("cable damping: %s", e.describe().split("; ", 1)[-1])
         out.append(dataclasses.replace(c, effects=effects))
     return out, nominal.with_effects([e for c in out for e in c.effects])
-
-
-def _follow_residual(settings: DiagnosisSettings, fs: float) -> DiagnosisSettings | None:
-    """The settings of the second look (:attr:`DiagnosisSettings.follow_residual`), or
-    None when it is off or the band cannot widen (already at 0.4 fs)."""
-    factor = float(settings.follow_residual)
-    reg = settings.regression
-    cutoff = min(factor * float(reg.filter.cutoff_hz), MAX_CUTOFF_FRACTION * fs)
-    if not factor > 1 or not cutoff > float(reg.filter.cutoff_hz) * (1 + 1e-9):
-        return None
-    grow = cutoff / float(reg.filter.cutoff_hz)
-    widened = dataclasses.replace(
-        reg, filter=dataclasses.replace(reg.filter, cutoff_hz=float(cutoff),
-                                        trim_s=float(TRIM_PERIODS / cutoff)),
-        decimate=max(1, int(fs // cutoff)))
-    freeform = settings.freeform and dataclasses.replace(
-        settings.freeform, harmonics=int(np.ceil(settings.freeform.harmonics * grow)))
-    return dataclasses.replace(
-        settings, regression=widened, freeform=freeform, follow_residual=1.0,
-        selection=dataclasses.replace(settings.selection,
-                                      alpha=settings.selection.alpha / 2))
-
-
-def nominal_rate(signals: Sequence[RunSignals]) -> float:
-    """The sample rate of the runs."""
-    return float(np.median([s.fs for s in signals]))
-
-
-def failed_tests(v: ResidualValidity, alpha: float) -> list[str]:
-    """Names of the validity tests a held-out column fails: the five correlation tests
-    (each at its own level) and ``ljung_box`` when its p-value is below ``alpha``."""
-    failed = [k for k, t in v.tests.tests.items() if not t.passed]
-    return failed + (["ljung_box"] if v.ljung_box_pvalue < alpha else [])
-
-
-def unexplained_residual(res: Residuals, held: list[RunSignals], nominal: Model,
-                         validity: dict[str, ResidualValidity], settings: DiagnosisSettings,
-                         channel: str = "torque") -> Unexplained | None:
-    """The held-out columns of ``channel`` that the nominal model gets materially wrong,
-    where at least one of them fails a validity test (one of the five correlation tests,
-    or Ljung-Box whiteness at ``alpha`` over the columns, Bonferroni): material means
-    the column's RMS error is at least
-    ``settings.unexplained_noise_ratio`` times the measurement noise its rows carry
-    (:func:`~cdpr_pipeline.discovery.bands.row_noise`) and at least
-    ``settings.unexplained_min_error_pct`` of its measured signal's RMS. None when no
-    column is.
-
-    Each column's band holds 80 % of the power of its held-out residual rows above their
-    noise floor (:func:`~cdpr_pipeline.discovery.bands.power_band_hz`), within the band
-    the rows keep (:func:`analysed_band_hz`, also reported): an error above that band
-    leaves there only what its slower passes put in it. (The unfiltered full-rate
-    residual is no guide: above the derivative filter's cut-off it holds the recorded
-    torque the filtered model cannot follow.)"""
-    r = res.stacked(channel)
-    measured = measured_rows(held, channel)
-    total = float(np.sum(r ** 2)) or 1.0
-    alpha = settings.selection.alpha / r.shape[1]
-    threshold = settings.unexplained_min_error_pct
-    rms = np.sqrt(np.mean(r ** 2, axis=0))
-    noise_ratio = rms / np.maximum(row_noise(held, channel), 1e-300)
-    # the rows' rate: their spectrum is the band the regression analysed
-    rate = len(r) / sum(float(s.row_times()[-1] - s.row_times()[0]) for s in held)
-    columns = []
-    for i, name in enumerate(channel_names(channel, r.shape[1])):
-        failed = failed_tests(validity[name], alpha)
-        rel = 100 * float(rms[i] / max(np.sqrt(np.mean(measured[:, i] ** 2)), 1e-300))
-        if rel < threshold or noise_ratio[i] < settings.unexplained_noise_ratio:
-            continue
-        columns.append(UnexplainedColumn(
-            name, rel, float(np.sum(r[:, i] ** 2)) / total,
-            power_band_hz(np.concatenate([x[channel][:, i] for x in res.by_run]), rate),
-            tuple(failed), float(noise_ratio[i])))
-    # the verdict needs a material column that fails a test; where the error sits is
-    # every material column: one whose error the prewhitening's AR noise model (fitted
-    # to a residual holding that same error) whitens still holds it (independent cable
-    # robot, seed 698269289: a 4-per-turn torque on u3 at 100x the noise passed every
-    # test on 119 rows, and the columns named held 42 % of the error)
-    if not any(c.failed_tests for c in columns):
-        return None
-    found = Unexplained(channel, tuple(columns), threshold, alpha,
-                        settings.unexplained_noise_ratio,
-                        analysed_band_hz(settings.regression, float(nominal_rate(held))))
-    log.warning("no cause found, but the held-out %s residual of %s fails the validity tests "
-                "(%s) with %s of the measured signal (%s times the noise): verdict "
-                "unexplained", channel, ", ".join(c.channel for c in columns),
-                ", ".join(sorted({t for c in columns for t in c.failed_tests})),
-                ", ".join(f"{c.relative_error_pct:.2g} %" for c in columns),
-                ", ".join(f"{c.noise_ratio:.0f}" for c in columns))
-    return found
 
 
 def _reidentify_if_unusable(nominal: Model, train: list[RunSignals], held: list[RunSignals],
@@ -761,35 +713,3 @@ def _reidentify_if_unusable(nominal: Model, train: list[RunSignals], held: list[
                            nominal.with_effects(effects).winch.as_dict())
 
 
-def _closed_loop(nominal, extended, rig: CdprRig, trajectories, held_names,
-                 extended_differs: bool
-                 ) -> tuple[ClosedLoopComparison, list[Discrepancy], ClosedLoopPlot]:
-    """Both models re-simulated in closed loop: the comparison, one discrepancy row per
-    column of the nominal model's errors, and the data of the report's figure."""
-    sim_nom = resimulate(nominal, nominal, rig, trajectories, label="nominal model")
-    err_nom = closed_loop_errors(trajectories, sim_nom)
-    err_ext = err_nom
-    if extended_differs:
-        err_ext = closed_loop_errors(trajectories, resimulate(
-            extended, nominal, rig, trajectories, label="extended model"))
-    rows, errors = [], {}
-    for sig_name in ("position", "torque"):
-        allb = np.concatenate([err_nom[n][sig_name] for n in err_nom])
-        total = float(np.sum(allb ** 2)) or 1.0
-        cols = ["x", "y", "z"] if sig_name == "position" else \
-            channel_names("torque", allb.shape[1])
-        rows += [Discrepancy(f"closed_loop_{sig_name}", col,
-                             float(np.sqrt(np.mean(allb[:, i] ** 2))),
-                             float(np.sum(allb[:, i] ** 2) / total))
-                 for i, col in enumerate(cols)]
-        hb = np.concatenate([err_nom[n][sig_name] for n in held_names])
-        ha = np.concatenate([err_ext[n][sig_name] for n in held_names])
-        errors[sig_name] = ClosedLoopErrors(
-            tuple(float(v) for v in np.sqrt(np.mean(hb ** 2, axis=0))),
-            tuple(float(v) for v in np.sqrt(np.mean(ha ** 2, axis=0))))
-    first = held_names[0]
-    times = {tr.name: tr.t for tr in trajectories}
-    before = err_nom[first]["position"]
-    plot = ClosedLoopPlot(first, before, err_ext[first]["position"],
-                          times[first][:len(before)])
-    return ClosedLoopComparison(True, None, errors["position"], errors["torque"]), rows, plot

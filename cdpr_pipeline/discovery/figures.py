@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cdpr_pipeline.discovery.closed_loop_report import scaled_unit
 from cdpr_pipeline.discovery.diagnosis import Diagnosis
 from cdpr_pipeline.discovery.plots import VARIABLES, ColumnPlot
 from cdpr_pipeline.discovery.results import Discrepancy
@@ -92,7 +93,12 @@ def channel_label(d: Diagnosis, signal: str, i: int) -> str:
 
 def column_unit(d: Diagnosis, entry: Discrepancy) -> str:
     """The unit of a discrepancy row's residual."""
-    if entry.signal in ("length", "closed_loop_position"):
+    if entry.signal == "length":
+        return "m"
+    cl = d.closed_loop
+    if entry.signal.endswith("_position"):       # the motion comparison's coordinates
+        if entry.channel in cl.coordinates:
+            return cl.units[cl.coordinates.index(entry.channel)]
         return "m"
     index = int(entry.channel[1:]) - 1
     return d.rig.channel_units[index].force
@@ -308,26 +314,36 @@ def band_figure(d: Diagnosis) -> Figure | None:
 
 
 def closed_loop_figure(d: Diagnosis) -> Figure | None:
-    """The platform position error of the first held-out run re-simulated in closed
-    loop, nominal and extended, against time."""
+    """The position error (measured minus simulated) of one run re-simulated in closed
+    loop or n steps ahead (the cross-test run where there is one, else the first
+    held-out run), nominal and extended, per coordinate in its unit, against time."""
     cl = d.plots.closed_loop
     if cl is None:
         return None
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(9, 2.6))
-    x = cl.t - cl.t[0] if cl.t is not None else None
-    for label, err, c in (("nominal model", cl.before, "C3"),
-                          ("extended model", cl.after, "C2")):
-        y = 1000 * np.linalg.norm(err, axis=1)
-        ax.plot(np.arange(len(y)) if x is None else x, y, color=c, lw=0.9, label=label)
-    ylabel = "|measured - simulated| position (mm)"
-    xlabel = TIME_LABEL if x is not None else f"sample of {cl.run} (time not recorded)"
-    ax.set_ylabel(ylabel)
-    ax.set_xlabel(xlabel)
-    title = f"Closed loop, held-out run {cl.run}: platform position error"
-    ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=8)
-    return Figure("closed_loop", title, xlabel, (ylabel,), png=_png(fig))
+    n = cl.before.shape[1]
+    fig, axes = plt.subplots(n, 1, figsize=(9, 1.8 * n + 0.9), sharex=True, squeeze=False)
+    x = cl.t - cl.t[0] if cl.t is not None else np.arange(len(cl.before))
+    ylabels = []
+    for i in range(n):
+        unit = cl.units[i] if cl.units else "m"
+        coordinate = cl.coordinates[i] if cl.coordinates else "xyz"[i]
+        shown, scale = scaled_unit(np.abs(np.concatenate([cl.before[:, i], cl.after[:, i]])),
+                                   unit)
+        ax = axes[i, 0]
+        for label, err, c in (("nominal model", cl.before, "C3"),
+                              ("extended model", cl.after, "C2")):
+            ax.plot(x, err[:, i] / scale, color=c, lw=0.8, label=label)
+        ylabels.append(f"{coordinate}: measured - simulated ({shown})")
+        ax.set_ylabel(ylabels[-1], fontsize=8)
+    axes[0, 0].legend(fontsize=7, loc="upper right")
+    xlabel = TIME_LABEL if cl.t is not None else f"sample of {cl.run} (time not recorded)"
+    axes[-1, 0].set_xlabel(xlabel)
+    what = "closed loop" if cl.mode == "closed_loop" else "n steps ahead"
+    title = f"Position error of run {cl.run}, re-simulated ({what})"
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return Figure("closed_loop", title, xlabel, tuple(ylabels), png=_png(fig))
 
 
 def figures(d: Diagnosis) -> list[Figure]:

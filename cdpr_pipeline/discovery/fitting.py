@@ -18,7 +18,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.optimize._numdiff import approx_derivative
 
-from cdpr_pipeline.discovery.bands import analysed_band_hz
+from cdpr_pipeline.discovery.adequacy import analysed_band_hz
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,

@@ -7,9 +7,11 @@ Two rules, in this order:
 1. every cause must still add to the others on the held-out runs, with a 95 % interval
    above zero (weakest by BIC first): causes were fitted jointly as they were added, so
    one found early can end with nothing left to explain;
-2. the causes are ranked by held-out contribution (:func:`rank_causes`), and the weakest
-   goes until the extended model's held-out gain (:func:`heldout_gain`) has a 95 %
-   interval above zero.
+2. the causes are ranked by held-out contribution (:func:`rank_causes`); one whose
+   contribution is not positive stays only with the interaction that justifies it
+   (:func:`interaction`: it adds to the others together, recorded in its evidence), and
+   the weakest goes until the extended model's held-out gain (:func:`heldout_gain`) has
+   a 95 % interval above zero.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -102,6 +105,17 @@ def never_worse(nominal: Model, causes: Sequence[Judgement], held: list[RunSigna
     # spec: the verdict is the strongest cause, the largest held-out contribution; the
     # selection's order (BIC at the step each was added) is not that
     kept = rank_causes(nominal, kept, held, scales)
+    # a cause whose contribution is not positive stays only with an interaction that
+    # justifies it: it adds to the others together (rule 1 judged its interval)
+    while any(c.interaction is not None and c.interaction["adds_to_others_pct"] <= 0
+              for c in kept):
+        dropped = next(c for c in reversed(kept) if c.interaction is not None
+                       and c.interaction["adds_to_others_pct"] <= 0)
+        kept = rank_causes(nominal, [c for c in kept if c is not dropped], held, scales)
+        withdrawn.append(dropped.label)
+        log.info("never worse: %s withdrawn (held-out contribution %.1f %%, adds %.1f %% "
+                 "to the others)", dropped.label, 100 * dropped.contribution,
+                 dropped.interaction["adds_to_others_pct"])
     while True:
         extended = nominal.with_effects([e for c in kept for e in c.effects])
         channel = kept[0].channel if kept else "torque"
@@ -209,6 +223,15 @@ def heldout_contributions(nominal: Model, effect_sets: Sequence[Sequence[Effect]
     the mean of what it adds over every order the causes could be added in. The values
     sum to the whole extension's value. ``2^k`` held-out residual evaluations for ``k``
     sets (the selection names at most a few causes)."""
+    return _shapley(coalition_values(nominal, effect_sets, held, scales), len(effect_sets))
+
+
+def coalition_values(nominal: Model, effect_sets: Sequence[Sequence[Effect]],
+                     held: list[RunSignals], scales: dict[str, np.ndarray]
+                     ) -> dict[int, float]:
+    """The held-out value of every coalition of ``effect_sets`` (bit ``j`` of the key:
+    set ``j`` in it): the share of the nominal model's held-out error it removes, per
+    channel, summed over channels (:func:`heldout_contributions`)."""
     k = len(effect_sets)
     base = residuals(nominal, nominal, held)
     ref = {c: max(relative_sse(base, c, scales), 1e-300) for c in base.channels}
@@ -217,6 +240,11 @@ def heldout_contributions(nominal: Model, effect_sets: Sequence[Sequence[Effect]
         effects = [e for j in range(k) if mask >> j & 1 for e in effect_sets[j]]
         res = residuals(nominal.with_effects(effects), nominal, held) if effects else base
         value[mask] = sum(1 - relative_sse(res, c, scales) / ref[c] for c in ref)
+    return value
+
+
+def _shapley(value: dict[int, float], k: int) -> np.ndarray:
+    """Each player's Shapley value of the coalition values ``value``."""
     out = np.zeros(k)
     for j in range(k):
         for mask in range(2 ** k):
@@ -231,11 +259,34 @@ def heldout_contributions(nominal: Model, effect_sets: Sequence[Sequence[Effect]
 def rank_causes(nominal: Model, causes: Sequence[Judgement], held: list[RunSignals],
                 scales: dict[str, np.ndarray]) -> list[Judgement]:
     """``causes`` strongest first, by held-out contribution
-    (:func:`heldout_contributions`), each with its contribution recorded."""
+    (:func:`heldout_contributions`), each with its contribution recorded; a cause whose
+    contribution is not positive also with the interaction that keeps it
+    (:func:`interaction`)."""
     if not causes:
         return []
-    shares = heldout_contributions(nominal, [c.effects for c in causes], held, scales)
-    ranked = [dataclasses.replace(c, contribution=float(v))
-              for c, v in zip(causes, shares, strict=True)]
+    value = coalition_values(nominal, [c.effects for c in causes], held, scales)
+    shares = _shapley(value, len(causes))
+    ranked = [dataclasses.replace(c, contribution=float(v),
+                                  interaction=interaction(value, j, causes)
+                                  if v <= 0 else None)
+              for j, (c, v) in enumerate(zip(causes, shares, strict=True))]
     order = np.argsort(-shares, kind="stable")
     return [ranked[i] for i in order]
+
+
+def interaction(value: dict[int, float], j: int, causes: Sequence[Judgement]
+                ) -> dict[str, Any]:
+    """Why cause ``j`` of ``causes`` stays although its held-out contribution is not
+    positive: what it adds to all the others (``adds_to_others_pct``), what it does
+    alone (``alone_pct``), and the other causes it adds to on their own (``with``:
+    labels, and ``adds_with_pct`` for each), all in shares of the nominal model's
+    held-out error summed over channels (:func:`coalition_values`). A cause that only
+    corrects another's fitted parameters adds to it and harms alone."""
+    k = len(causes)
+    full = 2 ** k - 1
+    pairs = {causes[o].label: value[1 << j | 1 << o] - value[1 << o]
+             for o in range(k) if o != j}
+    return {"adds_to_others_pct": 100 * (value[full] - value[full & ~(1 << j)]),
+            "alone_pct": 100 * value[1 << j],
+            "with": [label for label, v in pairs.items() if v > 0],
+            "adds_with_pct": {label: 100 * v for label, v in pairs.items()}}

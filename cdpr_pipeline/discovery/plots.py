@@ -103,22 +103,31 @@ class HeldoutRunPlot:
 
 @dataclass(frozen=True)
 class ClosedLoopPlot:
-    """The position error of the first held-out run re-simulated in closed loop.
+    """The position error of the first held-out run re-simulated in closed loop (or
+    n steps ahead).
 
     Attributes
     ----------
     run : str
         The run.
-    before, after : ndarray (samples, 3)
-        Measured minus simulated platform position, nominal and extended model (m).
+    before, after : ndarray (samples, coordinates)
+        Measured minus simulated position, nominal and extended model (in ``units``).
     t : ndarray (samples,) or None
-        The samples' recorded times, s (None: not known).
+        The samples' recorded times, s.
+    coordinates, units : tuple of str
+        The position columns (``x, y, z``; ``q1..qn`` or the axes' names) and units.
+    mode : str
+        ``closed_loop`` or ``n_step`` (:class:`~cdpr_pipeline.discovery.results.
+        ClosedLoopComparison`).
     """
 
     run: str
     before: np.ndarray
     after: np.ndarray
     t: np.ndarray | None = None
+    coordinates: tuple[str, ...] = ()
+    units: tuple[str, ...] = ()
+    mode: str = "closed_loop"
 
 
 @dataclass(frozen=True)

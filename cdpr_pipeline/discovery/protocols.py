@@ -24,8 +24,10 @@ import numpy as np
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.data.reading import ResolvedReading, resolve_settings
+from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.discovery.residuals import Model, measured_rows, nominal_model, residuals
 from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
+from cdpr_pipeline.sim.axes_loop import AxesLoop, AxesReferences
 
 #: protocol name -> regression config (``conf/regression/<name>.yaml``)
 PROTOCOLS = {"published": "emps", "held command": "commanded"}
@@ -152,3 +154,56 @@ def pulse_edges(pulses: np.ndarray, t: np.ndarray) -> np.ndarray:
     p = np.asarray(pulses, float).ravel()
     jump = np.abs(np.diff(p)) > 0.5 * max(np.abs(p).max(), 1e-300)
     return np.asarray(t, float)[1:][jump]
+
+
+# ----------------------------------------------------------------- closed loop
+@dataclass
+class ClosedLoopScore:
+    """One run re-simulated in closed loop under the published protocol: the simulated
+    force's relative error ``100 |u - u_sim| / |u|`` (%), the RMS of measured minus
+    simulated position, and the RMS tracking error (reference minus position) of the
+    simulation and of the measurement (m or rad)."""
+
+    force_pct: float
+    position_rms: float
+    tracking_rms_simulated: float
+    tracking_rms_measured: float
+
+
+def closed_loop_scores(model: Model, dataset: Dataset, runs: Sequence[str],
+                       from_rest: bool = True, substeps: int | None = None
+                       ) -> dict[str, ClosedLoopScore]:
+    """``model`` driven by rig.yaml's controller along each named run's recorded
+    reference and external forces (:class:`~cdpr_pipeline.sim.axes_loop.AxesLoop`),
+    starting at the measured position, at rest (``from_rest``, the EMPS benchmark's
+    re-simulation) or at the measured velocity; scored against the recording."""
+    by_name = {tr.name: tr for tr in dataset.trajectories}
+    rig = dataset.rig
+    nominal = nominal_model(rig, rig.coulomb_sharpness)
+    loop = AxesLoop(model, rig.controller, rig.sample_rate_hz, feedforward=nominal,
+                    substeps=substeps)
+    groups: dict[int, list[Trajectory]] = {}
+    for name in runs:
+        groups.setdefault(by_name[name].n_samples, []).append(by_name[name])
+    out = {}
+    for group in groups.values():           # runs of one length advance as one batch
+        starts = []
+        for tr in group:
+            dt = float(np.median(np.diff(tr.t)))
+            starts.append(np.zeros(rig.n) if from_rest
+                          else (tr.position[1] - tr.position[0]) / dt)
+        external = None
+        if any(tr.external is not None for tr in group):
+            external = np.stack([np.zeros_like(tr.torques) if tr.external is None
+                                 else tr.external for tr in group], axis=1)
+        result = loop.run(AxesReferences(np.stack([tr.desired for tr in group], axis=1),
+                                         np.stack([tr.position[0] for tr in group]),
+                                         np.stack(starts), external))
+        for b, tr in enumerate(group):
+            q, u = result.position[:, b], result.force[:, b]
+            out[tr.name] = ClosedLoopScore(
+                float(100 * np.linalg.norm(tr.torques - u) / np.linalg.norm(tr.torques)),
+                float(np.sqrt(np.mean((tr.position - q) ** 2))),
+                float(np.sqrt(np.mean((tr.desired - q) ** 2))),
+                float(np.sqrt(np.mean((tr.desired - tr.position) ** 2))))
+    return {name: out[name] for name in runs}

@@ -15,6 +15,7 @@ from __future__ import annotations
 import html
 from typing import Any
 
+from cdpr_pipeline.discovery.closed_loop_report import closed_loop_html
 from cdpr_pipeline.discovery.diagnosis import Diagnosis
 from cdpr_pipeline.discovery.figures import Figure, column_unit, figures
 from cdpr_pipeline.discovery.summary import (
@@ -195,8 +196,7 @@ def render(d: Diagnosis) -> str:
         *_gain(d),
         show("before_after"),
         "<h2>Validity tests (held-out)</h2>", show("validity"),
-        "<h2>Closed loop</h2>", show("closed_loop") or
-        f"<p>{html.escape(d.closed_loop.reason or 'not available')}</p>",
+        *closed_loop_html(d, show("closed_loop")),
         *_discrepancies(d),
         "<h2>Where the error sits in frequency</h2>", show("bands"),
         *_candidates(d),

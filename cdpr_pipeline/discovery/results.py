@@ -264,20 +264,103 @@ class ClosedLoopErrors:
                 "heldout_rmse_after": list(self.heldout_rmse_after)}
 
 
+def _floats(values: tuple[float, ...]) -> list[float]:
+    return [float(v) for v in values]
+
+
+@dataclass(frozen=True)
+class RunMotionErrors:
+    """One run's measured minus simulated signals, nominal (``before``) and extended
+    (``after``) model: position RMS and largest absolute error per coordinate (m, or the
+    axis's unit), and in closed loop the force or torque RMS per channel and its
+    relative error ``100 |u - u_sim| / |u|`` (%) over the run."""
+
+    heldout: bool
+    position_rms: tuple[tuple[float, ...], tuple[float, ...]]
+    position_max: tuple[tuple[float, ...], tuple[float, ...]]
+    torque_rms: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    torque_relative_pct: tuple[float, float] | None = None
+    #: set aside as an untouched cross-test (no fit or choice saw it)
+    crosstest: bool = False
+
+    def as_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "heldout": self.heldout, "crosstest": self.crosstest,
+            "position": {"rms_before": _floats(self.position_rms[0]),
+                         "rms_after": _floats(self.position_rms[1]),
+                         "max_before": _floats(self.position_max[0]),
+                         "max_after": _floats(self.position_max[1])}}
+        if self.torque_rms is not None:
+            out["torque"] = {"rms_before": _floats(self.torque_rms[0]),
+                             "rms_after": _floats(self.torque_rms[1]),
+                             "relative_error_pct_before": float(self.torque_relative_pct[0]),
+                             "relative_error_pct_after": float(self.torque_relative_pct[1])}
+        return out
+
+
+@dataclass(frozen=True)
+class FeedforwardTracking:
+    """What the extended model buys in control: the closed loop re-simulated on the
+    extended model (the best estimate of the rig) with the stated controller, its
+    feedforward built from the nominal and from the extended model; per run the
+    tracking error (reference minus simulated position) RMS and largest absolute value
+    per coordinate, ``(nominal feedforward, extended feedforward)``."""
+
+    rms: Mapping[str, tuple[tuple[float, ...], tuple[float, ...]]]
+    max: Mapping[str, tuple[tuple[float, ...], tuple[float, ...]]]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"plant": "extended model",
+                "runs": {run: {"rms_nominal_feedforward": _floats(self.rms[run][0]),
+                               "rms_extended_feedforward": _floats(self.rms[run][1]),
+                               "max_nominal_feedforward": _floats(self.max[run][0]),
+                               "max_extended_feedforward": _floats(self.max[run][1])}
+                         for run in self.rms}}
+
+
 @dataclass(frozen=True)
 class ClosedLoopComparison:
-    """The recorded runs re-simulated in closed loop with both models, or why not."""
+    """The recorded runs re-simulated with both models, or why not.
+
+    ``mode`` ``closed_loop``: under the stated controller along the recorded reference;
+    ``n_step``: without a stated controller, driven by the recorded force and restarted
+    from the measured state every ``horizon['samples']`` samples (chosen from the motion
+    bandwidth, ``horizon['why']``). ``coordinates`` names the position columns and
+    ``units`` their units; ``runs`` holds every run's errors, ``position`` and ``torque``
+    the held-out summaries.
+    """
 
     available: bool
     reason: str | None = None
     position: ClosedLoopErrors | None = None
     torque: ClosedLoopErrors | None = None
+    mode: str = "closed_loop"
+    runs: Mapping[str, RunMotionErrors] | None = None
+    horizon: Mapping[str, Any] | None = None
+    coordinates: tuple[str, ...] = ()
+    units: tuple[str, ...] = ()
+    feedforward: FeedforwardTracking | None = None
+    #: why the stated feedforward was not compared, when it was not
+    feedforward_reason: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
         if not self.available:
             return {"available": False, "reason": self.reason}
-        return {"available": True, "runs": {}, "position": self.position.as_dict(),
-                "torque": self.torque.as_dict()}
+        out: dict[str, Any] = {
+            "available": True, "mode": self.mode, "coordinates": list(self.coordinates),
+            "units": list(self.units),
+            "runs": {k: v.as_dict() for k, v in (self.runs or {}).items()},
+            "position": self.position.as_dict(),
+            "torque": None if self.torque is None else self.torque.as_dict()}
+        if self.reason is not None:
+            out["reason"] = self.reason
+        if self.horizon is not None:
+            out["horizon"] = dict(self.horizon)
+        if self.feedforward is not None:
+            out["feedforward"] = self.feedforward.as_dict()
+        elif self.feedforward_reason is not None:
+            out["feedforward"] = {"reason": self.feedforward_reason}
+        return out
 
 
 @dataclass(frozen=True)

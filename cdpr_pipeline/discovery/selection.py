@@ -102,6 +102,11 @@ class SelectionSettings:
         to act on that winch (besides BIC, see
         :func:`~cdpr_pipeline.discovery.fitting.fit_winches`).
     seed : int
+    exclude : list of str
+        Vocabulary effects not tried as candidates; the free-form search still leaves
+        their shapes to them (the second look on a wider band leaves the rigid-body
+        parameters to the first: :data:`~cdpr_pipeline.discovery.adequacy.
+        MOTION_BAND_EFFECTS`).
     """
 
     alpha: float = 0.05
@@ -114,6 +119,7 @@ class SelectionSettings:
     refit_winches: bool = False
     min_winch_gain: float = 0.05
     seed: int = 0
+    exclude: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,6 +152,14 @@ class Judgement:
     #: held-out error summed over channels (set by the diagnosis when it ranks causes:
     #: :func:`~cdpr_pipeline.discovery.never_worse.heldout_contributions`)
     contribution: float | None = None
+    #: its candidate and parameter vector as last fitted jointly with the other causes
+    #: (set on the causes :func:`select_causes` keeps): what a re-fit without another
+    #: cause starts from (:meth:`_Search.backward`)
+    part: tuple[Candidate, np.ndarray] | None = None
+    #: why a cause stays although its own held-out contribution is not positive (set by
+    #: :func:`~cdpr_pipeline.discovery.never_worse.never_worse`): what it adds to the
+    #: others, alone, and with which of them
+    interaction: dict[str, Any] | None = None
 
     def failed(self, reason: str) -> Judgement:
         """The same judgement, not passed, for ``reason``."""
@@ -164,7 +178,8 @@ class Judgement:
                 "heldout_sse_drop_ci95_pct": [100 * self.ci[0], 100 * self.ci[1]],
                 "signal": self.channel, "variant": self.label,
                 **({} if self.contribution is None else
-                   {"heldout_contribution_pct": 100 * self.contribution})}
+                   {"heldout_contribution_pct": 100 * self.contribution}),
+                **({} if self.interaction is None else {"interaction": self.interaction})}
 
 
 def fit_weights(base: Residuals, scales: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -414,7 +429,7 @@ class _Search:
                 parts = parts + [_freeform_part(best.freeform)]
             else:
                 parts = _split(parts, best)
-            causes = [replace(cause, effects=tuple(cand.build(x)))     # re-fitted jointly
+            causes = [replace(cause, effects=tuple(cand.build(x)), part=(cand, x))
                       for cause, (cand, x) in zip(causes + [best], parts, strict=True)]
             freeform = freeform and best.effect != "unnamed"    # one free-form part
             # the same variant again adds nothing (winches are re-identified one by one)
@@ -440,6 +455,68 @@ class _Search:
         return float(sum(res.count(c) * np.log(relative_sse(res, c, self.scales)
                                                / res.count(c)) for c in res.channels)
                      + n_params * self.log_n())
+
+    def adds_beyond(self, richer: list[Effect], n_extra: int, simpler: list[Effect],
+                    n_tests: int, label: str) -> Judgement:
+        """The model extended by ``richer`` judged on top of the one extended by
+        ``simpler`` as every candidate is judged (:class:`Judge`: significant on the
+        training runs with its ``n_extra`` further parameters, and a held-out gain of
+        ``min_gain`` whose interval excludes zero). Two descriptions of one thing from
+        different families compete on this footing: the one with more parameters must
+        pass it on top of the one with fewer."""
+        self._reference()
+        ctx = FitContext(self.nominal, self.train, [], {}, self.columns)
+        judge = Judge(ctx, self.heldout, self.settings, self.nominal_held,
+                      base_effects=list(simpler), scales=self.scales)
+        return judge(label, label, list(richer), max(int(n_extra), 1), n_tests)
+
+    def refit_jointly(self, causes: list[Judgement]) -> list[Judgement]:
+        """``causes`` re-fitted jointly on the training runs from where they are (their
+        :attr:`Judgement.part`), with nothing else in the model: what they explain
+        without a cause that was fitted beside them."""
+        self._reference()
+        parts = [c.part for c in causes]
+        current = _build(parts)
+        base_res = FitContext(self.nominal, self.train, current, {}, self.columns
+                              ).residuals([])
+        ctx = FitContext(self.nominal, self.train, [], fit_weights(base_res, self.scales),
+                         self.columns)
+        last, x_last = parts[-1]
+        joint = _joint(parts[:-1], replace(last, starts=[np.asarray(x_last, float)]))
+        fit = fit_candidate(joint, ctx)
+        if not fit.success and not fit.effects:
+            return list(causes)
+        out, k = [], 0
+        for c, (cand, _) in zip(causes, parts, strict=True):
+            x = np.asarray(fit.x[k:k + cand.n_params], float)
+            k += cand.n_params
+            out.append(replace(c, effects=tuple(cand.build(x)), part=(cand, x)))
+        return out
+
+    def backward(self, causes: list[Judgement], n_tests: int) -> list[Judgement]:
+        """Drop the causes that add nothing beyond the others re-fitted without them.
+
+        Causes were fitted jointly as they were added, and one found early can end with
+        nothing the others, re-fitted, would not explain (or explain only by
+        compensating another's parameters: alone it makes the model worse). Weakest
+        first (BIC), each cause is judged as a candidate on top of the others re-fitted
+        without it (:meth:`adds_beyond`); one that fails goes, the others keep their
+        re-fit, and the rest are asked again. Causes without a recorded fit are kept."""
+        causes = list(causes)
+        dropped = True
+        while dropped and len(causes) >= 2 and all(c.part is not None for c in causes):
+            dropped = False
+            for c in sorted(causes, key=lambda c: c.bic_drop):
+                others = self.refit_jointly([o for o in causes if o is not c])
+                j = self.adds_beyond(_effects(causes), c.n_params, _effects(others),
+                                     n_tests, c.label)
+                if not j.passed:
+                    if self.log:
+                        self.log.info("  %s dropped: nothing beyond the other causes "
+                                      "re-fitted without it (%s)", c.label, j.reason)
+                    causes, dropped = others, True
+                    break
+        return causes
 
     def parsimonious(self, cause: Judgement, others: list[Effect]
                      ) -> tuple[list[Effect], int]:
@@ -544,7 +621,9 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
     kind = nominal.kind
     search = _Search(nominal, train, heldout, settings, freeform,
                      _data_scale(train, kind, nominal), kind, log)
-    candidates = candidates_for(rig, search.scale, settings.effects, settings.refit_winches)
+    candidates = [c for c in candidates_for(rig, search.scale, settings.effects,
+                                            settings.refit_winches)
+                  if c.effect not in settings.exclude]
     # free-form terms with a candidate's shape are that candidate's to explain
     search.shapes = vocabulary_shapes(rig, search.scale, settings.effects)
     start = time.perf_counter()
@@ -570,8 +649,13 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
                                      without.n_params)
             # the free-form parameters that take c's place
             replacing = without.n_params - with_c.n_params
-            if bic_without + search.log_n() < bic_with and (rest.passed
-                                                            or replacing <= n_own):
+            # the same footing across families: with fewer parameters in its place, the
+            # free-form description wins unless c adds, as a candidate would, beyond it
+            simpler = without.passed and replacing < n_own and not search.adds_beyond(
+                _effects(others) + own + list(with_c.effects), n_own - replacing,
+                _effects(others) + list(without.effects), n_tests, c.label).passed
+            if simpler or bic_without + search.log_n() < bic_with and (
+                    rest.passed or replacing <= n_own):
                 if log:
                     log.info("  %s dropped: free-form terms explain it better (BIC %+.1f "
                              "with %d parameters for its %d): %s", c.label,
@@ -603,21 +687,39 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
                                             for e in o.effects] + extra)
                     for c in torque] if alone.passed else []
             named = sum(n for _, n in lean) + (final.n_params if on_top else 0)
-            if alone.passed and alone.n_params <= named and search.bic(
-                    _effects(others) + list(alone.effects), alone.n_params) \
-                    + search.log_n() < search.bic(
-                        _effects(others) + [e for own, _ in lean for e in own] + extra,
-                        named):
+            named_effects = _effects(others) + [e for own, _ in lean for e in own] + extra
+            alone_effects = _effects(others) + list(alone.effects)
+            # with fewer parameters, the free-form terms win unless the named causes
+            # add, as a candidate would, beyond them on held-out runs (one w|w| per
+            # winch against a viscous and Coulomb re-fit plus a Stribeck bump that
+            # explains no more there); with as many, a BIC better by one parameter's
+            # worth (a named effect wins ties)
+            if log:
+                log.info("  in place of %s: free-form %s with %d parameters for their %d%s",
+                         ", ".join(c.label for c in torque),
+                         "passes" if alone.passed else f"fails ({alone.reason})",
+                         alone.n_params, named,
+                         "" if not alone.passed else " (BIC %+.1f)" % (
+                             search.bic(alone_effects, alone.n_params)
+                             - search.bic(named_effects, named)))
+            if alone.passed and alone.n_params <= named and (
+                    search.bic(alone_effects, alone.n_params) + search.log_n()
+                    < search.bic(named_effects, named)
+                    or alone.n_params < named and not search.adds_beyond(
+                        named_effects, named - alone.n_params, alone_effects, n_tests,
+                        ", ".join(c.label for c in torque)).passed):
                 if log:
                     log.info("  %s dropped together: free-form terms explain them better "
                              "with %d parameters for their %d: %s",
                              ", ".join(c.label for c in torque), alone.n_params, named,
                              alone.freeform.describe())
                 keep, final = others, alone
-        if final.freeform.terms:
-            causes = keep + ([final] if final.passed else [])
+        if final.freeform.terms and final.passed:
+            causes = keep + [replace(final, part=_freeform_part(final.freeform))]
         else:
             causes = keep
+    # every cause must add beyond the others re-fitted without it
+    causes = search.backward(causes, len(candidates) + bool(freeform))
     causes = sorted(causes, key=lambda c: -c.bic_drop)
     return Selection(tuple(_merge(causes)), tuple(tuple(step) for step in search.steps),
                      tuple(_effects(causes)), seconds_candidates,

@@ -27,7 +27,7 @@ class NetworkBlackBox:
     """
 
     net_factory: Any = None
-    window: int = 32
+    window: int = 16
     epochs: int = 5
     max_windows: int = 4096
     seed: int = 0
@@ -38,8 +38,9 @@ class NetworkBlackBox:
         # its share goes into diagnosis.json, which must be the same on any machine: trained
         # on the CPU (a GPU's kernels sum in another order) with one thread (so do the
         # reductions), the process's thread count restored after
-        # imported here: torch and Lightning take seconds to load, and only a diagnosis
-        # that reaches its black-box phase needs them
+        # imported here: torch takes seconds to load, and only a diagnosis that reaches
+        # its black-box phase needs it (the plain torch loop: Lightning, seconds more,
+        # is not loaded)
         import torch
 
         from cdpr_pipeline.models.reconstruction import HighFrequencyModel
@@ -49,7 +50,7 @@ class NetworkBlackBox:
         try:
             model = HighFrequencyModel(self.net_factory, self.window, self.epochs,
                                        max_windows=self.max_windows, seed=self.seed,
-                                       sample_rate_hz=1.0, accelerator="cpu"
+                                       sample_rate_hz=1.0, accelerator="torch"
                                        ).fit(train, np.zeros((train.n, train.phi.shape[2])))
             return model.predict(held)
         finally:

@@ -122,7 +122,8 @@ def _stepper(model: Plant, dt: float, settings: PhysicsSettings) -> tuple[Plant,
     resolvable ``tanh``, :func:`~cdpr_pipeline.sim.simulator.integration_plant`) and the
     RK4 steps per sample, as the simulator picks them."""
     plant = integration_plant(model, dt)
-    return plant, int(settings.substeps) if settings.substeps else auto_substeps(plant, dt)
+    return plant, int(settings.substeps) if settings.substeps else auto_substeps(
+        plant, dt, implicit=False)
 
 
 def _integrate(model: Plant, state: np.ndarray, torque: np.ndarray, dt: np.ndarray,

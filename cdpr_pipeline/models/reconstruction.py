@@ -7,6 +7,7 @@ built on :class:`HighFrequencyModel`, is :class:`cdpr_pipeline.models.blackbox.N
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import torch
@@ -14,7 +15,7 @@ import torch
 from cdpr_pipeline.identification.regressors import WinchRegression
 from cdpr_pipeline.metrics import mae, mse, ppl
 from cdpr_pipeline.models.features import ChannelLayout
-from cdpr_pipeline.models.module import fit_window_network
+from cdpr_pipeline.models.window_fit import fit_windows
 
 
 def _inputs(reg: WinchRegression, theta: np.ndarray) -> np.ndarray:
@@ -45,7 +46,9 @@ class HighFrequencyModel:
     seed : int
     accelerator : str
         Lightning's accelerator: ``"auto"`` takes a GPU where there is one; ``"cpu"``
-        gives the same weights on any machine (the diagnosis's black box).
+        gives the same weights on any machine; ``"torch"`` trains on the CPU with the
+        plain torch loop (:func:`~cdpr_pipeline.models.window_fit.fit_windows`), without
+        loading Lightning (the diagnosis's black box).
     """
 
     net_factory: object
@@ -65,12 +68,19 @@ class HighFrequencyModel:
         self.y_mean, self.y_std = y.mean(axis=0), np.where(y.std(axis=0) > 0, y.std(axis=0), 1)
         rows = _runs(reg)
         layout = ChannelLayout(x.shape[1], reg.n, self.sample_rate_hz)
-        self.net = fit_window_network(
+        if self.accelerator == "torch":
+            fit = fit_windows
+        else:
+            # Lightning loads only for a fit that uses it (seconds of import)
+            from cdpr_pipeline.models.module import fit_window_network
+
+            fit = partial(fit_window_network, accelerator=self.accelerator)
+        self.net = fit(
             lambda: self.net_factory(layout=layout),
             [(x[r] - self.x_mean) / self.x_std for r in rows],
             [(y[r] - self.y_mean) / self.y_std for r in rows], self.window, lr=self.lr,
             epochs=self.epochs, max_windows=self.max_windows, batch_size=self.batch_size,
-            seed=self.seed, accelerator=self.accelerator)
+            seed=self.seed)
         self.theta = np.asarray(theta, float)
         return self
 

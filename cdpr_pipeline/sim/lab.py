@@ -20,10 +20,12 @@ import numpy as np
 import yaml
 
 from cdpr_pipeline.data.io import write_dataset
-from cdpr_pipeline.data.rig import CdprRig
+from cdpr_pipeline.data.rig import AxesRig, CdprRig
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.sim.axes_loop import AxesLoop, AxesReferences
+from cdpr_pipeline.sim.axis_references import AxisReferenceSet
 from cdpr_pipeline.sim.effects import Effect
-from cdpr_pipeline.sim.plant import Plant
+from cdpr_pipeline.sim.plant import Drives, Plant
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import BatchSimulator, SimulationResult
 from cdpr_pipeline.sim.trajectories import (
@@ -228,3 +230,47 @@ def _atomic_write_text(path: Path, text: str) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def generate_axes_dataset(out_dir: str | Path, rig: AxesRig, references: AxisReferenceSet, *,
+                          effects: Sequence[Effect] = (), overwrite: bool = False,
+                          substeps: int | None = None) -> Path:
+    """Drive axes along the default reference set (:class:`~cdpr_pipeline.sim.
+    axis_references.AxisReferenceSet`) in closed loop under rig.yaml's
+    ``position_loop`` controller, the plant the stated model altered by ``effects``
+    (exact sensors); write the ``cdpr-measured/1`` dataset to ``out_dir`` and the truth
+    beside it (:func:`truth_path_for`), both atomically.
+
+    Raises
+    ------
+    ValueError
+        When rig.yaml states no ``position_loop`` controller (naming why).
+    """
+    if rig.controller is None or not rig.controller.closed_loop:
+        raise ValueError("simulating drive axes needs rig.yaml's controller in the "
+                         "position_loop schema (docs/data-format.md): "
+                         + ("there is none" if rig.controller is None
+                            else rig.controller.why_not))
+    nominal = Drives.stated(rig, rig.coulomb_sharpness)
+    plant = nominal.with_effects(effects)
+    families, reference = references.references(rig.joint_types, rig.sample_rate_hz)
+    runs = AxesReferences(reference, reference[0], np.zeros(reference.shape[1:]))
+    result = AxesLoop(plant, rig.controller, rig.sample_rate_hz, feedforward=nominal,
+                      substeps=substeps).run(runs)
+    t = np.arange(reference.shape[0]) / rig.sample_rate_hz
+    trajectories = [Trajectory(f"{b:03d}_{family}", t.copy(), result.position[:, b],
+                               result.force[:, b], desired=reference[:, b])
+                    for b, family in enumerate(families)]
+    out_dir = Path(out_dir)
+    write_dataset(out_dir, rig, trajectories, overwrite=overwrite)
+    truth = {"format": TRUTH_FORMAT, "dataset": out_dir.name, "kind": "axes",
+             "effects": [{"effect": e.name, "label": e.label, "params": e.params(),
+                          "description": e.describe(nominal)} for e in effects],
+             "verdict": effects[0].label if len(effects) == 1 else
+             ("none" if not effects else [e.label for e in effects]),
+             "references": {"families": families, "duration_s": references.duration_s},
+             "simulator": {"substeps": result.substeps, "sensors": "exact"}}
+    truth_path = truth_path_for(out_dir)
+    _atomic_write_text(truth_path, yaml.safe_dump(truth, sort_keys=False))
+    log.info("wrote %d axis runs to %s (truth: %s)", len(trajectories), out_dir, truth_path)
+    return out_dir

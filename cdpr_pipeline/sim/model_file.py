@@ -17,7 +17,7 @@ from typing import Any
 import yaml
 
 from cdpr_pipeline.data.errors import DataValidationError
-from cdpr_pipeline.data.rig import Rig
+from cdpr_pipeline.data.rig import FORMAT, Rig
 from cdpr_pipeline.data.validation import parse_rig
 from cdpr_pipeline.sim.effects import ALIASES, EFFECTS, Effect, effect_class
 from cdpr_pipeline.sim.plant import nominal_plant
@@ -39,6 +39,30 @@ def write_model(path: str | Path, rig: Rig, effects: Sequence[Effect], **meta: A
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(yaml.safe_dump(model_record(rig, effects, **meta), sort_keys=False))
     return path
+
+
+def read_model_or_rig(path: str | Path) -> tuple[Rig, list[Effect]]:
+    """The rig and effects of a model file (:func:`read_model`), or of a dataset's
+    ``rig.yaml`` (or the dataset directory holding one): the nominal model, no effect.
+
+    Raises
+    ------
+    ValueError
+        As :func:`read_model`, naming the file.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "rig.yaml"
+    try:
+        record = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise ValueError(f"{path}: cannot read model file ({err})") from err
+    if isinstance(record, dict) and record.get("format") == FORMAT:
+        rig, problems = parse_rig(record, file=str(path))
+        if rig is None or any(p.severity == "error" for p in problems):
+            raise DataValidationError(problems)
+        return rig, []
+    return read_model(path)
 
 
 def read_model(path: str | Path) -> tuple[Rig, list[Effect]]:

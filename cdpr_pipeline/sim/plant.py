@@ -480,7 +480,8 @@ class Drives:
 
     kind: ClassVar[str] = "axes"
     cables: ClassVar[bool] = False
-    closed_loop: ClassVar[bool] = False
+    #: under a ``position_loop`` controller (:mod:`cdpr_pipeline.sim.axes_loop`)
+    closed_loop: ClassVar[bool] = True
     #: no cables to stretch (:attr:`Plant.elastic`)
     elastic: ClassVar[bool] = False
     drive_word: ClassVar[str] = "axis"
@@ -588,10 +589,12 @@ def winch_rates(
 
 
 def forward_kinematics(
-    anchors: np.ndarray, lengths: np.ndarray, guess: np.ndarray, iterations: int = 4
+    anchors: np.ndarray, lengths: np.ndarray, guess: np.ndarray, iterations: int = 4,
+    tol: float = 1e-12
 ) -> np.ndarray:
     """Platform position whose cable lengths best match ``lengths`` (B, n), by Gauss-Newton
-    from ``guess`` (B, 3). Converges quadratically from a nearby guess (the last tick)."""
+    from ``guess`` (B, 3). Converges quadratically from a nearby guess (the last tick):
+    at most ``iterations``, stopping once no position moved by more than ``tol`` (m)."""
     p = np.array(guess, dtype=float, copy=True)
     for _ in range(iterations):
         g, units = cable_geometry(anchors, p)
@@ -600,7 +603,10 @@ def forward_kinematics(
         resid = g - lengths
         jtj = np.einsum("bni,bnj->bij", jac, jac)
         jtr = np.einsum("bni,bn->bi", jac, resid)
-        p -= np.linalg.solve(jtj, jtr[..., None])[..., 0]
+        step = np.linalg.solve(jtj, jtr[..., None])[..., 0]
+        p -= step
+        if np.abs(step).max(initial=0.0) <= tol:
+            break
     return p
 
 

@@ -1,4 +1,5 @@
-"""``cdpr simulate``: write a virtual-lab dataset, with hidden effects, and its truth."""
+"""``cdpr simulate``: write a virtual-lab dataset, with hidden effects, and its truth; or
+re-simulate a model along a recorded dataset and compare (``data.path=DIR``)."""
 
 from __future__ import annotations
 
@@ -13,31 +14,28 @@ from omegaconf import DictConfig, OmegaConf
 from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.errors import DataValidationError
 from cdpr_pipeline.data.io import read_rig
-from cdpr_pipeline.data.rig import CdprRig
+from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.data.validation import parse_rig
 from cdpr_pipeline.errors import ConfigError, InputError
 from cdpr_pipeline.sim.effects import Effect
-from cdpr_pipeline.sim.lab import LabRun, generate_dataset
-from cdpr_pipeline.sim.model_file import read_model
-from cdpr_pipeline.sim.plant import plant_kind
+from cdpr_pipeline.sim.lab import LabRun, generate_axes_dataset, generate_dataset
+from cdpr_pipeline.sim.model_file import read_model_or_rig
+from cdpr_pipeline.stages.simulate_data import compare_with_data
 
 log = logging.getLogger(__name__)
 
 _RIG_CONFIG_KEYS = ("file", "home_m")
 
 
-def rig_from_config(cfg: DictConfig) -> CdprRig:
+def rig_from_config(cfg: DictConfig) -> Rig:
     """The nominal rig: from ``rig.file`` if given, else from the inline keys."""
     if cfg.get("file"):
-        rig = read_rig(Path(cfg.file))
-    else:
-        raw = {k: v for k, v in OmegaConf.to_container(cfg, resolve=True).items()
-               if k not in _RIG_CONFIG_KEYS}
-        rig, problems = parse_rig(raw, file="config rig")
-        if rig is None or any(p.severity == "error" for p in problems):
-            raise DataValidationError(problems)
-    if not plant_kind(rig).closed_loop:
-        raise ConfigError("the virtual lab simulates cable robots (kind: cdpr) only")
+        return read_rig(Path(cfg.file))
+    raw = {k: v for k, v in OmegaConf.to_container(cfg, resolve=True).items()
+           if k not in _RIG_CONFIG_KEYS}
+    rig, problems = parse_rig(raw, file="config rig")
+    if rig is None or any(p.severity == "error" for p in problems):
+        raise DataValidationError(problems)
     return rig
 
 
@@ -57,22 +55,41 @@ def effects_from_config(cfg: DictConfig | None, n_cables: int, seed: int) -> lis
     return effects
 
 
-def simulate(cfg: DictConfig) -> LabRun:
+def simulate(cfg: DictConfig) -> LabRun | Path | dict[str, Any]:
     """Run the virtual lab as configured and write the dataset and its truth.
 
-    ``model_file=FILE`` (a ``cdpr-model/1`` file, e.g. a diagnosis's extended_model.yaml)
-    replaces the rig and adds its effects to the configured ones."""
+    ``model_file=FILE`` (a ``cdpr-model/1`` file, e.g. a diagnosis's extended_model.yaml,
+    or a rig.yaml) replaces the rig and adds its effects to the configured ones. With
+    ``data.path=DIR`` the model follows that dataset's recorded references instead and
+    is compared with it (:func:`~cdpr_pipeline.stages.simulate_data.compare_with_data`).
+    Drive axes without a dataset follow the default reference set
+    (``conf/axis_references/``)."""
+    data_path = (cfg.get("data") or {}).get("path")
+    if data_path:
+        if not cfg.get("model_file"):
+            raise ConfigError("data.path=DIR compares a model with a dataset: give the "
+                              "model too, model_file=FILE (a rig.yaml or an "
+                              "extended_model.yaml)")
+        return compare_with_data(cfg.model_file, data_path, cfg.out_dir)
     if cfg.get("model_file"):
-        rig, effects = read_model(cfg.model_file)
-        if not plant_kind(rig).closed_loop:
-            raise InputError(f"{cfg.model_file}: the virtual lab simulates cable robots only")
+        try:
+            rig, effects = read_model_or_rig(cfg.model_file)
+        except ValueError as err:
+            raise InputError(str(err)) from err
         log.info("model %s: %d effect(s)", cfg.model_file, len(effects))
         effects += effects_from_config(cfg.get("effects"), rig.n, cfg.seed)
     else:
         rig = rig_from_config(cfg.rig)
         effects = effects_from_config(cfg.get("effects"), rig.n, cfg.seed)
-    traj = cfg.trajectory
     sim = cfg.simulator
+    if rig.kind == "axes":
+        try:
+            return generate_axes_dataset(
+                Path(cfg.out_dir), rig, instantiate(cfg.axis_references), effects=effects,
+                overwrite=bool(cfg.overwrite), substeps=sim.substeps)
+        except ValueError as err:
+            raise InputError(f"{cfg.get('model_file') or 'rig'}: {err}") from err
+    traj = cfg.trajectory
     return generate_dataset(
         Path(cfg.out_dir), rig, OmegaConf.to_container(traj.counts),
         overwrite=bool(cfg.overwrite),

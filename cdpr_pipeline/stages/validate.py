@@ -201,12 +201,19 @@ def _repro(verdicts: Mapping[str, CommandVerdict]) -> CommandVerdict:
 
 
 def _simulate(data: Dataset) -> CommandVerdict:
-    needs = "only rig.yaml, of a kind the virtual lab runs (rig.file=DIR/rig.yaml)"
-    if plant_kind(data.rig).closed_loop:
+    needs = ("only rig.yaml (rig.file=DIR/rig.yaml); for drive axes a controller in the "
+             "position_loop schema")
+    controller = data.rig.controller
+    why = None
+    if not plant_kind(data.rig).cables:
+        why = "rig.yaml has no controller" if controller is None else controller.why_not
+    if why is None:
         return CommandVerdict("simulate", True, needs, reads_runs=False)
     return CommandVerdict("simulate", False, needs, [Problem(
-        "rig.yaml", "kind", None, f"kind {data.rig.kind}: the virtual lab simulates cable "
-        "robots (kind: cdpr) only", "warning", "not_simulated")], reads_runs=False)
+        "rig.yaml", "controller", None, f"the virtual lab runs drive axes under a "
+        f"position_loop controller: {why} (cdpr simulate model_file=M data.path=DIR still "
+        "compares a model with the runs, n steps ahead)", "warning", "not_simulated")],
+        reads_runs=False)
 
 
 @hydra_command("validate", writes=False)

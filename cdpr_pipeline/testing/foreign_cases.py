@@ -477,13 +477,62 @@ def null_datasets(n_lab: int, n_cdpr: int, n_axes: int, first_seed: int) -> list
     return out
 
 
+#: the null calibration grid's generators and rig kinds (the lab simulates cable robots
+#: only), runs per dataset, and run lengths (s)
+NULL_GROUPS = (("lab", "cdpr"), ("independent", "cdpr"), ("independent", "axes"))
+NULL_RUNS = (1, 2, 3, 4, 5)
+NULL_LENGTHS = {"short": 10.0, "long": 30.0}
+
+
+def null_grid(replicates: int, first_seed: int,
+              groups: tuple[tuple[str, str], ...] = NULL_GROUPS,
+              runs: tuple[int, ...] = NULL_RUNS,
+              lengths: tuple[str, ...] = tuple(NULL_LENGTHS)) -> list[dict]:
+    """Effect-free datasets over the calibration grid: every generator and rig kind of
+    ``groups``, every run count of ``runs`` and run length of ``lengths``
+    (:data:`NULL_LENGTHS`), ``replicates`` times, each with its own seed (independent
+    cable robots cycle through :data:`CDPR_RIGS`, drive axes through
+    :data:`AXES_RATES` and what rig.yaml states of them, :data:`AXES_RIGS`). Ordered replicate by replicate, so that any prefix covers the
+    grid as evenly as it can."""
+    out = []
+    for k in range(replicates * len(groups) * len(runs) * len(lengths)):
+        cell, rep = k % (len(groups) * len(runs) * len(lengths)), k // (
+            len(groups) * len(runs) * len(lengths))
+        (sim, kind), rest = groups[cell % len(groups)], cell // len(groups)
+        n_runs, length = runs[rest % len(runs)], lengths[(rest // len(runs)) % len(lengths)]
+        spec = {"simulator": sim, "kind": kind, "seed": first_seed + k, "n_runs": n_runs,
+                "length": length, "duration_s": NULL_LENGTHS[length], "replicate": rep}
+        if sim == "independent" and kind == "cdpr":
+            spec.update(n=CDPR_RIGS[k % len(CDPR_RIGS)][0],
+                        rate_hz=CDPR_RIGS[k % len(CDPR_RIGS)][1])
+        elif sim == "independent":
+            spec.update(rate_hz=AXES_RATES[k % len(AXES_RATES)],
+                        **AXES_RIGS[(k // len(groups)) % len(AXES_RIGS)])
+        out.append(spec)
+    return out
+
+
+def _looks(record: dict) -> list[dict]:
+    """The looks a diagnosis took (``band``: the motion's, and the wider band's when the
+    first found no cause and a held-out column failed a validity test), each with its
+    analysed band and held-out columns, the wider one with its own verdict."""
+    band = record["band"]
+    if band.get("from") == "residual":
+        return [band["motion"], {**band, "verdict": record["verdict"]}]
+    return [{k: v for k, v in band.items() if k != "tried"}] + (
+        [band["tried"]] if "tried" in band else [])
+
+
 def run_null(spec: dict, settings, tmp: Path, paper_rig) -> dict:
-    """Simulate one effect-free dataset of :func:`null_datasets`, diagnose it, and
-    return what the tests saw: the verdict and every first-step candidate's statistics
-    (:func:`first_step`)."""
+    """Simulate one effect-free dataset of :func:`null_datasets` or :func:`null_grid`,
+    diagnose it, and return what the tests saw: the verdict, every first-step
+    candidate's statistics (:func:`first_step`), each look's held-out columns (size over
+    the noise, share of the signal, validity tests failed) and the nominal model's
+    training error."""
     start = time.perf_counter()
+    n_runs, duration = spec.get("n_runs"), spec.get("duration_s")
     if spec["simulator"] == "lab":
-        data = lab_dataset(paper_rig, [], spec["seed"])
+        data = lab_dataset(paper_rig, [], spec["seed"], duration_s=duration, n_runs=n_runs)
         rig = f"lab paper rig ({paper_rig.n} cables, {paper_rig.sample_rate_hz:g} Hz)"
         t_sim = time.perf_counter() - start
         t0 = time.perf_counter()
@@ -492,7 +541,8 @@ def run_null(spec: dict, settings, tmp: Path, paper_rig) -> dict:
         seed = spec["seed"]
     else:
         case = foreign_case(tmp, spec["kind"], [], spec["seed"], n=spec.get("n"),
-                            rate_hz=spec.get("rate_hz"), rig_options=spec.get("rig_options"))
+                            rate_hz=spec.get("rate_hz"), n_runs=n_runs, duration_s=duration,
+                            rig_options=spec.get("rig_options"))
         t_sim = time.perf_counter() - start
         record = case.diagnose(settings)
         seconds, seed = case.seconds, case.seed
@@ -506,6 +556,10 @@ def run_null(spec: dict, settings, tmp: Path, paper_rig) -> dict:
             "summary": record["summary"],
             "final_gain": {"relative": record["gain"]["relative"],
                            "ci95": record["gain"]["ci95"]},
+            "train_relative_error_pct":
+                record["nominal"]["metrics"]["train"]["relative_error_pct"],
+            "unusable": "unusable" in record["nominal"],
+            "looks": _looks(record),
             "candidates": first_step(record, settings.selection.alpha)}
 
 
@@ -514,13 +568,21 @@ def quantiles(x: np.ndarray) -> dict[str, float]:
     return {f"q{int(100 * q):02d}": float(np.quantile(x, q)) for q in qs} if len(x) else {}
 
 
-def summarise(records: list[dict], alpha: float, min_gain: float) -> dict:
+def summarise(records: list[dict], alpha: float, min_gain: float,
+              thresholds: dict[str, float] | None = None) -> dict:
     """Of :func:`run_null` records: the null distribution of every statistic and the
-    rate beyond its threshold, overall and per simulator (and rig kind)."""
+    rate beyond its threshold, overall and per simulator (and rig kind), and with
+    ``thresholds`` (``noise_ratio``, ``min_error_pct``, ``unusable_error_pct``) each
+    verdict gate's rate (:func:`gate_rates`) also per run count and run length."""
     groups = {"all": records}
     for r in records:
         groups.setdefault(f"{r['simulator']} {r['kind']}", []).append(r)
         groups.setdefault(r["simulator"], []).append(r)
+    for r in records:
+        if "n_runs" in r:
+            groups.setdefault(f"{r['n_runs']} run{'s' if r['n_runs'] > 1 else ''}",
+                              []).append(r)
+            groups.setdefault(f"{r['length']} runs ({r['duration_s']:g} s)", []).append(r)
     out = {}
     for name, recs in groups.items():
         cands = [c for r in recs for c in r["candidates"]]
@@ -532,6 +594,7 @@ def summarise(records: list[dict], alpha: float, min_gain: float) -> dict:
         any_sig = [any(c["pvalue"] < c["bonferroni"] for c in r["candidates"]) for r in recs]
         any_lo = [any(c["ci_lo"] > 0 for c in r["candidates"]) for r in recs]
         any_pass = [any(c["passed"] for c in r["candidates"]) for r in recs]
+        any_gain = [any(c["gain"] >= min_gain for c in r["candidates"]) for r in recs]
         n_tests = float(np.mean([len(r["candidates"]) for r in recs]))
         out[name] = {
             "datasets": len(recs), "candidates": len(cands), "tests_per_step": n_tests,
@@ -546,7 +609,8 @@ def summarise(records: list[dict], alpha: float, min_gain: float) -> dict:
                              "nominal_median_chi2_1": 0.455},
             "heldout_gain": {"quantiles": quantiles(gain),
                              "at_least_min_gain": float(np.mean(gain >= min_gain)),
-                             "min_gain": min_gain, "above_zero": float(np.mean(gain > 0))},
+                             "min_gain": min_gain, "above_zero": float(np.mean(gain > 0)),
+                             "datasets_with_any": float(np.mean(any_gain))},
             "ci_lower": {"quantiles": quantiles(lo), "above_zero": float(np.mean(lo > 0)),
                          "nominal_above_zero": float(np.mean(bonf)),
                          "datasets_with_any_above_zero": float(np.mean(any_lo))},
@@ -560,8 +624,65 @@ def summarise(records: list[dict], alpha: float, min_gain: float) -> dict:
             "final_gain_ci_lower_above_zero": float(np.mean(
                 [r["final_gain"]["ci95"][0] > 0 for r in recs])),
             "per_effect_first_step": _per_effect(cands, min_gain),
+            **({"gates": gate_rates(recs, thresholds)}
+               if thresholds and all("looks" in r for r in recs) else {}),
         }
     return out
+
+
+def _failing_columns(look: dict) -> list[dict]:
+    return [c for c in look["columns"] if c["failed_tests"]]
+
+
+def gate_rates(records: list[dict], thresholds: dict[str, float]) -> dict:
+    """Per verdict gate, how often effect-free data cross it (a false alarm when every
+    other gate lets it through too), with the null distribution of what it thresholds.
+
+    * ``validity``: a held-out column fails a validity test (first look): the second
+      look on a wider band runs;
+    * ``second_look_cause``: the wider band names a cause (a false alarm);
+    * ``noise_ratio``: a failing column of the motion band's look has an RMS error of at
+      least ``noise_ratio`` times the noise and ``min_error_pct`` of its signal: with no
+      cause, ``unexplained`` (``rate_wider_look``: the same on the wider look, which
+      decides nothing: its null distribution beside it);
+    * ``unusable``: the nominal model's training error exceeds ``unusable_error_pct``;
+    * ``verdict``: any verdict but ``none`` (every gate together)."""
+    ratio, pct = thresholds["noise_ratio"], thresholds["min_error_pct"]
+
+    def worst(look: dict) -> float:
+        return max((c["noise_ratio"] for c in _failing_columns(look)
+                    if c["relative_error_pct"] >= pct), default=0.0)
+
+    first = np.array([worst(r["looks"][0]) for r in records])
+    second = np.array([worst(r["looks"][1]) if len(r["looks"]) > 1 else 0.0
+                       for r in records])
+    failing = np.array([bool(_failing_columns(r["looks"][0])) for r in records])
+    looked = np.array([len(r["looks"]) > 1 for r in records])
+    found = np.array([len(r["looks"]) > 1 and r["looks"][1].get("from") == "residual"
+                      for r in records])
+    train = np.array([r["train_relative_error_pct"] for r in records])
+
+    def rate(x: np.ndarray) -> float:
+        return float(np.mean(x)) if len(x) else 0.0
+
+    return {
+        "datasets": len(records),
+        "validity": {"rate": rate(failing), "second_look_ran": rate(looked)},
+        "second_look_cause": {"rate": rate(found)},
+        "noise_ratio": {"threshold": ratio, "min_error_pct": pct,
+                        "rate": rate(first >= ratio),
+                        "rate_wider_look": rate(second >= ratio),
+                        "largest": float(first.max()) if len(first) else 0.0,
+                        "largest_wider_look": float(second.max()) if len(second) else 0.0,
+                        "quantiles_first_look": quantiles(first[failing]),
+                        "quantiles_wider_look": quantiles(second[looked])},
+        "unusable": {"threshold": thresholds["unusable_error_pct"],
+                     "rate": rate(train > thresholds["unusable_error_pct"]),
+                     "largest_train_error_pct": float(train.max()) if len(train) else 0.0},
+        "verdict": {"rate": rate(np.array([r["verdict"] != "none" for r in records])),
+                    "unexplained": rate(np.array([r["verdict"] == "unexplained"
+                                                  for r in records]))},
+    }
 
 
 def _per_effect(cands: list[dict], min_gain: float) -> dict:

@@ -25,11 +25,19 @@ from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.lab import simulate_lab
 
 
-def lab_dataset(rig, effects: list[Effect], seed: int, duration_s: float | None = None
-                ) -> Dataset:
-    """The `trajectory=diagnosis` experiment (five runs, spiral held out) with effects."""
+def lab_dataset(rig, effects: list[Effect], seed: int, duration_s: float | None = None,
+                n_runs: int | None = None) -> Dataset:
+    """The `trajectory=diagnosis` experiment (five runs, spiral held out) with effects.
+
+    ``n_runs`` (1-5) keeps fewer runs: the first ``n_runs - 1`` families and the
+    held-out spiral, or for one run the first family alone (its last block held out)."""
     traj = compose_config("simulate", ["trajectory=diagnosis"]).trajectory
-    lab = simulate_lab(rig, dict(traj.counts), effects=effects,
+    counts = dict(traj.counts)
+    if n_runs is not None:
+        families = list(counts)
+        keep = families[:1] if n_runs == 1 else families[:n_runs - 1] + families[-1:]
+        counts = {f: counts[f] for f in keep}
+    lab = simulate_lab(rig, counts, effects=effects,
                        duration_s=float(duration_s or traj.duration_s), seed=seed)
     return Dataset(f"lab(seed={seed})", rig, lab.trajectories)
 

@@ -9,6 +9,7 @@ from cdpr_pipeline.tracking.mlflow import (
     latest_runs,
     log_metrics,
     log_params_once,
+    log_run,
     make_logger,
     mlflow_client,
     run_name,
@@ -17,5 +18,5 @@ from cdpr_pipeline.tracking.mlflow import (
 )
 
 __all__ = ["DEFAULT_TRACKING_URI", "PARENT_RUN_ENV", "experiment_id", "finished_or_failed",
-           "flatten_params", "latest_runs", "log_metrics", "log_params_once", "make_logger",
-           "mlflow_client", "run_name", "stage_run", "tracking_uri"]
+           "flatten_params", "latest_runs", "log_metrics", "log_params_once", "log_run",
+           "make_logger", "mlflow_client", "run_name", "stage_run", "tracking_uri"]

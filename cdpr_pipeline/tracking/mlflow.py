@@ -215,12 +215,41 @@ def stage_run(name: str, experiment: str, uri: str | None = None,
 def log_params_once(client, run_id: str, params: Mapping[str, str]) -> None:
     """Log params the run does not have yet (MLflow refuses to change a logged param);
     values are cut to MLflow's 6000 characters."""
-    from mlflow.entities import Param
+    log_run(client, run_id, params=params)
 
-    have = client.get_run(run_id).data.params
-    new = [Param(k, str(v)[:6000]) for k, v in params.items() if k not in have]
-    for lo in range(0, len(new), 100):
-        client.log_batch(run_id, params=new[lo:lo + 100])
+
+#: what one ``log_batch`` request may carry (MLflow's limits)
+BATCH_PARAMS, BATCH_METRICS, BATCH_ENTRIES = 100, 1000, 1000
+
+
+def log_run(client, run_id: str, params: Mapping[str, Any] | None = None,
+            metrics: Mapping[str, float] | None = None, step: int = 0) -> int:
+    """Log params and metrics together in as few ``log_batch`` requests as MLflow's
+    limits allow (one for a diagnosis's 70-odd params and 40-odd metrics): each request
+    is a transaction on the store. Params the run already has are left as they are (MLflow
+    refuses to change one; values cut to 6000 characters); metric names are made
+    acceptable (:func:`metric_name`) and non-finite values (a NaN time-to-best, an
+    undefined R^2) left out rather than stored as numbers. Returns the requests made."""
+    import math
+    import time
+
+    from mlflow.entities import Metric, Param
+
+    new: list = []
+    if params:
+        have = client.get_run(run_id).data.params
+        new = [Param(k, str(v)[:6000]) for k, v in params.items() if k not in have]
+    now = int(time.time() * 1000)
+    items = [Metric(metric_name(k), float(v), now, step) for k, v in (metrics or {}).items()
+             if v is not None and math.isfinite(float(v))]
+    requests = 0
+    while new or items:
+        batch_params, new = new[:BATCH_PARAMS], new[BATCH_PARAMS:]
+        room = min(BATCH_METRICS, BATCH_ENTRIES - len(batch_params))
+        batch_metrics, items = items[:room], items[room:]
+        client.log_batch(run_id, metrics=batch_metrics, params=batch_params)
+        requests += 1
+    return requests
 
 
 def metric_name(name: str) -> str:
@@ -236,19 +265,10 @@ def metric_name(name: str) -> str:
 
 
 def log_metrics(client, run_id: str, metrics: Mapping[str, float], step: int = 0) -> None:
-    """Log many metrics in batches (one request per 500), their names made acceptable to
+    """Log many metrics in batches (:func:`log_run`), their names made acceptable to
     MLflow (:func:`metric_name`). Non-finite values (a NaN time-to-best, an undefined
     R^2) are left out rather than stored as numbers."""
-    import math
-    import time
-
-    from mlflow.entities import Metric
-
-    now = int(time.time() * 1000)
-    items = [Metric(metric_name(k), float(v), now, step) for k, v in metrics.items()
-             if v is not None and math.isfinite(float(v))]
-    for lo in range(0, len(items), 500):
-        client.log_batch(run_id, metrics=items[lo:lo + 500])
+    log_run(client, run_id, metrics=metrics, step=step)
 
 
 def latest_runs(experiment: str, uri: str | None = None, task: str = "train",

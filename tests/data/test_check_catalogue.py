@@ -158,6 +158,8 @@ CASES = [
          "drum_radius_m"),
     Case("rig_key", "cdpr", rig(lambda d: d["controller"].update(gain=3.0)), "rig.yaml",
          "controller.gain"),
+    Case("rig_controller", "axes", rig(lambda d: d.update(controller={
+        "type": "position_loop", "rate_hz": 100.0, "kp": -1.0})), "rig.yaml", "controller.kp"),
     Case("missing_dataset", "cdpr", remove("."), "<root>"),
     Case("missing_trajectories", "cdpr", remove("trajectories"), "trajectories/"),
     Case("no_trajectories", "cdpr", lambda r: [p.unlink() for p in
@@ -213,7 +215,7 @@ CASES = [
     Case("no_reversal", "foreign", text(C0, lambda ls: ls[:101]), C0, "l1"),
     Case("window_split", "foreign", text(C0, lambda ls: ls[:101]), C0, "t"),
     Case("no_desired", "axes", frame(AX, lambda t: t.drop(columns=["qd1"])), AX, "qd1", 1),
-    Case("not_simulated", "axes", lambda r: None, "rig.yaml", "kind"),
+    Case("not_simulated", "axes", lambda r: None, "rig.yaml", "controller"),
 ]
 
 

@@ -97,7 +97,8 @@ def test_drive_axes_answer_as_the_data_spec_states(n):
     assert rig.nominal_winch is rig.nominal
     assert [(s.field, s.names(n), s.required) for s in rig.signals] == [
         ("position", q, True), ("desired", [f"qd{i}" for i in range(1, n + 1)], False),
-        ("torques", [f"u{i}" for i in range(1, n + 1)], True)]
+        ("torques", [f"u{i}" for i in range(1, n + 1)], True),
+        ("external", [f"fext{i}" for i in range(1, n + 1)], False)]
     assert rig.signal("lengths") is None
     assert rig.signal("desired").describe() == "qd1..qdn"
     assert rig.position_names == rig.axes and not rig.shared_position_units

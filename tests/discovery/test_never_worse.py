@@ -4,6 +4,8 @@ re-identified first and the report says it was unusable."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -92,6 +94,28 @@ def test_never_worse_withdraws_the_harmful_cause_beside_a_helpful_one(payload_la
     assert [c.label for c in kept.causes] == ["payload_mass_error"], lab["case"]
     assert kept.withdrawn == ("drum_radius_error",), lab["case"]
     assert kept.gain.ci95[0] > 0, lab["case"]
+
+
+def test_a_cause_that_harms_alone_is_kept_only_with_its_interaction(payload_lab):
+    """Twice the true payload error and a correction of the opposite sign: the correction
+    alone makes the held-out runs worse (its held-out contribution is negative), beside
+    the first it removes its overshoot. It stays, its evidence saying why (what it adds
+    to the other, what it does alone, which cause it helps); the first has none."""
+    lab = payload_lab
+    e = lab["true"].relative
+    over = dataclasses.replace(_cause(PayloadMassError(2 * e), "torque", 2e4),
+                               label="overshoot")
+    back = dataclasses.replace(_cause(PayloadMassError(-e), "torque", 1e4),
+                               label="correction")
+    kept = _never_worse(lab, [over, back])
+    assert [c.label for c in kept.causes] == ["overshoot", "correction"], lab["case"]
+    first, second = kept.causes
+    assert first.contribution > 0 and first.interaction is None, lab["case"]
+    assert second.contribution < 0, lab["case"]
+    i = second.interaction
+    assert i["alone_pct"] < 0 < i["adds_to_others_pct"], (lab["case"], i)
+    assert i["with"] == ["overshoot"] and i["adds_with_pct"]["overshoot"] > 0, lab["case"]
+    assert second.evidence()["interaction"] == i
 
 
 # ------------------------------------------------------------------ in the diagnosis

@@ -79,7 +79,7 @@ def test_pulse_edge_transients_are_half_timing(emps, readings):
     rest is no first-order lag (the best lag on top of the held reading is 0; see the
     benchmark)."""
     run = {tr.name: tr for tr in emps.trajectories}[TEST[0]]
-    edges = pulse_edges(run.extra["pulses_n"], run.t)
+    edges = pulse_edges(run.external[:, 0], run.t)
     assert len(edges) > 20
     share = {p: edge_share(d.nominal, d.nominal, d.test[0], edges, 0.05)
              for p, d in readings.items()}

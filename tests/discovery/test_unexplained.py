@@ -19,13 +19,10 @@ import numpy as np
 import pytest
 
 from cdpr_pipeline.data.reading import resolve_settings
+from cdpr_pipeline.discovery.adequacy import heldout_columns, unexplained_residual
 from cdpr_pipeline.discovery.bands import row_noise
-from cdpr_pipeline.discovery.diagnosis import (
-    DiagnosisSettings,
-    summary_sentence,
-    unexplained_residual,
-)
-from cdpr_pipeline.discovery.residuals import Residuals, nominal_model
+from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, summary_sentence
+from cdpr_pipeline.discovery.residuals import Residuals
 from cdpr_pipeline.discovery.results import HeldoutGain
 from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.testing.foreign_cases import FAST, foreign_case, foreign_settings
@@ -101,15 +98,20 @@ def test_where_it_sits_is_every_material_column(quiet_lab, seed):
     rows = size * np.sin(2 * np.pi * rng.uniform(0.3, 2.0, 3) * t[:, None])
     res = Residuals([held[0].name], [{"torque": rows}])
     validity = {"u1": _validity(True), "u2": _validity(False), "u3": _validity(False)}
-    found = unexplained_residual(res, held, nominal_model(rig, regression.sign_sharpness),
-                                 validity, settings)
+
+    def verdict(validity):
+        columns = heldout_columns(res, held, validity, settings.selection.alpha)
+        return unexplained_residual(columns, settings.unexplained_noise_ratio,
+                                    settings.unexplained_min_error_pct,
+                                    settings.selection.alpha, 5.0)
+
+    found = verdict(validity)
     assert [c.channel for c in found.columns] == ["u1", "u3"], seed
     assert found.share_of_error > 0.99, seed
     assert found.columns[0].failed_tests == ("ljung_box",)
     assert found.columns[1].failed_tests == ()
     # no material column fails a test: not unexplained
-    assert unexplained_residual(res, held, None, {c: _validity(False) for c in validity},
-                                settings) is None
+    assert verdict({c: _validity(False) for c in validity}) is None
 
 
 def test_none_never_claims_adequacy_when_tests_failed():
@@ -122,40 +124,46 @@ def test_none_never_claims_adequacy_when_tests_failed():
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("kind", ["cdpr", "axes"])
 @pytest.mark.parametrize("ratio", [(2.0, 10.0), (10.0, 40.0)])
-def test_a_periodic_torque_above_the_motion_band_is_never_none(tmp_path, seed, ratio):
-    """A torque periodic in a winch angle (the independent generator's ``cogging``,
-    upper half of its amplitude range) whose frequency at the typical winch speed is
-    2-10 or 10-40 times the motion's bandwidth (as the pipeline measures it on the
-    effect-free recording of the same rig and references; the band the motion gives the
-    regression is 10 times it, so the first lies partly, the second mostly above it; the
-    issue's 6-19 Hz torque was 15-45 times it and got ``none``). It must get ``cogging``
-    (or ``unnamed``, beyond the period counts the candidate scans) with a held-out gain
-    (the band following the residual: ``follow_residual``), or ``unexplained``, and
-    never another vocabulary name."""
+def test_a_periodic_torque_above_the_motion_band_is_never_none(tmp_path, seed, ratio, kind):
+    """A torque periodic in a winch angle (the independent generator's ``cogging``) or
+    in a prismatic axis's position without a stated pitch (its ``periodic_torque``,
+    outside the vocabulary), upper half of its amplitude range, whose frequency at the
+    typical speed is 2-10 or 10-40 times the motion's bandwidth (as the pipeline
+    measures it on the effect-free recording of the same rig and references; the band
+    the motion gives the regression is about 10 times it, so the first lies partly, the
+    second mostly above it; the issue's 6-19 Hz torque was 15-45 times it and got
+    ``none``), on both rig kinds. It must get its name (``cogging``; or ``unnamed``:
+    beyond the period counts the candidate scans, and outside the vocabulary) with a
+    held-out gain (on the motion's band, or on the wider band the second look takes
+    whenever a held-out validity test fails: ``follow_residual``), or ``unexplained``:
+    never ``none``, never another vocabulary name."""
     from cdpr_pipeline.data.reading import motion_bandwidth_hz
     from cdpr_pipeline.testing.independent_sim import draw_effect
 
-    runs, duration = FAST["cdpr"]
-    quiet = foreign_case(tmp_path / "quiet", "cdpr", [], seed, n_runs=runs,
+    runs, duration = FAST[kind]
+    quiet = foreign_case(tmp_path / "quiet", kind, [], seed, n_runs=runs,
                          duration_s=duration)
     bandwidth = motion_bandwidth_hz(quiet.dataset.trajectories)
+    name = "cogging" if kind == "cdpr" else "periodic_torque"
+    named = {"cogging", "unnamed"} if name == "cogging" else {"unnamed"}
 
     def draw(rig, rng):
-        eff = draw_effect("cogging", rig, rng,
+        eff = draw_effect(name, rig, rng,
                           frequency_hz=(ratio[0] * bandwidth, ratio[1] * bandwidth))
         idx = list(eff.channels)
         amplitude = np.array(eff.params["amplitude"], float)
         amplitude[idx] = rng.uniform(0.55, 0.8, len(idx)) * rig.coulomb[idx]
         return type(eff)(eff.name, eff.channels, {**eff.params, "amplitude": amplitude})
 
-    case = foreign_case(tmp_path, "cdpr", [draw], quiet.seed, n_runs=runs,
+    case = foreign_case(tmp_path, kind, [draw], quiet.seed, n_runs=runs,
                         duration_s=duration)
     record = case.diagnose()
     found = {c["effect"] for c in record["causes"]}
     text = f"motion bandwidth {bandwidth:.3g} Hz: {case.describe()}"
-    assert found <= {"cogging", "unnamed"}, text
-    assert record["verdict"] in ("cogging", "unnamed", "unexplained"), text
+    assert found <= named, text
+    assert record["verdict"] in named | {"unexplained"}, text
     if record["verdict"] != "unexplained":
         assert record["gain"]["ci95"][0] > 0, text
     assert ADEQUATE not in record["summary"], text

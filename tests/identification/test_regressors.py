@@ -61,7 +61,14 @@ def test_emps_converted_dataset(emps):
     raw = loadmat(emps_path() / "DATA_EMPS.mat")
     np.testing.assert_allclose(tr.torques[:, 0], 35.15065188 * raw["vir"].ravel(), rtol=1e-8)
     np.testing.assert_allclose(tr.position[:, 0], raw["qm"].ravel(), rtol=1e-8, atol=1e-12)
-    assert "pulses_n" in emps[1].extra
+    # the pulses: 5.07 V added to vir while pulses_N reads 5 (vir minus the controller
+    # law, measured), in newtons in fext1
+    pulses = loadmat(emps_path() / "DATA_EMPS_PULSES.mat")["pulses_N"].ravel()
+    on = pulses > 0
+    assert emps[1].external is not None and emps[0].external is None
+    np.testing.assert_allclose(emps[1].external[~on, 0], 0.0)
+    assert emps[1].external[on, 0] == pytest.approx(35.15065188 * 5.07, rel=1e-3)
+    assert emps.rig.controller.closed_loop and emps.rig.controller.kv == (243.45,)
 
 
 def test_emps_lsm_reproduces_the_published_identification(emps):

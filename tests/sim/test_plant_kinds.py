@@ -68,7 +68,7 @@ def test_each_model_says_what_it_models():
     axes = nominal_plant(drive_axes(2), None)
     assert (cable.cables, cable.closed_loop, cable.elastic) == (True, True, False)
     assert cable.replace(cable_stiffness=np.full(4, 1e5)).elastic
-    assert (axes.cables, axes.closed_loop, axes.elastic) == (False, False, False)
+    assert (axes.cables, axes.closed_loop, axes.elastic) == (False, True, False)
     assert isinstance(axes, Drives)
 
 

@@ -60,7 +60,7 @@ def test_hard_sign_is_stepped_implicitly_close_to_the_resolved_explicit_steps(pa
     smooth = integration_plant(plant, dt)
     assert not implicit_friction(smooth)
     explicit = BatchSimulator(smooth, nominal, hard.controller, IDEAL, hard.sample_rate_hz,
-                              substeps=HARD_SIGN_SUBSTEPS)
+                              substeps=HARD_SIGN_SUBSTEPS, integrator="rk4")
     a = implicit.run(desired, np.random.default_rng(0))
     b = explicit.run(desired, np.random.default_rng(0))
     assert a.substeps == IMPLICIT_MIN_SUBSTEPS and b.substeps == HARD_SIGN_SUBSTEPS

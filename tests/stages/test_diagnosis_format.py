@@ -22,6 +22,8 @@ from cdpr_pipeline.discovery.results import (
     BlackBoxShare,
     ClosedLoopComparison,
     ClosedLoopErrors,
+    FeedforwardTracking,
+    RunMotionErrors,
     Unexplained,
     UnexplainedColumn,
     Unusable,
@@ -146,11 +148,26 @@ def records(kind_cases):
         d, unusable=Unusable(150.0, 100.0, nominal.winch.as_dict(), kept=True),
         unexplained=Unexplained("torque", (column,), 0.1, 0.01, 20.0, 40.0),
         blackbox=BlackBoxShare("torque", 0.2, 0.9),
-        closed_loop=ClosedLoopComparison(True, None, errors, errors),
+        closed_loop=ClosedLoopComparison(
+            True, None, errors, errors, "closed_loop",
+            {"000_run": RunMotionErrors(True, ((0.001,), (0.0005,)), ((0.002,), (0.001,)),
+                                        ((1.0,), (0.5,)), (5.0, 2.5), False),
+             "001_aside": RunMotionErrors(False, ((0.001,), (0.0005,)),
+                                          ((0.002,), (0.001,)), crosstest=True)},
+            None, ("q1",), ("m",),
+            FeedforwardTracking({"000_run": ((0.001,), (0.0005,))},
+                                {"000_run": ((0.002,), (0.001,))})),
         band={**d.band, "from": "residual", "motion": dict(d.band),
               "tried": {**d.band, "verdict": "none"}})
     out["axes with every optional block"] = diagnosis_record(
         extra, str(kind_cases["axes"].dataset.root))
+    # n steps ahead (no torque, a horizon, why not in closed loop) and a cross-test split
+    n_step = dataclasses.replace(
+        d, crosstest=("001_aside",), closed_loop=ClosedLoopComparison(
+            True, "rig.yaml has no controller", errors, None, "n_step", {}, {
+                "samples": 250, "seconds": 0.25, "bandwidth_hz": 1.0, "why": "..."},
+            ("q1",), ("m",), None, "rig.yaml's controller states no feedforward"))
+    out["axes n steps ahead"] = diagnosis_record(n_step, str(kind_cases["axes"].dataset.root))
     return out
 
 

@@ -156,13 +156,13 @@ def test_unix_time_is_accepted_and_kept_relative(tmp_path, monkeypatch,
 
 
 def test_shipped_recordings_validate_clean_for_every_command(tmp_path) -> None:
-    """EMPS (whole, 2 runs at 1 kHz) and the foreign rig: no problem of the data (EMPS's
-    drive axis is not a rig the virtual lab simulates), every other command says yes."""
+    """EMPS (whole, 2 runs at 1 kHz, its controller in the position_loop schema) and the
+    foreign rig: no problem of the data, every command says yes."""
     emps = convert_emps(emps_path(), tmp_path / "emps")
-    for root, simulated in ((foreign_rig_path(), True), (emps, False)):
+    for root in (foreign_rig_path(), emps):
         assert validate_dataset(root).problems == []
         report = validate_report(root)
-        assert [p.kind for p in report.problems] == ([] if simulated else ["not_simulated"])
+        assert report.problems == []
         assert {c: v.usable for c, v in report.commands.items()} == {
             "identify": True, "diagnose": True, "train": True, "virtual": True,
-            "repro": True, "simulate": simulated}
+            "repro": True, "simulate": True}

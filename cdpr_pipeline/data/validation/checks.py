@@ -55,6 +55,9 @@ CHECKS: dict[str, Check] = {
     "rig_count": Check("rig.yaml", E, "a per-cable or per-axis list whose length differs "
                        "from `anchors_m` or `axes`; fewer than 3 anchors"),
     "rig_key": Check("rig.yaml", E, "an unknown key in a cable robot's `controller`"),
+    "rig_controller": Check("rig.yaml", E, "a drive axes' `controller` of `type: "
+                            "position_loop` that breaks its schema (an unknown key, a "
+                            "missing or bad value)"),
     # the dataset directory
     "missing_dataset": Check("dataset", E, "the dataset directory does not exist"),
     "missing_trajectories": Check("dataset", E, "no `trajectories/` directory"),
@@ -132,8 +135,8 @@ CHECKS: dict[str, Check] = {
                           "windows, or to cut into training, validation and test blocks"),
     "no_desired": Check("commands", EW, "virtual: the runs have no desired columns "
                         "(`xd,yd,zd` or `qd1..qdn`) to drive a trained predictor along"),
-    "not_simulated": Check("commands", W, "simulate: the virtual lab cannot run this kind "
-                           "of rig"),
+    "not_simulated": Check("commands", W, "simulate: the virtual lab cannot run these "
+                           "drive axes (rig.yaml states no `position_loop` controller)"),
 }
 
 

@@ -24,7 +24,8 @@ ANCHOR_CLEARANCE_M = FRAME_TOLERANCE_M
 #: Time (after the first sample): 30 years; axis positions 1000 km or 1.6e5 turns;
 #: forces/torques 1e10 N (N m), 10x the largest presses and drives; velocity 1e4 m/s;
 #: acceleration 1e6 m/s^2.
-PHYSICAL_LIMITS = {"t": 1e9, "q": 1e6, "qd": 1e6, "u": 1e10, "v": 1e4, "a": 1e6}
+PHYSICAL_LIMITS = {"t": 1e9, "q": 1e6, "qd": 1e6, "u": 1e10, "fext": 1e10, "v": 1e4,
+                   "a": 1e6}
 #: fastest a measured position may change, m/s or rad/s (about 1e6 rpm): a faster
 #: jump between two samples is a corrupt sample, not motion
 MAX_SPEED = 1e5
@@ -67,8 +68,9 @@ def check_limits(run: RunFile, columns: dict[str, np.ndarray]) -> None:
     anchor frame instead, in :func:`check_cable_robot`)."""
     prefixes = channel_prefixes(run.rig)
     for name, values in columns.items():
-        match = re.match(r"^(t|qd|q|u|v|a)[0-9xyz]*$", name)
-        if match is None or (match.group(1) in ("q", "qd") and match.group(1) not in prefixes):
+        match = re.match(r"^(t|qd|q|u|fext|v|a)[0-9xyz]*$", name)
+        if match is None or (match.group(1) in ("q", "qd", "fext")
+                             and match.group(1) not in prefixes):
             continue    # q, qd: a column of another kind (a cable robot's extra)
         if match.group(1) in ("v", "a") and name[1:] not in ("x", "y", "z"):
             continue  # an extra column such as 'alpha': not a velocity

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from ..axis_controller import parse_axis_controller
 from ..errors import Problem
 from ..rig import (
     FORMAT,
@@ -186,13 +187,17 @@ class _RigChecker:
         controller = self.raw.get("controller")
         if controller is not None and not isinstance(controller, Mapping):
             self.error("controller", "must be a mapping", "rig_shape")
+        elif controller is not None:
+            controller, problems = parse_axis_controller(controller, n)
+            for key, message in problems:
+                self.error(key, message, "rig_controller")
         extra = {k: v for k, v in self.raw.items() if k not in _AXES_KEYS}
         virtual = self._virtual()
         if self.problems or rate is None or names is None or nominal is None:
             return None
         return AxesRig(sample_rate_hz=rate, axes=tuple(names), nominal=nominal,
-                       controller=None if controller is None else dict(controller),
-                       virtual=virtual, extra=extra, coulomb_sharpness=law)
+                       controller=controller, virtual=virtual, extra=extra,
+                       coulomb_sharpness=law)
 
     def _anchors(self) -> np.ndarray | None:
         raw = self.required("anchors_m")

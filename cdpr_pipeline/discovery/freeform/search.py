@@ -213,11 +213,12 @@ class FreeFormSearch:
         reg = L0Regression(max_terms, self.regression.penalty, self.regression.max_overlap
                            ).fit(X, y, pair_cost, groups)
         support, coef = reg.support_, reg.coef_
-        own = np.einsum("ij,ij->j", residual, residual)
+        own = _own_columns(X, y, support, groups, n)
         support, coef = prune_weak_terms(X, y, support, own[groups], self.min_term_gain)
         while support:
             fitted = y - X[:, support] @ coef[support]
             rss = float(fitted @ fitted)
+            own = _own_columns(X, y, support, groups, n)
             weakest, worst = None, np.inf
             for g in sorted(set(groups[support].tolist())):
                 rest = [k for k in support if groups[k] != g]
@@ -234,3 +235,21 @@ class FreeFormSearch:
                 coef[support] = np.linalg.lstsq(X[:, support], y, rcond=None)[0]
         return tuple(FreeFormTerm(int(k // L) + 1, library[k % L], float(coef[k]))
                      for k in support)
+
+
+def _own_columns(X: np.ndarray, y: np.ndarray, support: Sequence[int], groups: np.ndarray,
+                 n: int) -> np.ndarray:
+    """Per winch, the sum of squares left on its own column of the stacked residual
+    ``y`` (rows x n, raveled) once the other winches' terms of ``support`` are fitted:
+    what its own terms have to explain. On a redundant rig a winch's term reaches every
+    column through the internal-force projection, so the raw column of a winch beside a
+    much larger effect holds mostly that one (a drag 30 times larger on one winch of
+    four hid the others' own drags below the practical thresholds, and re-fitted
+    friction parameters named in their place took them)."""
+    out = np.zeros(n)
+    for g in range(n):
+        rest = [k for k in support if groups[k] != g]
+        left = y - (X[:, rest] @ np.linalg.lstsq(X[:, rest], y, rcond=None)[0]
+                    if rest else 0.0)
+        out[g] = float(np.sum(left.reshape(-1, n)[:, g] ** 2))
+    return out

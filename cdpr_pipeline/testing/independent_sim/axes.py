@@ -1,6 +1,7 @@
 """Kind ``axes``: independent drive axes (a linear axis in m, or a joint in rad).
 
-Each axis is one body, ``I q'' + F_v q' + F_c sign(q') + d = tau`` (hard sign), plus any
+Each axis is one body, ``I q'' + F_v q' + F_c sign(q') + d = tau`` (hard sign; or
+``F_c tanh(k q')``, taken at the end-of-step speed, where the rig states it), plus any
 hidden effects, driven by its own position loop. Parameter scales span what real drives
 have: inertia 1e-3..1e2, viscous up to 1e4.
 
@@ -31,7 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from .effects import Effect, TrueModel, lag_response, true_model
+from .effects import (
+    Effect,
+    TrueModel,
+    coulomb_law_yaml,
+    lag_response,
+    solve_tanh_implicit,
+    true_model,
+)
 from .writer import FORMAT, RunTruth, Truth, simulate_and_write
 
 AXES_FAMILIES = ("multisine", "moves", "mixed")
@@ -68,6 +76,12 @@ class AxesRigSpec:
     #: per axis the travel of a prismatic axis per motor revolution, m (rig.yaml's
     #: ``pitch_m``), NaN where not stated (a rotary joint); None: stated for none
     pitch_m: np.ndarray | None = None
+    #: state the controller in rig.yaml's ``position_loop`` schema (the data format's,
+    #: so that the closed loop can be re-simulated); False: a free-form description
+    controller_schema: bool = False
+    #: the Coulomb law the axes follow and rig.yaml states: None the hard sign, ``k``
+    #: (s/rad or s/m) ``tanh(k q')``
+    coulomb_tanh: float | None = None
 
     kind = "axes"
 
@@ -149,16 +163,26 @@ class AxesRigSpec:
             "axes": self.names,
             "nominal": {"inertia": self.inertia.tolist(), "viscous": self.viscous.tolist(),
                         "coulomb": self.coulomb.tolist(), "offset": self.offset.tolist(),
-                        "coulomb_law": "sign"},
-            "controller": {"type": "pd_with_feedforward", "kp": kp.tolist(),
-                           "kd": kd.tolist(), "feedforward": "nominal",
-                           "rate_hz": float(self.rate_hz)},
+                        "coulomb_law": coulomb_law_yaml(self.coulomb_tanh)},
+            "controller": self._controller(kp, kd),
             "generator": "cdpr_pipeline.testing.independent_sim",
             **({"joint_types": list(self.joint_types)} if self.joint_types else {}),
             **({"pitch_m": [None if np.isnan(p) or r else float(p)
                             for p, r in zip(self.pitch_m, self.rotary, strict=True)]}
                if self.pitch_m is not None else {}),
         }
+
+    def _controller(self, kp: np.ndarray, kd: np.ndarray) -> dict[str, Any]:
+        if not self.controller_schema:
+            return {"type": "pd_with_feedforward", "kp": kp.tolist(), "kd": kd.tolist(),
+                    "feedforward": "nominal", "rate_hz": float(self.rate_hz)}
+        # the same controller as the data format states one: PD on the error around no
+        # velocity loop, the nominal model as feedforward (this generator's is smoothed),
+        # the velocity a low-passed difference of the encoder position
+        return {"type": "position_loop", "rate_hz": float(self.rate_hz), "kp": kp.tolist(),
+                "kd": kd.tolist(), "derivative": "error", "feedforward": "nominal",
+                "velocity_estimate": "difference",
+                "velocity_filter_hz": self.velocity_filter_hz().tolist()}
 
     def describe(self) -> dict[str, Any]:
         out = self.rig_yaml()
@@ -170,7 +194,8 @@ class AxesRigSpec:
 
 def random_axes_rig(seed: int, n_axes: int | None = None, rate_hz: float | None = None,
                     inertia: Any = None, viscous: Any = None, coulomb: Any = None,
-                    joint_types: Any = None, pitch: bool = False) -> AxesRigSpec:
+                    joint_types: Any = None, pitch: bool = False,
+                    coulomb_tanh: float | None = None) -> AxesRigSpec:
     """Draw random drive axes.
 
     Parameters
@@ -193,6 +218,9 @@ def random_axes_rig(seed: int, n_axes: int | None = None, rate_hz: float | None 
         amplitude, from a stream of its own: the rest of the rig stays the same) and
         state it in rig.yaml as ``pitch_m`` (``null`` on rotary joints); False: no
         pitch stated.
+    coulomb_tanh : float, optional
+        The Coulomb law ``F_c tanh(k q')`` with this ``k``, simulated and stated in
+        rig.yaml; omitted: the hard sign (the same draws either way).
 
     Returns
     -------
@@ -229,7 +257,8 @@ def random_axes_rig(seed: int, n_axes: int | None = None, rate_hz: float | None 
                        ref_hz=ref_hz, bandwidth_hz=bandwidth,
                        damping_ratio=float(rng.uniform(0.7, 1.0)),
                        joint_types=None if joint_types is None else tuple(joint_types),
-                       pitch_m=pitch_m)
+                       pitch_m=pitch_m,
+                       coulomb_tanh=None if coulomb_tanh is None else float(coulomb_tanh))
 
 
 # --------------------------------------------------------------------------- references
@@ -344,6 +373,13 @@ class AxesPlant:
         theta = np.maximum(0.5, 1.0 - self.inertia / np.maximum(stiff, 1e-300))
         momentum = self.inertia * v + h * push - (1.0 - theta) * stiff * v
         level = mdl.friction_level(v)
+        if mdl.coulomb_tanh is not None:
+            # a smooth law: the level at the current speed, tanh at the new one (implicit)
+            v_new = solve_tanh_implicit(self.inertia + theta * stiff, h * level,
+                                        mdl.coulomb_tanh, momentum)
+            phi = level * np.tanh(mdl.coulomb_tanh * v_new)
+            self.last_theta = theta
+            return q + (0.5 * h) * (v + v_new), v_new, phi
         stick = np.abs(momentum) <= h * level
         phi = np.where(stick, momentum / h, level * np.sign(momentum))
         v_new = np.where(stick, 0.0, (momentum - h * phi) / (self.inertia + theta * stiff))
@@ -391,8 +427,12 @@ def simulate_axes_runs(rig: AxesRigSpec, effects: list[Effect], families: list[s
     v_d = np.stack([r[1] for r in refs])
     a_d = np.stack([r[2] for r in refs])
     eps = 0.02 * rig.typical_speed
-    u_ff = (rig.inertia * a_d + rig.viscous * v_d + rig.coulomb * np.tanh(v_d / eps)
-            + rig.offset)
+    # a controller stated in the data format's schema feeds forward the nominal model
+    # exactly as stated (a hard sign, or the stated tanh); otherwise this generator's own
+    # smoothed sign
+    stated = np.sign(v_d) if rig.coulomb_tanh is None else np.tanh(rig.coulomb_tanh * v_d)
+    sign = stated if rig.controller_schema else np.tanh(v_d / eps)
+    u_ff = rig.inertia * a_d + rig.viscous * v_d + rig.coulomb * sign + rig.offset
 
     substeps = int(np.ceil(SUB_RATE_HZ / rig.rate_hz - 1e-9))
     h = 1.0 / (rig.rate_hz * substeps)

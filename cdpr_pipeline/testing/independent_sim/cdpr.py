@@ -1,7 +1,8 @@
-"""Kind ``cdpr``: a suspended point-mass cable robot with 3 or 4 cables.
+"""Kind ``cdpr``: a suspended point-mass cable robot with 3 to 8 cables.
 
 Physics (``docs/data-format.md``): winch i obeys
-``I theta'' + F_v theta' + F_c sign(theta') + d = u - r t`` (hard sign), the platform
+``I theta'' + F_v theta' + F_c sign(theta') + d = u - r t`` (hard sign; or
+``F_c tanh(k theta')`` where the rig states that law), the platform
 ``m p'' = sum_i t_i k_i + m g`` with ``k_i = (A_i - p) / |A_i - p|``; theta is positive
 reeling in.
 
@@ -18,16 +19,19 @@ except the viscous torque (trapezoid: at the sub-step's mean speed), the set-val
 friction implicit (``phi_i in F_i Sgn(w_i+)``, a small box-constrained QP
 in the winch speeds, solved by projected Gauss-Seidel only on the sub-steps where the
 sign guess fails), the position by the trapezoid rule. Winches really stick (``w = 0``
-with ``|phi| <= F``) instead of chattering. Tensions follow per winch as
+with ``|phi| <= F``) instead of chattering. A rig stating ``tanh(k w)`` has
+``phi_i = F_i tanh(k w_i+)`` instead, at the same end-of-step speeds (Newton's method,
+:mod:`.cdpr_plants`). Tensions follow per winch as
 ``t = (tau - smooth - I w' - phi) / r``; a tension reaching zero (a slack cable, which
 rigid cables cannot model) raises :class:`SlackCableError`.
 
 Elastic cables (only with the ``cable_elasticity`` effect): platform and winches are
 separate bodies coupled by springs ``t = max(0, EA (L - l0 + tau_d (L' - l0')) / l0)``;
 symplectic Euler with a step below the cable modes, winch friction solved exactly per
-winch (1-D stick/slip).
+winch (1-D stick/slip, or the 1-D tanh equation).
 
-Controller (its own, not the spec's ``computed_torque_pd``): a joint-space PD on the
+Controller, by default its own (not the spec's ``computed_torque_pd``, which
+``controller="computed_torque_pd"`` selects, :mod:`.cdpr_control`): a joint-space PD on the
 encoder lengths towards the desired cable lengths (inverse kinematics of the desired
 platform path on the nominal geometry; errors projected onto the length changes a
 platform motion can make, so that 4 winches do not fight over model errors), plus a
@@ -48,7 +52,10 @@ from typing import Any
 
 import numpy as np
 
-from .effects import Effect, TrueModel, lag_response, true_model
+from .cdpr_control import ComputedTorque
+from .cdpr_geometry import MAX_CABLES, distribute_tensions, unit_vectors
+from .cdpr_plants import ElasticPlant, RigidPlant
+from .effects import Effect, coulomb_law_yaml, lag_response, true_model
 from .writer import FORMAT, RunTruth, Truth, simulate_and_write
 
 #: trajectory families (the part of the file name after the index)
@@ -60,6 +67,8 @@ DEFAULT_TRAIN_FAMILIES = ("flat_circle", "oblique_eight", "multisine", "oblique_
 TYPICAL_PLATFORM_SPEED = 0.5  # m/s, sets the per-winch speed scale of the effect ranges
 ACCEL_LIMIT_G = 0.25  # desired accelerations stay below this fraction of g
 SUB_RATE_HZ = 1000.0  # the rigid plant takes sub-steps of at most 1 ms
+#: the controllers a rig may have (:attr:`RigSpec.controller`)
+CONTROLLERS = ("joint_pd", "computed_torque_pd")
 
 
 @dataclass(frozen=True)
@@ -90,6 +99,13 @@ class RigSpec:
     mocap_noise_m: float = 1e-4
     torque_noise_nm: np.ndarray | None = None
     encoder_counts: int | None = 2**16
+    #: the Coulomb law the winches follow and rig.yaml states: None the hard sign, ``k``
+    #: (s/rad) ``tanh(k w)``
+    coulomb_tanh: float | None = None
+    #: ``joint_pd`` (this generator's own, stated under ``controller_info``) or
+    #: ``computed_torque_pd`` (the format's, stated under ``controller``, so that the
+    #: pipeline can re-simulate the closed loop)
+    controller: str = "joint_pd"
 
     kind = "cdpr"
 
@@ -104,6 +120,8 @@ class RigSpec:
         object.__setattr__(self, "torque_noise_nm",
                            np.broadcast_to(np.asarray(self.torque_noise_nm, float),
                                            (self.n,)).copy())
+        if self.controller not in CONTROLLERS:
+            raise ValueError(f"controller {self.controller!r}: one of {CONTROLLERS}")
 
     @property
     def n(self) -> int:
@@ -144,6 +162,12 @@ class RigSpec:
         omega = 2 * np.pi * self.bandwidth_hz
         return inertia * omega**2, 2 * self.damping_ratio * inertia * omega
 
+    def platform_gains(self) -> tuple[float, float]:
+        """The computed-torque controller's gains on the platform error, ``(kp [1/s^2],
+        kd [1/s])``: the same bandwidth and damping ratio as the joint PD."""
+        omega = 2 * np.pi * self.bandwidth_hz
+        return omega**2, 2 * self.damping_ratio * omega
+
     def velocity_filter_hz(self) -> float:
         return min(30.0, self.rate_hz / 5.0)
 
@@ -151,10 +175,11 @@ class RigSpec:
         return replace(self, **changes)
 
     def rig_yaml(self) -> dict[str, Any]:
-        """The ``rig.yaml`` mapping: the nominal model; the controller is not the spec's
-        ``computed_torque_pd``, so it goes under the extra key ``controller_info``."""
+        """The ``rig.yaml`` mapping: the nominal model; the joint PD controller is not the
+        spec's ``computed_torque_pd``, so it goes under the extra key ``controller_info``
+        (the computed-torque one under ``controller``)."""
         kp, kd = self.gains()
-        return {
+        out = {
             "format": FORMAT,
             "kind": "cdpr",
             "sample_rate_hz": float(self.rate_hz),
@@ -166,7 +191,7 @@ class RigSpec:
                               "viscous": self.viscous.tolist(),
                               "coulomb": self.coulomb.tolist(),
                               "offset": self.offset.tolist(),
-                              "coulomb_law": "sign"},
+                              "coulomb_law": coulomb_law_yaml(self.coulomb_tanh)},
             "controller_info": {
                 "type": "joint_space_pd_with_feedforward",
                 "description": "PD on encoder lengths to desired cable lengths (errors "
@@ -176,6 +201,13 @@ class RigSpec:
                 "min_tension_n": float(self.min_tension_n), "rate_hz": float(self.rate_hz)},
             "generator": "cdpr_pipeline.testing.independent_sim",
         }
+        if self.controller == "computed_torque_pd":
+            kp_p, kd_p = self.platform_gains()
+            del out["controller_info"]
+            out["controller"] = {"type": "computed_torque_pd", "kp": float(kp_p),
+                                 "kd": float(kd_p), "min_tension_n": float(self.min_tension_n),
+                                 "feedforward": "winch_nominal", "rate_hz": float(self.rate_hz)}
+        return out
 
     def describe(self) -> dict[str, Any]:
         out = self.rig_yaml()
@@ -189,60 +221,6 @@ class RigSpec:
 
 class SlackCableError(RuntimeError):
     """A cable's tension reached zero: the data would not follow the stated physics."""
-
-
-# --------------------------------------------------------------------------- geometry
-
-
-def unit_vectors(anchors: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Cable unit vectors towards the anchors and cable lengths.
-
-    Parameters
-    ----------
-    anchors : ndarray, shape (n, 3)
-    p : ndarray, shape (..., 3)
-
-    Returns
-    -------
-    k : ndarray, shape (..., n, 3)
-    length : ndarray, shape (..., n)
-    """
-    d = anchors - np.asarray(p)[..., None, :]
-    length = np.sqrt((d * d).sum(-1))
-    return d / length[..., None], length
-
-
-def distribute_tensions(k: np.ndarray, force: np.ndarray, t_min: float) -> np.ndarray:
-    """Tensions with ``sum_i t_i k_i = force``: unique for 3 cables; for 4 the minimum-norm
-    solution moved along the null space just enough to keep every tension >= ``t_min``
-    (or, if impossible, to maximise the smallest).
-
-    Parameters
-    ----------
-    k : ndarray, shape (..., n, 3)
-    force : ndarray, shape (..., 3)
-    t_min : float
-
-    Returns
-    -------
-    ndarray, shape (..., n)
-    """
-    n = k.shape[-2]
-    kt = np.swapaxes(k, -1, -2)  # (..., 3, n): columns are the unit vectors
-    if n == 3:
-        return np.linalg.solve(kt, force[..., None])[..., 0]
-    if n != 4:
-        raise ValueError("the independent simulator supports 3 or 4 cables")
-    t0 = (k @ np.linalg.solve(kt @ k, force[..., None]))[..., 0]
-    # null vector of the 3x4 matrix: signed 3x3 minors (generalised cross product)
-    nu = np.stack([(-1) ** j * np.linalg.det(np.delete(k, j, axis=-2)) for j in range(4)], -1)
-    nu /= np.linalg.norm(nu, axis=-1, keepdims=True)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        bound = (t_min - t0) / nu
-    lo = np.where(nu > 0, bound, -np.inf).max(-1)
-    hi = np.where(nu < 0, bound, np.inf).min(-1)
-    lam = np.where(lo <= hi, np.clip(0.0, lo, hi), 0.5 * (lo + hi))
-    return t0 + lam[..., None] * nu
 
 
 # --------------------------------------------------------------------------- rigs
@@ -260,17 +238,23 @@ def _inradius(points: np.ndarray, center: np.ndarray) -> float:
     return float(min(dist))
 
 
-def random_rig(seed: int, n_cables: int | None = None, rate_hz: float | None = None) -> RigSpec:
+def random_rig(seed: int, n_cables: int | None = None, rate_hz: float | None = None,
+               coulomb_tanh: float | None = None, controller: str = "joint_pd") -> RigSpec:
     """Draw a random suspended cable robot.
 
     Parameters
     ----------
     seed : int
         Seed; the same seed gives the same rig.
-    n_cables : {3, 4}, optional
-        Number of cables; drawn when omitted.
+    n_cables : int, optional
+        Number of cables, 3 to 8; drawn (3 or 4) when omitted.
     rate_hz : float, optional
         Sample (and controller) rate; drawn in 100..1000 Hz when omitted.
+    coulomb_tanh : float, optional
+        The Coulomb law ``F_c tanh(k w)`` with this ``k`` (s/rad), simulated and stated
+        in rig.yaml; omitted: the hard sign. Either way the same draws.
+    controller : {"joint_pd", "computed_torque_pd"}
+        The rig's controller (:attr:`RigSpec.controller`); the same draws either way.
 
     Returns
     -------
@@ -282,18 +266,25 @@ def random_rig(seed: int, n_cables: int | None = None, rate_hz: float | None = N
         ``r t_static``: reflected inertia ``I / r^2 <= 2 m``, viscous torque at the
         typical speed ``<= 0.4 r t_static``, Coulomb ``<= 0.3 r t_static``, offset
         ``<= 0.05 r t_static`` (the lower bound shrinks below a cap). Controller
-        bandwidth 2-4 Hz (at most rate/40); minimum tension 0.3 m g with 4 cables.
+        bandwidth 2-4 Hz (at most rate/40); minimum tension 0.3 m g with 4 cables or
+        more. Five to eight anchors stand on a ring like three do, evenly spaced
+        within +-10 degrees.
     """
     rng = np.random.default_rng([int(seed), 0xC0DE])
     n = int(n_cables) if n_cables is not None else int(rng.choice([3, 4]))
-    if n not in (3, 4):
-        raise ValueError("n_cables must be 3 or 4")
+    if not 3 <= n <= MAX_CABLES:
+        raise ValueError(f"n_cables must be 3 to {MAX_CABLES}")
     rate = float(rate_hz) if rate_hz is not None else float(rng.integers(100, 1001))
     height = rng.uniform(2.0, 3.0)
     if n == 3:
         radius_a = rng.uniform(1.3, 2.0)
         ang = np.deg2rad(90.0 + 120.0 * np.arange(3) + rng.uniform(-15, 15, 3))
         rad = radius_a * rng.uniform(0.9, 1.1, 3)
+        xy = np.column_stack([rad * np.cos(ang), rad * np.sin(ang)])
+    elif n > 4:
+        radius_a = rng.uniform(1.3, 2.0)
+        ang = np.deg2rad(90.0 + 360.0 / n * np.arange(n) + rng.uniform(-10, 10, n))
+        rad = radius_a * rng.uniform(0.9, 1.1, n)
         xy = np.column_stack([rad * np.cos(ang), rad * np.sin(ang)])
     else:
         half = rng.uniform(1.0, 2.0, 2)
@@ -308,9 +299,10 @@ def random_rig(seed: int, n_cables: int | None = None, rate_hz: float | None = N
     ws_height = min(0.3, 0.25 * drop)
     mass = rng.uniform(1.0, 10.0)
     radius = rng.uniform(0.02, 0.1, n)
-    # with 4 cables the internal tension is set by the winch torques, so model errors move
-    # it: a preload keeps the cables taut (with 3 the platform alone fixes the tensions)
-    min_tension = max(2.0, 0.3 * mass * 9.81 if n == 4 else 0.2 * mass * 9.81 / n)
+    # with 4 cables or more the internal tension is set by the winch torques, so model
+    # errors move it: a preload keeps the cables taut (with 3 the platform alone fixes
+    # the tensions)
+    min_tension = max(2.0, 0.3 * mass * 9.81 if n >= 4 else 0.2 * mass * 9.81 / n)
     k, _ = unit_vectors(anchors, center)
     hold = radius * distribute_tensions(k, np.array([0.0, 0.0, mass * 9.81]), min_tension)
     speed = TYPICAL_PLATFORM_SPEED / radius
@@ -332,7 +324,9 @@ def random_rig(seed: int, n_cables: int | None = None, rate_hz: float | None = N
         offset=rng.uniform(-1.0, 1.0, n) * np.minimum(0.05, 0.05 * hold),
         center=center, ws_radius=ws_radius, ws_height=ws_height,
         bandwidth_hz=min(rng.uniform(2.0, 4.0), rate / 40.0),
-        damping_ratio=rng.uniform(0.7, 1.0), min_tension_n=min_tension)
+        damping_ratio=rng.uniform(0.7, 1.0), min_tension_n=min_tension,
+        coulomb_tanh=None if coulomb_tanh is None else float(coulomb_tanh),
+        controller=controller)
 
 
 # --------------------------------------------------------------------------- trajectories
@@ -432,166 +426,6 @@ def desired_trajectory(family: str, rig: RigSpec, t: np.ndarray, rng: np.random.
     raise RuntimeError(f"no feasible {family} path for rig seed {rig.seed}")
 
 
-# --------------------------------------------------------------------------- plants
-
-
-class _RigidPlant:
-    """Rigid cables: state (p, v); Moreau-type stepping (see the module docstring)."""
-
-    def __init__(self, model: TrueModel, gravity: np.ndarray, lam: np.ndarray) -> None:
-        self.m, self.g = model.mass, gravity
-        self.anchors, self.r, self.inertia = model.anchors, model.radius, model.inertia
-        self.inv_r = 1.0 / self.r
-        self.m_eye, self.m_g = model.mass * np.eye(3), model.mass * gravity
-        self.model, self.lam = model, lam
-        self._h = None
-
-    def _for_step(self, h: float) -> None:
-        # trapezoid rule for the viscous torque: F_v at the sub-step's mean speed
-        # w + h/2 G a (an explicit F_v w would act like an inertia error of -F_v h / 2);
-        # it folds into an effective inertia I + h F_v / 2 on the G a term
-        if h != self._h:
-            self._h = h
-            self.inertia_eff = self.inertia + 0.5 * h * self.model.viscous
-            self.inertia_col = self.inertia_eff[:, None]
-
-    def init_state(self, p0: np.ndarray, t0: np.ndarray) -> dict[str, np.ndarray]:
-        b = p0.shape[0]
-        return {"p": p0.copy(), "v": np.zeros((b, 3)), "phi": np.zeros((b, self.r.size))}
-
-    def angle(self, st: dict[str, np.ndarray]) -> np.ndarray:
-        return (self.lam - unit_vectors(self.anchors, st["p"])[1]) / self.r
-
-    def step(self, st: dict[str, np.ndarray], tau: np.ndarray, h: float, record: bool):
-        # written for few numpy calls: it runs once per sub-step on tiny arrays
-        self._for_step(h)
-        p, v = st["p"], st["v"]
-        d = self.anchors - p[:, None, :]
-        length = np.sqrt((d * d).sum(-1))
-        jac = d / (length * self.r)[..., None]  # G = diag(1/r) K^T: w = G v
-        jac_t = jac.transpose(0, 2, 1)
-        w = (jac @ v[..., None])[..., 0]
-        curv = (w * w * self.r - (v * v).sum(-1)[:, None] * self.inv_r) / length  # w' = Ga + c
-        angle = (self.lam - length) * self.inv_r
-        smooth = tau - self.model.smooth_torque(w, angle) - self.inertia * curv
-        mass_inv = np.linalg.inv(jac_t @ (self.inertia_col * jac) + self.m_eye)
-        minv_jt = mass_inv @ jac_t
-        acc_free = (mass_inv @ ((jac_t @ smooth[..., None])[..., 0] + self.m_g)[..., None])
-        w_free = w + h * (jac @ acc_free)[..., 0]
-        level = self.model.friction_level(w)
-        phi = _moreau_friction(w_free, jac @ minv_jt, level, h, w, st["phi"])
-        acc = acc_free[..., 0] - (minv_jt @ phi[..., None])[..., 0]
-        v_new = v + h * acc
-        ga = (jac @ acc[..., None])[..., 0]
-        tension = (smooth - phi - self.inertia_eff * ga) * self.inv_r
-        out = {"p": p + (0.5 * h) * (v + v_new), "v": v_new, "phi": phi}
-        info = None
-        if record:
-            info = {"p": p, "v": v, "a": acc, "theta": angle, "w": w, "wdot": ga + curv,
-                    "w_mean": w + 0.5 * h * ga, "length": length, "tension": tension,
-                    "tau": tau.copy(), "friction": phi}
-        return out, info, tension.min(axis=1)
-
-
-def _moreau_friction(w_free: np.ndarray, delassus: np.ndarray, level: np.ndarray, h: float,
-                     w_now: np.ndarray, warm: np.ndarray) -> np.ndarray:
-    """Set-valued friction torques ``phi_i in level_i Sgn(w_i+)``, ``w+ = w_free - h W phi``.
-
-    First guess: every winch slips in the direction it moves (or would move); where that
-    guess contradicts the resulting speeds, the box-constrained QP
-    ``min 1/2 h phi^T W phi - phi^T w_free, |phi_i| <= level_i`` is solved by projected
-    Gauss-Seidel, warm-started from the previous sub-step.
-    """
-    sign = np.sign(np.where(w_now == 0, w_free, w_now))
-    phi = level * sign
-    w_plus = w_free - h * (delassus @ phi[..., None])[..., 0]
-    bad = ((level > 0) & (np.sign(w_plus) != sign)).any(axis=1)
-    if not bad.any():
-        return phi
-    idx = np.flatnonzero(bad)
-    level = np.broadcast_to(level, w_free.shape)
-    wb, lev = w_free[idx], level[idx]
-    hw = h * delassus[idx]
-    x = np.clip(warm[idx], -lev, lev)
-    diag = np.diagonal(hw, axis1=1, axis2=2)
-    # stop on the complementarity of the speeds, not on phi: with 4 cables W is singular
-    # and several stuck winches share their friction in a non-unique way
-    tol = 1e-10 * (1.0 + np.abs(wb).max())
-    for _ in range(500):
-        for i in range(x.shape[1]):
-            resid = wb[:, i] - (hw[:, i, :] * x).sum(-1) + diag[:, i] * x[:, i]
-            x[:, i] = np.clip(resid / diag[:, i], -lev[:, i], lev[:, i])
-        w_plus = wb - (hw @ x[..., None])[..., 0]
-        slack = np.where(x >= lev, np.maximum(-w_plus, 0.0),
-                         np.where(x <= -lev, np.maximum(w_plus, 0.0), np.abs(w_plus)))
-        slack[lev == 0] = 0.0  # no friction, no condition
-        if slack.max() <= tol:
-            break
-    phi[idx] = x
-    return phi
-
-
-class _ElasticPlant:
-    """Elastic cables: state (p, v, theta, w); symplectic Euler below the cable modes."""
-
-    DAMPING_RATIO = 0.1  # material damping of each cable's own mode
-
-    def __init__(self, model: TrueModel, gravity: np.ndarray, lam: np.ndarray,
-                 center: np.ndarray) -> None:
-        self.m, self.g = model.mass, gravity
-        self.anchors, self.r, self.inertia = model.anchors, model.radius, model.inertia
-        self.model, self.lam, self.ea = model, lam, model.ea
-        length = unit_vectors(self.anchors, center)[1]
-        stiff = self.ea / length
-        n = self.r.size
-        # a loss time constant per cable: the cable alone carrying m/n is damped at 10 %,
-        # unless the effect states the cable's own
-        self.tau_d = 2 * self.DAMPING_RATIO / np.sqrt(stiff * n / self.m)
-        if model.cable_damping_s is not None:
-            self.tau_d = np.where(np.isfinite(model.cable_damping_s), model.cable_damping_s,
-                                  self.tau_d)
-        omega = np.sqrt(np.r_[stiff * self.r**2 / self.inertia, stiff.sum() / self.m])
-        rates = np.r_[stiff * self.tau_d * self.r**2 / self.inertia,
-                      (stiff * self.tau_d).sum() / self.m]
-        self.max_step = float(min(0.3 / omega.max(), 0.3 / rates.max()))
-
-    def init_state(self, p0: np.ndarray, t0: np.ndarray) -> dict[str, np.ndarray]:
-        # cables stretched by the initial tensions t0, platform at rest
-        length = unit_vectors(self.anchors, p0)[1]
-        l0 = length / (1.0 + t0 / self.ea)
-        b = p0.shape[0]
-        return {"p": p0.copy(), "v": np.zeros((b, 3)), "theta": (self.lam - l0) / self.r,
-                "w": np.zeros_like(t0)}
-
-    def angle(self, st: dict[str, np.ndarray]) -> np.ndarray:
-        return st["theta"]
-
-    def step(self, st: dict[str, np.ndarray], tau: np.ndarray, h: float, record: bool):
-        p, v, theta, w = st["p"], st["v"], st["theta"], st["w"]
-        k, length = unit_vectors(self.anchors, p)
-        l0 = self.lam - self.r * theta
-        rate = -(k * v[:, None, :]).sum(-1) + self.r * w  # d/dt (L - l0)
-        tension = np.maximum(self.ea * ((length - l0) + self.tau_d * rate) / l0, 0.0)
-        smooth = tau - self.model.smooth_torque(w, theta) - self.r * tension
-        level = self.model.friction_level(w)
-        # viscous torque at the sub-step's mean speed (trapezoid), as in the rigid plant
-        half = 0.5 * h * self.model.viscous
-        momentum = self.inertia * w + h * smooth + half * w
-        stick = np.abs(momentum) <= h * level
-        phi = np.where(stick, momentum / h, level * np.sign(momentum))
-        w_new = np.where(stick, 0.0, (momentum - h * phi) / (self.inertia + half))
-        acc = (k * tension[..., None]).sum(1) / self.m + self.g
-        v_new = v + h * acc
-        out = {"p": p + h * v_new, "v": v_new, "theta": theta + h * w_new, "w": w_new}
-        info = None
-        if record:
-            info = {"p": p, "v": v, "a": acc, "theta": theta, "w": w,
-                    "wdot": (w_new - w) / h, "w_mean": 0.5 * (w + w_new), "length": length,
-                    "unstretched": l0,
-                    "tension": tension, "tau": tau.copy(), "friction": phi}
-        return out, info, tension.min(axis=1)
-
-
 # --------------------------------------------------------------------------- simulation
 
 
@@ -599,6 +433,8 @@ class _ElasticPlant:
 class _Plan:
     families: list[str]
     p_d: np.ndarray  # (B, N, 3)
+    v_d: np.ndarray  # (B, N, 3)
+    a_d: np.ndarray  # (B, N, 3)
     l_d: np.ndarray  # (B, N, n) desired lengths (nominal geometry)
     w_d: np.ndarray  # (B, N, n) desired winch speeds
     u_ff: np.ndarray  # (B, N, n) feedforward torques
@@ -609,7 +445,7 @@ class _Plan:
 def _plan(rig: RigSpec, families: list[str], t: np.ndarray,
           rngs: list[np.random.Generator]) -> _Plan:
     """Desired paths and the controller's feedforward, precomputed for every run."""
-    p_d, l_d, w_d, u_ff, proj, t0 = [], [], [], [], [], []
+    p_d, v_d, a_d, l_d, w_d, u_ff, proj, t0 = [], [], [], [], [], [], [], []
     eps = 0.02 * rig.typical_speed  # tanh smoothing of the feedforward Coulomb term
     for fam, rng in zip(families, rngs, strict=True):
         p, v, a = desired_trajectory(fam, rig, t, rng)
@@ -623,13 +459,15 @@ def _plan(rig: RigSpec, families: list[str], t: np.ndarray,
              + rig.coulomb * np.tanh(w / eps) + rig.offset)
         kt = np.swapaxes(k, 1, 2)
         p_d.append(p)
+        v_d.append(v)
+        a_d.append(a)
         l_d.append(length)
         w_d.append(w)
         u_ff.append(u)
         proj.append(k @ np.linalg.solve(kt @ k, kt))
         t0.append(tension[0])
-    return _Plan(list(families), np.array(p_d), np.array(l_d), np.array(w_d), np.array(u_ff),
-                 np.array(proj), np.array(t0))
+    return _Plan(list(families), np.array(p_d), np.array(v_d), np.array(a_d), np.array(l_d),
+                 np.array(w_d), np.array(u_ff), np.array(proj), np.array(t0))
 
 
 def default_families(n_runs: int) -> list[str]:
@@ -667,10 +505,10 @@ def simulate_runs(rig: RigSpec, effects: list[Effect], families: list[str], dura
     lam = np.linalg.norm(model.anchors - rig.center, axis=1)
     l_cal = rig.home_lengths()
     if model.ea is None:
-        plant: _RigidPlant | _ElasticPlant = _RigidPlant(model, rig.g_vec, lam)
+        plant: RigidPlant | ElasticPlant = RigidPlant(model, rig.g_vec, lam)
         max_step = 1.0 / SUB_RATE_HZ
     else:
-        plant = _ElasticPlant(model, rig.g_vec, lam, rig.center)
+        plant = ElasticPlant(model, rig.g_vec, lam, rig.center)
         max_step = min(1.0 / SUB_RATE_HZ, plant.max_step)
     substeps = int(np.ceil(1.0 / (rig.rate_hz * max_step) - 1e-9))
     h = 1.0 / (rig.rate_hz * substeps)
@@ -690,6 +528,8 @@ def simulate_runs(rig: RigSpec, effects: list[Effect], families: list[str], dura
     w_hat = np.zeros((b, n))
     tau = None
     angle_prev = None
+    computed = ComputedTorque(rig) if rig.controller == "computed_torque_pd" else None
+    p_est = plan.p_d[:, 0].copy()
     for i in range(n_samples):
         angle = plant.angle(state)
         if quantum is not None:
@@ -698,11 +538,17 @@ def simulate_runs(rig: RigSpec, effects: list[Effect], families: list[str], dura
         if angle_prev is not None:
             w_hat = alpha * w_hat + (1 - alpha) * (angle - angle_prev) * rig.rate_hz
         angle_prev = angle
-        # length and length-rate errors, projected onto what platform motions can change:
-        # with 4 cables an inconsistent part (model errors) would make the winches fight
-        err = np.stack([l_enc - plan.l_d[:, i], rig.radius * (plan.w_d[:, i] - w_hat)], -1)
-        err = plan.proj[:, i] @ err
-        u = plan.u_ff[:, i] + (kp * err[..., 0] + kd * err[..., 1]) / rig.radius
+        if computed is not None:
+            u, p_est = computed(l_enc, w_hat, p_est, plan.p_d[:, i], plan.v_d[:, i],
+                                plan.a_d[:, i])
+        else:
+            # length and length-rate errors, projected onto what platform motions can
+            # change: with 4 cables an inconsistent part (model errors) would make the
+            # winches fight
+            err = np.stack([l_enc - plan.l_d[:, i], rig.radius * (plan.w_d[:, i] - w_hat)],
+                           -1)
+            err = plan.proj[:, i] @ err
+            u = plan.u_ff[:, i] + (kp * err[..., 0] + kd * err[..., 1]) / rig.radius
         tau = u.copy() if tau is None else tau  # the drive starts settled
         rec_l[:, i], rec_u[:, i] = l_enc, u
         low = np.full(b, np.inf)
@@ -743,9 +589,13 @@ def simulate_runs(rig: RigSpec, effects: list[Effect], families: list[str], dura
     settings = {"substeps": substeps, "step_s": h, "noise": bool(noise),
                 "mocap_noise_m": mocap_sd, "torque_noise_nm": np.asarray(torque_sd).tolist(),
                 "encoder_quantum_rad": quantum, "plant": type(plant).__name__.strip("_"),
-                "controller": {"kp_nm_per_rad": kp.tolist(), "kd_nms_per_rad": kd.tolist(),
+                "controller": {"type": rig.controller, "kp_nm_per_rad": kp.tolist(),
+                               "kd_nms_per_rad": kd.tolist(),
                                "velocity_filter_hz": rig.velocity_filter_hz()}}
-    if isinstance(plant, _ElasticPlant):
+    if computed is not None:
+        settings["controller"].update(zip(("kp_per_s2", "kd_per_s"), rig.platform_gains(),
+                                          strict=True))
+    if isinstance(plant, ElasticPlant):
         settings["cable_loss_time_constant_s"] = plant.tau_d.tolist()
     return columns, truth, settings
 

@@ -139,7 +139,7 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
         ``cable_elasticity`` only: draw the named cables' Kelvin-Voigt loss time
         constant (s, one for all: one cable material) uniformly in this range, after the
         stiffness (which stays the draw it would be without it); omitted, each cable's
-        own mode is damped at 10 % (:class:`~.cdpr._ElasticPlant`, 1.5-3.5 ms).
+        own mode is damped at 10 % (:class:`~.cdpr.ElasticPlant`, 1.5-3.5 ms).
 
     Returns
     -------
@@ -301,6 +301,10 @@ class TrueModel:
     #: Kelvin-Voigt loss time constant per cable, s; NaN (or None for all): the
     #: elastic plant's default (each cable's own mode damped at 10 %)
     cable_damping_s: np.ndarray | None = None
+    #: the stated Coulomb law: None for the hard sign (set-valued friction, true
+    #: sticking), ``k`` (s/rad) for ``tanh(k w)`` applied to the whole sign-type level
+    #: (Coulomb plus Stribeck's bump)
+    coulomb_tanh: float | None = None
 
     def __post_init__(self) -> None:
         self.refresh()
@@ -378,7 +382,8 @@ def true_model(rig: Any, effects: list[Effect]) -> TrueModel:
         offset=rig.offset.copy(), stribeck_delta=zeros.copy(), stribeck_speed=np.ones(n),
         asym_coefficient=zeros.copy(), asym_side=np.ones(n), quad_coefficient=zeros.copy(),
         periodic_amplitude=zeros.copy(), periodic_wavenumber=zeros.copy(),
-        periodic_phase=zeros.copy(), lag_s=zeros.copy())
+        periodic_phase=zeros.copy(), lag_s=zeros.copy(),
+        coulomb_tanh=getattr(rig, "coulomb_tanh", None))
     if rig.kind == "cdpr":
         model.mass, model.anchors, model.radius = rig.mass, rig.anchors.copy(), rig.radius.copy()
     else:
@@ -454,6 +459,37 @@ def lag_response(lag_s: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     decay = np.where(on, np.exp(-h / safe), 0.0)
     mean_keep = np.where(on, -(safe / h) * np.expm1(-h / safe), 0.0)
     return decay, mean_keep
+
+
+def coulomb_law_yaml(coulomb_tanh: float | None) -> Any:
+    """rig.yaml's ``coulomb_law`` for a law: ``sign``, or ``{tanh: k}``."""
+    return "sign" if coulomb_tanh is None else {"tanh": float(coulomb_tanh)}
+
+
+def solve_tanh_implicit(a: np.ndarray, b: np.ndarray, k: float, rhs: np.ndarray,
+                        tol: float = 1e-12, max_iter: int = 60) -> np.ndarray:
+    """``x`` with ``a x + b tanh(k x) = rhs`` elementwise (``a > 0``, ``b >= 0``): the
+    end-of-step speed of a body whose friction ``b tanh(k x)`` is taken implicitly.
+
+    The left side rises monotonically, so the root lies in
+    ``[(rhs - b) / a, (rhs + b) / a]``; Newton steps that leave the shrinking bracket
+    fall back to bisection (a steep tanh sends plain Newton far away)."""
+    a, b, rhs = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float),
+                                    np.asarray(rhs, float))
+    lo, hi = (rhs - b) / a, (rhs + b) / a
+    x = np.clip(rhs / a, lo, hi)
+    scale = tol * (np.abs(rhs) + b + 1e-300)
+    for _ in range(max_iter):
+        th = np.tanh(k * x)
+        f = a * x + b * th - rhs
+        lo = np.where(f < 0, x, lo)
+        hi = np.where(f > 0, x, hi)
+        if np.all(np.abs(f) <= scale):
+            break
+        newton = x - f / (a + b * k * (1.0 - th * th))
+        inside = (newton > lo) & (newton < hi)
+        x = np.where(inside, newton, 0.5 * (lo + hi))
+    return x
 
 
 def resolve_effects(rig: Any, effects: Any, seed: int) -> list[Effect]:
