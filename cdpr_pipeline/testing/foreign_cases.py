@@ -492,8 +492,8 @@ def null_grid(replicates: int, first_seed: int,
     ``groups``, every run count of ``runs`` and run length of ``lengths``
     (:data:`NULL_LENGTHS`), ``replicates`` times, each with its own seed (independent
     cable robots cycle through :data:`CDPR_RIGS`, drive axes through
-    :data:`AXES_RATES` and what rig.yaml states of them, :data:`AXES_RIGS`). Ordered replicate by replicate, so that any prefix covers the
-    grid as evenly as it can."""
+    :data:`AXES_RATES` and what rig.yaml states of them, :data:`AXES_RIGS`). Ordered
+    replicate by replicate, so that any prefix covers the grid as evenly as it can."""
     out = []
     for k in range(replicates * len(groups) * len(runs) * len(lengths)):
         cell, rep = k % (len(groups) * len(runs) * len(lengths)), k // (
