@@ -5,7 +5,10 @@ virtual lab (``cdpr_pipeline/sim``, the paper rig, the ``trajectory=diagnosis``
 experiment, a different seed each), the independent simulator's cable robots
 (``cdpr_pipeline.testing.independent_sim``: 3 and 4 cables at several sample rates, a
 random rig each)
-and its drive axes (1-6 axes, a random rig and rate each). Each is diagnosed with the
+and its drive axes (1-6 axes, a random rig and rate each; rig.yaml in turn states nothing,
+every prismatic axis's pitch, or rotary joints beside a prismatic axis with its pitch, so
+that the candidates needing a motor angle, ``cogging``'s, are judged on the axes too:
+``foreign_cases.AXES_RIGS``). Each is diagnosed with the
 command's configuration (closed loop and black box off) and every first-step candidate's
 statistics are recorded, with the thresholds the selection holds them to
 (``cdpr_pipeline.discovery.selection.Judge``):

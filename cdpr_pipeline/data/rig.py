@@ -41,6 +41,61 @@ def coulomb_law_dict(sharpness: float | None) -> str | dict[str, float]:
     return {"tanh": float(sharpness)}
 
 
+def stated_per_channel(extra: dict[str, Any], key: str, n: int, what: str,
+                       valid: Any) -> tuple[Any, ...]:
+    """rig.yaml's optional top-level ``key``: a list with one entry per channel, ``null``
+    where not stated; every entry None when the key is absent.
+
+    Parameters
+    ----------
+    extra : dict
+        The rig's top-level keys the format does not name (:attr:`Rig.extra`).
+    key : str
+        The key.
+    n : int
+        Number of channels.
+    what : str
+        What an entry must be, for the error (``a positive integer``).
+    valid : callable
+        Entry -> whether it is valid (called on entries that are not None).
+
+    Raises
+    ------
+    ValueError
+        Naming ``rig.yaml: key`` and the entry, for a list of the wrong length or an
+        invalid entry.
+    """
+    raw = extra.get(key)
+    if raw is None:
+        return (None,) * n
+    if not isinstance(raw, list | tuple) or len(raw) != n:
+        raise ValueError(f"rig.yaml: {key}: must be a list with one entry per channel ({n}), "
+                         f"each {what} or null, got {raw!r}")
+    for i, value in enumerate(raw):
+        if value is not None and (isinstance(value, bool) or not valid(value)):
+            raise ValueError(f"rig.yaml: {key}[{i}] (channel {i + 1}): must be {what} or "
+                             f"null, got {value!r}")
+    return tuple(raw)
+
+
+def _positive_integer(value: Any) -> bool:
+    return isinstance(value, int | float) and float(value) == int(value) and int(value) > 0
+
+
+def _positive_length(value: Any) -> bool:
+    return isinstance(value, int | float) and np.isfinite(value) and float(value) > 0
+
+
+def cogging_periods(rig: Rig) -> tuple[int | None, ...]:
+    """rig.yaml's optional ``cogging_periods``: per winch (axis) the number of periods
+    per motor revolution (per pitch) of a torque that repeats with position, where it is
+    known (a motor's slot and pole counts, a gear's teeth); None where not stated, and
+    the diagnosis fits it. See :func:`stated_per_channel` for the errors."""
+    stated = stated_per_channel(rig.extra, "cogging_periods", rig.n, "a positive integer",
+                                _positive_integer)
+    return tuple(None if v is None else int(v) for v in stated)
+
+
 @dataclass(frozen=True)
 class RecordedSignal:
     """One signal of a run as the data format records it: the :class:`~cdpr_pipeline.
@@ -170,6 +225,13 @@ class Rig(Protocol):
         command held over the controller period (``false``: as measured, sampled);
         None when rig.yaml does not say (the reading decides from the controller rate
         and :attr:`torque_commanded`)."""
+
+    @property
+    def angle_per_position(self) -> tuple[float | None, ...]:
+        """Per channel, radians of motor angle per unit of the channel's position (a
+        winch angle or a rotary joint: 1; a prismatic axis: ``2 pi / pitch``), None where
+        rig.yaml does not say (a prismatic axis without ``pitch_m``). A torque that
+        repeats with the motor angle (``cogging``) is periodic in it."""
 
     def frame_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The box the positions must stay in, None for a rig without one."""
@@ -345,6 +407,11 @@ class CdprRig(_Signals):
         return self.winch_nominal
 
     @property
+    def angle_per_position(self) -> tuple[float | None, ...]:
+        """A cable robot's channel position is the winch's motor angle: 1 per winch."""
+        return (1.0,) * self.n
+
+    @property
     def motion_columns(self) -> tuple[str, ...]:
         return (*self.position_names, *(f"l{i}" for i in range(1, self.n + 1)))
 
@@ -516,6 +583,24 @@ class AxesRig(_Signals):
         :attr:`joint_types`; rig.yaml's optional ``units`` (``{q1: m, u1: N}``) wins
         where it names a column."""
         return axes_units(self.joint_types, self.extra.get("units"))
+
+
+    @property
+    def pitch_m(self) -> tuple[float | None, ...]:
+        """Per axis, rig.yaml's optional top-level ``pitch_m``: the travel of a prismatic
+        axis per motor revolution (a screw's lead) or per magnet pitch of a linear motor,
+        m; None where not stated (and on rotary joints, whose q is an angle). See
+        :func:`stated_per_channel` for the errors."""
+        stated = stated_per_channel(self.extra, "pitch_m", self.n, "a positive length in m",
+                                    _positive_length)
+        return tuple(None if v is None else float(v) for v in stated)
+
+    @property
+    def angle_per_position(self) -> tuple[float | None, ...]:
+        """A rotary joint's q is its angle (1); a prismatic axis turns its motor once per
+        pitch (``2 pi / pitch_m``), None without a stated pitch."""
+        return tuple(1.0 if t == "rotary" else None if p is None else 2 * np.pi / p
+                     for t, p in zip(self.joint_types, self.pitch_m, strict=True))
 
 
 #: the kinds of rig rig.yaml may state, by its ``kind``

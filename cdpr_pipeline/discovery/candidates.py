@@ -28,13 +28,14 @@ from dataclasses import replace
 
 from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.sim.candidate_forms import TORQUE, Candidate, DataScale
-from cdpr_pipeline.sim.effects import EFFECTS, Effect
+from cdpr_pipeline.sim.effects import EFFECTS, VOCABULARY, Effect
 
 
 def candidate_effects(kind: str | None = None) -> list[str]:
-    """Vocabulary effects that have candidates (for rigs of ``kind``)."""
-    return [name for name, cls in EFFECTS.items()
-            if cls.in_vocabulary and cls.candidates.__func__ is not Effect.candidates.__func__
+    """Vocabulary effects that have candidates (for rigs of ``kind``), in the judging
+    order the registry declares (:data:`~cdpr_pipeline.sim.effects.VOCABULARY`)."""
+    return [cls.name for cls in VOCABULARY
+            if cls.candidates.__func__ is not Effect.candidates.__func__
             and (kind is None or kind in cls.kinds)]
 
 
@@ -72,5 +73,5 @@ def vocabulary_shapes(rig: Rig, scale: DataScale, names: list[str] | None = None
     for name in names or candidate_effects(kind):
         cls = EFFECTS[name]
         if kind in cls.kinds:
-            out += [e for e in cls.shapes(scale.speed_rms) if e not in out]
+            out += [e for e in cls.shapes(rig, scale) if e not in out]
     return out

@@ -95,7 +95,7 @@ from cdpr_pipeline.identification.pipeline import (
     trim_words,
 )
 from cdpr_pipeline.identification.regressors import WinchRegression
-from cdpr_pipeline.sim.effects import CableElasticity, Effect
+from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.plant import smooth_sign
 from cdpr_pipeline.wavelet.split import WaveletSplit, band_energies
 
@@ -675,14 +675,14 @@ def _cable_damping(causes: list[Judgement], nominal: Model, train: list[RunSigna
     training runs (:mod:`~cdpr_pipeline.discovery.damping`), and the extended model
     they make. The residuals predict the quasi-static stretch, so no gain changes."""
     extended = nominal.with_effects([e for c in causes for e in c.effects])
-    if not any(isinstance(e, CableElasticity) for c in causes for e in c.effects):
+    if not any(e.elastic_cables for c in causes for e in c.effects):
         return causes, extended
     out = []
     for c in causes:
         effects = tuple(with_fitted_damping(e, extended, nominal, train)
-                        if isinstance(e, CableElasticity) else e for e in c.effects)
+                        if e.elastic_cables else e for e in c.effects)
         for e in effects:
-            if isinstance(e, CableElasticity) and e.damping_interval_s is not None:
+            if e.elastic_cables and e.damping_interval_s is not None:
                 log.info("cable damping: %s", e.describe().split("; ", 1)[-1])
         out.append(dataclasses.replace(c, effects=effects))
     return out, nominal.with_effects([e for c in out for e in c.effects])

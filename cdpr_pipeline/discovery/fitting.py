@@ -18,6 +18,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.optimize._numdiff import approx_derivative
 
+from cdpr_pipeline.discovery.adequacy import analysed_band_hz
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,
@@ -138,11 +139,15 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
 
     A torque-side effect on winch ``i`` changes only winch ``i``'s torque residual, by
     ``m_i`` times a unit column that depends on the winch's shape parameter and variant
-    only. So every winch is fitted on its own by variable projection: for a shape and
-    variant, the best magnitude is a bounded one-dimensional least-squares solution; the
-    shape is found on a log grid refined by golden sections, all winches at once (one
-    model evaluation gives every winch's column, each at its own trial shape). The unit
-    columns are differences of the model's own residuals (lags and filters included).
+    only (plus ``q_i`` times a second column for a form with a quadrature component,
+    e.g. a sine and a cosine). So every winch is fitted on its own by variable
+    projection: for a shape and variant, the best magnitudes are a bounded linear
+    least-squares solution; the shape is found on a log grid refined by golden
+    sections, all winches at once (one model evaluation gives every winch's column,
+    each at its own trial shape and variant). The unit columns are differences of the
+    model's own residuals (lags and filters included). A form with a ``screen`` tries,
+    on each winch, the few variants the screen proposes from the data (a period count
+    among dozens) instead of every variant.
 
     Winch ``i`` is kept when its likelihood-ratio gain on its own column,
     ``N log(SSE0_i / SSE1_i)``, beats BIC's ``k log N`` (``k`` its free parameters) and
@@ -172,105 +177,177 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
     r0 = base.stacked("torque")
     rows, n = r0.shape
     bounds = np.array([form.magnitude(i) for i in range(n)], float)
+    components = (False, True) if form.quadrature else (False,)
+    if form.screen is not None:
+        # the channels' positions and speeds at the statistics rows, and the band the
+        # rows keep, for the screen to place the variants it proposes
+        positions = np.concatenate([s.theta[s.row_index()] for s in ctx.train])
+        speeds = np.concatenate([s.omega[s.row_index()] for s in ctx.train])
+        band_hz = analysed_band_hz(ctx.train[0].settings, ctx.train[0].fs)
 
     mixes = any(s.mixes for s in ctx.train)
 
-    def unit(variant: Any, shapes: np.ndarray | None, winches: range) -> np.ndarray:
-        """What a unit magnitude on ``winches`` explains (rows, n)."""
-        parts = {i + 1: WinchPart(variant, 1.0, None if shapes is None else float(shapes[i]))
-                 for i in winches}
+    def unit(variants: Sequence[Any], shapes: np.ndarray | None, winches: Sequence[int],
+             quadrature: bool) -> np.ndarray:
+        """What a unit magnitude (of the quadrature component when ``quadrature``) on
+        ``winches`` explains (rows, n); ``variants`` per winch."""
+        parts = {i + 1: WinchPart(variants[i], 0.0 if quadrature else 1.0,
+                                  None if shapes is None else float(shapes[i]),
+                                  1.0 if quadrature else 0.0) for i in winches}
         return r0 - ctx.training_residuals([*current, *form.make(parts)],
                                            TORQUE).stacked("torque")
 
-    def search(target: np.ndarray, winches: list[int]) -> tuple[list, np.ndarray]:
-        """Per winch of ``winches``, the best variant, shape and magnitude on its own
-        column of ``target`` (rows, n), and the sum of squares left (n,)."""
-        best_sse = np.full(n, np.inf)
-        best: list[WinchPart | None] = [None] * n
-
-        def keep_best(variant: Any, shapes: np.ndarray | None) -> np.ndarray:
+    def own_columns(variants: Sequence[Any], shapes: np.ndarray | None,
+                    winches: Sequence[int]) -> list[np.ndarray]:
+        """Each winch's own unit column(s) on ``winches`` (rows, n), one per component."""
+        out = []
+        for quadrature in components:
             if mixes:
                 # the internal-force projection carries a winch's effect into the
                 # others' residuals: each winch's own column comes from that winch alone
                 col = np.zeros_like(r0)
                 for i in winches:
-                    col[:, i] = unit(variant, shapes, range(i, i + 1))[:, i]
+                    col[:, i] = unit(variants, shapes, [i], quadrature)[:, i]
             else:
-                col = unit(variant, shapes, range(n))
-            den = np.sum(col ** 2, axis=0)
-            m = np.where(den > 0, np.sum(col * target, axis=0) / np.where(den > 0, den, 1.0),
-                         0.0)
-            m = np.clip(m, bounds[:, 0], bounds[:, 1])
-            sse = np.sum((target - m * col) ** 2, axis=0)
-            for i in winches:
+                col = unit(variants, shapes, winches, quadrature)
+            out.append(col)
+        return out
+
+    def rounds(target: np.ndarray, winches: list[int]) -> list[tuple[list, list[int]]]:
+        """The variants to try: per round one per winch, and the winches it is tried on."""
+        if form.screen is None:
+            return [([v] * n, winches) for v in form.variants]
+        proposed = form.screen(positions, speeds, target, band_hz)
+        depth = max((len(proposed[i]) for i in winches), default=0)
+        out = []
+        for j in range(depth):
+            on = [i for i in winches if len(proposed[i]) > j]
+            out.append(([proposed[i][j] if i in on else None for i in range(n)], on))
+        return out
+
+    def search(target: np.ndarray, winches: list[int]) -> tuple[list, np.ndarray]:
+        """Per winch of ``winches``, the best variant, shape and magnitudes on its own
+        column of ``target`` (rows, n), and the sum of squares left (n,); a winch no
+        variant may act on keeps an infinite sum."""
+        best_sse = np.full(n, np.inf)
+        best: list[WinchPart | None] = [None] * n
+
+        def keep_best(variants: list, shapes: np.ndarray | None, on: list[int]
+                      ) -> np.ndarray:
+            cols = own_columns(variants, shapes, on)
+            m, q = _project(cols, target, bounds)
+            sse = np.sum((target - m * cols[0] - (q * cols[1] if len(cols) > 1 else 0.0))
+                         ** 2, axis=0)
+            for i in on:
                 if sse[i] < best_sse[i]:
                     best_sse[i] = sse[i]
-                    best[i] = WinchPart(variant, float(m[i]),
-                                        None if shapes is None else float(shapes[i]))
+                    best[i] = WinchPart(variants[i], float(m[i]),
+                                        None if shapes is None else float(shapes[i]),
+                                        float(q[i]))
             return sse
 
-        for variant in form.variants:
+        for variants, on in rounds(target, winches):
+            if not on:
+                continue
             if form.shape is None:
-                keep_best(variant, None)
+                keep_best(variants, None, on)
                 continue
             grid = np.log(np.geomspace(*form.shape, _SHAPE_GRID))
-            table = np.array([keep_best(variant, np.full(n, np.exp(g))) for g in grid])
+            table = np.array([keep_best(variants, np.full(n, np.exp(g)), on) for g in grid])
             k = np.argmin(table, axis=0)
             a, b = grid[np.maximum(k - 1, 0)], grid[np.minimum(k + 1, len(grid) - 1)]
             c, d = b - _GOLDEN * (b - a), a + _GOLDEN * (b - a)
-            fc, fd = keep_best(variant, np.exp(c)), keep_best(variant, np.exp(d))
+            fc, fd = keep_best(variants, np.exp(c), on), keep_best(variants, np.exp(d), on)
             for _ in range(_GOLDEN_STEPS):
                 left = fc < fd         # the minimum lies in [a, d]
                 b = np.where(left, d, b)
                 a = np.where(left, a, c)
                 new = np.where(left, b - _GOLDEN * (b - a), a + _GOLDEN * (b - a))
-                fnew = keep_best(variant, np.exp(new))
+                fnew = keep_best(variants, np.exp(new), on)
                 c, d = np.where(left, new, d), np.where(left, c, new)
                 fc, fd = np.where(left, fnew, fd), np.where(left, fc, fnew)
         return best, best_sse
 
     def passing(target: np.ndarray, best_sse: np.ndarray, winches: list[int]) -> list[int]:
         sse0 = np.maximum(np.sum(target ** 2, axis=0), 1e-300)
-        return [i for i in winches
-                if rows * np.log(sse0[i] / max(best_sse[i], 1e-300)) > form.k * np.log(rows)
+        return [i for i in winches if np.isfinite(best_sse[i])
+                and rows * np.log(sse0[i] / max(best_sse[i], 1e-300)) > form.k * np.log(rows)
                 and best_sse[i] <= (1 - min_gain) * sse0[i]]
 
-    columns: dict[tuple, np.ndarray] = {}
+    columns: dict[tuple, list[np.ndarray]] = {}
 
-    def column(i: int) -> np.ndarray:
-        """What a unit magnitude on winch ``i`` alone explains, at its best variant and
-        shape (each a model evaluation: kept across the joint eliminations)."""
+    def column(i: int) -> list[np.ndarray]:
+        """What a unit magnitude of each component on winch ``i`` alone explains, at its
+        best variant and shape (each a model evaluation: kept across the joint
+        eliminations)."""
         key = (i, best[i].variant, best[i].shape)
         if key not in columns:
             shapes = None if form.shape is None else np.full(n, float(best[i].shape))
-            columns[key] = unit(best[i].variant, shapes, range(i, i + 1))
+            columns[key] = [unit([best[i].variant] * n, shapes, [i], quadrature)
+                            for quadrature in components]
         return columns[key]
+
+    def explained(j: int) -> np.ndarray:
+        """What winch ``j``'s fitted magnitudes explain of every winch's residual."""
+        values = (best[j].magnitude, best[j].quadrature)
+        return sum(v * col for v, col in zip(values, column(j), strict=False))
+
+    def with_values(values: np.ndarray) -> list:
+        return [p._replace(magnitude=float(v[0]),
+                           quadrature=float(v[1]) if len(v) > 1 else p.quadrature)
+                if p is not None else None for p, v in zip(best, values, strict=True)]
 
     best, best_sse = search(r0, list(range(n)))
     kept = passing(r0, best_sse, list(range(n)))
     if not kept:
+        # the best winch the effect may act on (a winch no variant fits keeps an
+        # infinite sum of squares)
         sse0 = np.maximum(np.sum(r0 ** 2, axis=0), 1e-300)
-        kept = [int(np.argmax(rows * np.log(sse0 / np.maximum(best_sse, 1e-300))))]
+        able = np.isfinite(best_sse)
+        gain = np.full(n, -np.inf)
+        gain[able] = rows * np.log(sse0[able] / np.maximum(best_sse[able], 1e-300))
+        kept = [int(np.argmax(gain))]
     if mixes and len(kept) > 1:
-        kept, magnitudes = _joint_winches(kept, best, r0, form.k, bounds, column, min_gain)
-        best = [p._replace(magnitude=float(m)) if p is not None else None
-                for p, m in zip(best, magnitudes, strict=True)]
+        kept, values = _joint_winches(kept, best, r0, form.k, bounds, column, min_gain)
+        best = with_values(values)
     rest = [i for i in range(n) if i not in kept]
     if mixes and rest:
         # a small effect on one winch hides under the projected share of a large one
         # on another: search the winches left out again on what the kept winches do
         # not explain of their own columns
-        spread = sum(best[j].magnitude * column(j) for j in kept)
+        spread = sum(explained(j) for j in kept)
         best2, sse2 = search(r0 - spread, rest)
         found = passing(r0 - spread, sse2, rest)
         if found:
             for i in found:
                 best[i] = best2[i]
-            kept, magnitudes = _joint_winches(sorted(kept + found), best, r0, form.k,
-                                              bounds, column, min_gain)
-            best = [p._replace(magnitude=float(m)) if p is not None else None
-                    for p, m in zip(best, magnitudes, strict=True)]
+            kept, values = _joint_winches(sorted(kept + found), best, r0, form.k,
+                                          bounds, column, min_gain)
+            best = with_values(values)
     return on_winches(template, {i + 1: best[i] for i in kept})
+
+
+def _project(cols: list[np.ndarray], target: np.ndarray, bounds: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Per winch, the magnitudes of one unit column (or of two, a quadrature pair) that
+    best explain its own column of ``target``, each clipped to the winch's bounds: (n,)
+    magnitudes and (n,) quadrature magnitudes (zeros for one column)."""
+    if len(cols) == 1:
+        col = cols[0]
+        den = np.sum(col ** 2, axis=0)
+        m = np.where(den > 0, np.sum(col * target, axis=0) / np.where(den > 0, den, 1.0),
+                     0.0)
+        return np.clip(m, bounds[:, 0], bounds[:, 1]), np.zeros(target.shape[1])
+    c1, c2 = cols
+    g11, g12, g22 = (np.sum(c1 * c1, axis=0), np.sum(c1 * c2, axis=0),
+                     np.sum(c2 * c2, axis=0))
+    b1, b2 = np.sum(c1 * target, axis=0), np.sum(c2 * target, axis=0)
+    det = g11 * g22 - g12 * g12
+    ok = det > 1e-12 * np.maximum(g11 * g22, 1e-300)
+    safe = np.where(ok, det, 1.0)
+    m = np.where(ok, (g22 * b1 - g12 * b2) / safe, 0.0)
+    q = np.where(ok, (g11 * b2 - g12 * b1) / safe, 0.0)
+    return np.clip(m, bounds[:, 0], bounds[:, 1]), np.clip(q, bounds[:, 0], bounds[:, 1])
 
 
 def _joint_winches(kept: list[int], best: list, r0: np.ndarray, k: int, bounds: np.ndarray,
@@ -282,17 +359,20 @@ def _joint_winches(kept: list[int], best: list, r0: np.ndarray, k: int, bounds: 
     variants as found); the winch whose removal costs least goes while that cost, the
     sum over winches of ``rows log(SSE_without / SSE_with)``, is below BIC's
     ``k log rows``, or while its own residual gains less than ``min_gain`` from it (the
-    own-residual test's practical significance, now in the joint fit). Returns the
-    winches left and every winch's magnitude (n,)."""
+    own-residual test's practical significance, now in the joint fit). ``column(i)``
+    gives winch ``i``'s unit columns (one per linear component). Returns the winches
+    left and every winch's magnitudes (n, components)."""
     rows, n = r0.shape
     cols = {i: column(i) for i in kept}
+    parts = len(cols[kept[0]])
 
     def solve(winches: list[int]) -> tuple[np.ndarray, np.ndarray]:
-        a = np.stack([cols[i].ravel() for i in winches], axis=1)
+        a = np.stack([c.ravel() for i in winches for c in cols[i]], axis=1)
         m = np.linalg.lstsq(a, r0.ravel(), rcond=None)[0]
-        m = np.clip(m, bounds[winches, 0], bounds[winches, 1])
+        m = np.clip(m, np.repeat(bounds[winches, 0], parts),
+                    np.repeat(bounds[winches, 1], parts))
         fit = r0 - (a @ m).reshape(rows, n)
-        return m, np.maximum(np.sum(fit ** 2, axis=0), 1e-300)
+        return m.reshape(len(winches), parts), np.maximum(np.sum(fit ** 2, axis=0), 1e-300)
 
     kept = list(kept)
     while len(kept) > 1:
@@ -306,9 +386,10 @@ def _joint_winches(kept: list[int], best: list, r0: np.ndarray, k: int, bounds: 
         if score[worst] >= k * np.log(rows):
             break
         kept.pop(worst)
-    magnitudes = np.array([p.magnitude if p is not None else 0.0 for p in best], float)
-    magnitudes[kept] = solve(kept)[0]
-    return kept, magnitudes
+    values = np.array([[p.magnitude, p.quadrature][:parts] if p is not None
+                       else [0.0] * parts for p in best], float)
+    values[kept] = solve(kept)[0]
+    return kept, values
 
 
 @dataclass

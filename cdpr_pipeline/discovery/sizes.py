@@ -42,7 +42,7 @@ from cdpr_pipeline.discovery.bands import row_noise
 from cdpr_pipeline.discovery.residuals import Model, Residuals, measured_rows, residuals
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.discovery.validity import NoiseModel
-from cdpr_pipeline.sim.effects import Effect, Size, WinchParameterError
+from cdpr_pipeline.sim.effects import Effect, Size
 from cdpr_pipeline.sim.effects.base import drive, unit
 
 #: a size is told from the value at which it does nothing at this many standard errors
@@ -196,7 +196,7 @@ def _references(effects: Sequence[Effect], nominal: Model, causes: Sequence[Any]
     """Per effect the model its sizes are relative to: the nominal model with every
     cause's winch re-identifications but its own (a Stribeck size relative to the
     extended model's F_c, a re-identified value relative to the stated one)."""
-    refits = [e for c in causes for e in c.effects if isinstance(e, WinchParameterError)]
+    refits = [e for c in causes for e in c.effects if e.reidentifies_winch]
     return [nominal.with_effects([r for r in refits if r is not e]) for e in effects]
 
 

@@ -20,7 +20,7 @@ from cdpr_pipeline.discovery.residuals import Model
 from cdpr_pipeline.discovery.results import HeldoutGain, Unexplained, Unusable
 from cdpr_pipeline.discovery.selection import Judgement
 from cdpr_pipeline.discovery.sizes import CauseComponent
-from cdpr_pipeline.sim.effects import Effect, WinchParameterError
+from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.effects.base import drive, with_unit
 
 #: the one name of the gain figure (:meth:`HeldoutGain.relative`)
@@ -106,23 +106,12 @@ def gain_shares(causes: Sequence[Judgement]) -> list[GainShare]:
 
 
 # ------------------------------------------------------------------ records
-def _winch_change(effect: WinchParameterError, nominal: Model) -> dict[str, Any]:
-    i = effect.cable - 1
-    w = nominal.winch
-    old = {k: float(getattr(w, k)[i]) for k in ("inertia", "viscous", "coulomb", "offset")}
-    new = {"inertia": old["inertia"] * effect.inertia_scale,
-           "viscous": old["viscous"] * effect.viscous_scale,
-           "coulomb": old["coulomb"] * effect.coulomb_scale,
-           "offset": old["offset"] + effect.offset_delta}
-    return {"winch": effect.cable, "old": old, "new": new}
-
-
 def winch_reference(nominal: Model, causes: Sequence[Judgement]) -> Model:
     """The nominal model with every cause's re-identified winch parameters: what an
     effect's size is relative to in the extended model (a Stribeck size as a multiple of
     the extended model's F_c, not of a nominal F_c another cause replaced)."""
     return nominal.with_effects([e for c in causes for e in c.effects
-                                 if isinstance(e, WinchParameterError)])
+                                 if e.reidentifies_winch])
 
 
 def cause_params(effects: Sequence[Effect], nominal: Model,
@@ -132,13 +121,13 @@ def cause_params(effects: Sequence[Effect], nominal: Model,
     model when None)."""
     out: dict[str, Any] = {}
     reference = nominal if reference is None else reference
-    changes = [_winch_change(e, nominal) for e in effects if isinstance(e, WinchParameterError)]
+    changes = [e.winch_change(nominal.winch) for e in effects if e.reidentifies_winch]
     for e in effects:
-        if not isinstance(e, WinchParameterError):
+        if not e.reidentifies_winch:
             # per-winch sizes both absolute and relative to the extended winch parameters
             out.update({**e.params(), **e.derived(reference)})
     if changes:
-        out["winches" if all(isinstance(e, WinchParameterError) for e in effects)
+        out["winches" if all(e.reidentifies_winch for e in effects)
             else "refit_winches"] = changes
     return out
 
@@ -150,7 +139,7 @@ def cause_record(j: Judgement, nominal: Model, causes: Sequence[Judgement] = (),
     if j.freeform is not None:
         expression = j.freeform.describe(nominal)
     else:
-        structural = [e for e in j.effects if not isinstance(e, WinchParameterError)]
+        structural = [e for e in j.effects if not e.reidentifies_winch]
         expression = (structural or j.effects)[0].expression if j.effects else ""
     reference = winch_reference(nominal, causes)
     share = share or GainShare(None)
@@ -183,17 +172,18 @@ def describe_cause(j: Judgement, nominal: Model, reference: Model | None = None)
     reference = nominal if reference is None else reference
     parts = []
     for e in j.effects:
-        if isinstance(e, WinchParameterError):
-            c = _winch_change(e, nominal)
+        if e.reidentifies_winch:
+            c = e.winch_change(nominal.winch)
             # a change worth a sentence: 2 % of the value (of F_c for the offset)
             ref = {k: abs(c["old"]["coulomb" if k == "offset" else k]) for k in c["old"]}
             q = e.quantities
-            diffs = [f"{k} {with_unit(c['old'][k], nominal, e.cable, q[k], '.4g')} -> "
-                     f"{with_unit(c['new'][k], nominal, e.cable, q[k], '.4g')}"
+            w = c["winch"]
+            diffs = [f"{k} {with_unit(c['old'][k], nominal, w, q[k], '.4g')} -> "
+                     f"{with_unit(c['new'][k], nominal, w, q[k], '.4g')}"
                      for k in c["old"]
                      if abs(c["new"][k] - c["old"][k]) > 0.02 * max(ref[k], 1e-12)]
             if diffs:
-                parts.append(f"{drive(nominal, e.cable)}: " + ", ".join(diffs))
+                parts.append(f"{drive(nominal, w)}: " + ", ".join(diffs))
         else:
             parts.append(e.describe(reference))
     return "; ".join(parts) if parts else j.label

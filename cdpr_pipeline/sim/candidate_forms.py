@@ -44,20 +44,28 @@ class DataScale:
 SLOW_SHARE = 0.01
 
 
+#: a screen of variants (:attr:`WinchForm.screen`)
+Screen = Callable[[np.ndarray, np.ndarray, np.ndarray, float], list[list[Any]]]
+
+
 class WinchPart(NamedTuple):
-    """A winch-separable effect on one winch: the discrete ``variant`` (a direction, or
-    None), the ``magnitude`` (linear in the torque) and the ``shape`` parameter (a
-    Stribeck velocity, or None)."""
+    """A winch-separable effect on one winch: the discrete ``variant`` (a direction, a
+    period count, or None), the ``magnitude`` (linear in the torque), the ``shape``
+    parameter (a Stribeck velocity, or None) and, for an effect with two linear
+    components, the ``quadrature`` magnitude (the cosine's where the magnitude is the
+    sine's)."""
 
     variant: Any
     magnitude: float
     shape: float | None
+    quadrature: float = 0.0
 
 
 @dataclass(frozen=True)
 class WinchForm:
     """How a winch-side effect acts on each winch separately: on winch ``i`` an extra
-    torque ``m_i f(theta_i, omega_i; s_i, v_i)``, linear in the magnitude ``m_i``.
+    torque ``m_i f(theta_i, omega_i; s_i, v_i)``, linear in the magnitude ``m_i`` (plus
+    ``q_i g(theta_i, omega_i; s_i, v_i)`` for an effect with a ``quadrature`` component).
 
     Attributes
     ----------
@@ -73,6 +81,19 @@ class WinchForm:
         Bounds of the per-winch shape parameter (None: the effect has none).
     names : (str, str)
         Names of the magnitude and of the shape parameter or variant, for reports.
+    quadrature : bool
+        The effect has a second linear component per winch (:attr:`WinchPart.
+        quadrature`, bounded like the magnitude): a sine and a cosine of one angle,
+        whose amplitude and phase the two give in closed form.
+    screen : callable or None
+        ``(positions, speeds, residual, band_hz) -> per winch a list of variants`` worth
+        fitting, best first (an empty list: the effect cannot act on that winch), from
+        the statistics rows' channel positions and speeds, the residual to explain (all
+        (rows, n)) and the band the rows keep (Hz): for a variant chosen among many (a
+        period count), where fitting each would cost a model evaluation. Replaces
+        :attr:`variants`; the choice counts as a parameter.
+    quadrature_name : str
+        Name of the quadrature component, for reports.
     """
 
     make: Callable[[dict[int, WinchPart]], list[Effect]]
@@ -81,11 +102,21 @@ class WinchForm:
     variants: tuple[Any, ...] = (None,)
     shape: tuple[float, float] | None = None
     names: tuple[str, str] = ("magnitude", "shape")
+    quadrature: bool = False
+    screen: Screen | None = None
+    quadrature_name: str = "quadrature"
+
+    @property
+    def components(self) -> int:
+        """Linear magnitudes per winch (1, or 2 with a quadrature component)."""
+        return 2 if self.quadrature else 1
 
     @property
     def k(self) -> int:
-        """Free parameters per winch."""
-        return 1 if self.shape is None else 2
+        """Free parameters per winch: the linear components, the shape parameter, and a
+        variant a :attr:`screen` chose among many (a period count, chosen on the same
+        data like a fitted constant)."""
+        return self.components + (self.shape is not None) + (self.screen is not None)
 
 
 @dataclass
@@ -145,30 +176,39 @@ class Candidate:
 
 def on_winches(template: Candidate, parts: dict[int, WinchPart]) -> Candidate:
     """The winch-separable ``template`` acting on the winches of ``parts`` only, starting
-    at their values: per kept winch its magnitude, then its shape parameter; the
-    per-winch variants are fixed. Only the kept winches' parameters count."""
+    at their values: per kept winch its magnitude, its quadrature component (if the
+    form has one), then its shape parameter; the per-winch variants are fixed. Only the
+    kept winches' parameters count."""
     form = template.form
     cables = sorted(parts)
     x0, lower, upper, x_scale, names = [], [], [], [], []
     for c in cables:
         part = parts[c]
         lo, hi = form.magnitude(c - 1)
-        x0.append(float(np.clip(part.magnitude, lo, hi)))
-        lower.append(lo)
-        upper.append(hi)
-        x_scale.append(max(abs(part.magnitude), 0.1 * abs(form.typical(c - 1)), 1e-9))
-        names.append(f"{form.names[0]}[winch {c}]")
+        values = [(part.magnitude, form.names[0])]
+        if form.quadrature:
+            values.append((part.quadrature, form.quadrature_name))
+        for value, name in values:
+            x0.append(float(np.clip(value, lo, hi)))
+            lower.append(lo)
+            upper.append(hi)
+            x_scale.append(max(abs(part.magnitude), abs(part.quadrature),
+                               0.1 * abs(form.typical(c - 1)), 1e-9))
+            names.append(f"{name}[winch {c}]")
         if form.shape is not None:
             x0.append(float(np.clip(part.shape, *form.shape)))
             lower.append(form.shape[0])
             upper.append(form.shape[1])
             x_scale.append(0.3 * x0[-1])
             names.append(f"{form.names[1]}[winch {c}]")
-    step = form.k
+    linear = form.components
+    step = linear + (form.shape is not None)
 
     def build(x: np.ndarray) -> list[Effect]:
         return form.make({c: WinchPart(parts[c].variant, float(x[step * j]),
-                                       float(x[step * j + 1]) if step == 2 else None)
+                                       float(x[step * j + linear]) if step > linear
+                                       else None,
+                                       float(x[step * j + 1]) if linear == 2 else 0.0)
                           for j, c in enumerate(cables)})
 
     return replace(template, build=build, starts=[np.asarray(x0, float)],
@@ -182,14 +222,19 @@ def winch_candidate(effect: str, label: str, make: Callable[[dict[int, WinchPart
                     n: int, magnitude: Callable[[int], tuple[float, float]],
                     typical: Callable[[int], float], variants: tuple[Any, ...] = (None,),
                     shape: tuple[float, float] | None = None,
-                    names: tuple[str, str] = ("magnitude", "shape")) -> Candidate:
-    """A winch-separable candidate (torque side): one magnitude per winch, a per-winch
-    shape parameter when ``shape`` gives its bounds, and per-winch ``variants``.
+                    names: tuple[str, str] = ("magnitude", "shape"),
+                    quadrature: bool = False, screen: Screen | None = None,
+                    quadrature_name: str = "quadrature") -> Candidate:
+    """A winch-separable candidate (torque side): one magnitude per winch (two with a
+    ``quadrature`` component), a per-winch shape parameter when ``shape`` gives its
+    bounds, and per-winch ``variants`` (or variants a ``screen`` proposes from the data,
+    see :class:`WinchForm`).
 
     As returned it acts on every winch with zero magnitude and the first variant; the
     diagnosis lets the data choose its winches, variants and starting point first
     (:func:`~cdpr_pipeline.discovery.fitting.fit_winches`)."""
-    form = WinchForm(make, magnitude, typical, tuple(variants), shape, names)
+    form = WinchForm(make, magnitude, typical, tuple(variants), shape, names, quadrature,
+                     screen, quadrature_name)
     middle = None if shape is None else float(np.sqrt(shape[0] * shape[1]))
     template = Candidate(effect, label, lambda x: [], [np.zeros(0)], np.zeros(0),
                          np.zeros(0), np.zeros(0), affects=TORQUE, form=form)

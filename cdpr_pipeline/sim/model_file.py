@@ -19,7 +19,7 @@ import yaml
 from cdpr_pipeline.data.errors import DataValidationError
 from cdpr_pipeline.data.rig import FORMAT, Rig
 from cdpr_pipeline.data.validation import parse_rig
-from cdpr_pipeline.sim.effects import EFFECTS, Effect
+from cdpr_pipeline.sim.effects import ALIASES, EFFECTS, Effect, effect_class
 from cdpr_pipeline.sim.plant import nominal_plant
 
 MODEL_FORMAT = "cdpr-model/1"
@@ -88,11 +88,11 @@ def read_model(path: str | Path) -> tuple[Rig, list[Effect]]:
     effects = []
     for k, entry in enumerate(record.get("effects") or []):
         name = entry.get("effect") if isinstance(entry, dict) else None
-        if name not in EFFECTS:
+        if name not in EFFECTS and name not in ALIASES:
             raise ValueError(f"{path}: effects[{k}]: unknown effect {name!r}; "
                              f"known: {sorted(EFFECTS)}")
         try:
-            effects.append(EFFECTS[name](**(entry.get("params") or {})))
+            effects.append(effect_class(name)(**(entry.get("params") or {})))
         except TypeError as err:
             raise ValueError(f"{path}: effects[{k}] ({name}): {err}") from err
     return rig, effects

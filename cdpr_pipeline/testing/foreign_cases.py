@@ -164,9 +164,13 @@ def foreign_case(out_dir: str | Path, kind: str, effects: list[str], seed: int,
         0-based channels the effect acts on (drawn: one, some or all, when omitted).
     rig_options : dict, optional
         Further nominal values for the rig's drawer (``inertia=[...]`` of
-        ``random_axes_rig``); drawn when omitted.
+        ``random_axes_rig``); drawn when omitted. Drive axes hiding ``cogging`` by name
+        state their pitch (``pitch=True``) unless the options say otherwise: cogging
+        repeats with a motor angle, which a prismatic axis has only with a pitch.
     """
     runs, duration = FULL[kind]
+    if kind == "axes" and "cogging" in effects:
+        rig_options = {"pitch": True, **(rig_options or {})}
     n_runs, duration_s = n_runs or runs, duration_s or duration
     root = Path(out_dir)
     last: Exception | None = None
@@ -255,6 +259,8 @@ TOLERANCE = {
     # the fitted load against the true one over the axis's stroke, relative to its size
     # (the rotary amplitude, or the spring's k times the amplitude)
     "position_dependent_load": {"load": 0.15},
+    # the period count must be the true one (else the channel counts as not found)
+    "cogging": {"amplitude": 0.25},
 }
 
 
@@ -265,7 +271,8 @@ def _rel(found: float, true: float) -> float:
 def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
     """Relative errors of the fitted magnitudes in ``cause`` (a ``diagnosis.json``
     cause record) against the simulated first effect, per channel, where the truth
-    gives a number the cause's form can express: per-winch (per-cable) effects always;
+    gives a number the cause's form can express: per-winch (per-cable) effects always
+    (``cogging``: its period count must be the true one, and its amplitude is compared);
     ``anchor_offset``: the cable named must be one that moved, and its
     offset is compared when only one moved.
 
@@ -350,6 +357,16 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
             else:
                 true, fit, size = ta * q + tb, a[i] * q + b[i], abs(ta) * rig.amplitude[i]
             errors[f"load[{c}]"] = float(np.abs(fit - true).max() / size)
+    elif name == "cogging":
+        at = dict(zip(p.get("cables", []), zip(p.get("periods", []), p.get("amplitude", []),
+                                               strict=True), strict=True))
+        for c in chans:
+            true_n = int(round(float(eff.params["periods"][c - 1])))
+            if c not in at or at[c][0] != true_n:
+                missing.append(f"winch {c}" + ("" if c not in at else
+                                               f" ({at[c][0]} periods, not {true_n})"))
+                continue
+            errors[f"amplitude[{c}]"] = _rel(at[c][1], eff.params["amplitude"][c - 1])
     elif name == "anchor_offset":
         c = int(p["cable"])
         if c not in chans:
@@ -439,6 +456,13 @@ CDPR_RIGS = [(3, 100.0), (4, 250.0), (3, 500.0), (4, 1000.0), (3, 250.0), (4, 10
              (3, 1000.0), (4, 500.0)]
 #: independent drive axes: rates in turn (axis count drawn with the rig)
 AXES_RATES = [100.0, 250.0, 500.0, 1000.0, 2000.0]
+#: independent drive axes: what rig.yaml states of them, in turn: nothing (prismatic
+#: axes without a pitch: no motor angle, no cogging candidate), every prismatic axis's
+#: pitch, and rotary joints beside prismatic axes with a pitch (three axes): the
+#: candidates that need a motor angle (``cogging``) are judged on effect-free data too
+AXES_RIGS: list[dict] = [{}, {"rig_options": {"pitch": True}},
+                         {"n": 3, "rig_options": {"pitch": True, "joint_types":
+                                                  ["rotary", "prismatic", "rotary"]}}]
 
 
 def null_datasets(n_lab: int, n_cdpr: int, n_axes: int, first_seed: int) -> list[dict]:
@@ -448,7 +472,8 @@ def null_datasets(n_lab: int, n_cdpr: int, n_axes: int, first_seed: int) -> list
              "n": CDPR_RIGS[i % len(CDPR_RIGS)][0], "rate_hz": CDPR_RIGS[i % len(CDPR_RIGS)][1]}
             for i in range(n_cdpr)]
     out += [{"simulator": "independent", "kind": "axes", "seed": first_seed + 200 + i,
-             "rate_hz": AXES_RATES[i % len(AXES_RATES)]} for i in range(n_axes)]
+             "rate_hz": AXES_RATES[i % len(AXES_RATES)], **AXES_RIGS[i % len(AXES_RIGS)]}
+            for i in range(n_axes)]
     return out
 
 
@@ -467,8 +492,8 @@ def null_grid(replicates: int, first_seed: int,
     ``groups``, every run count of ``runs`` and run length of ``lengths``
     (:data:`NULL_LENGTHS`), ``replicates`` times, each with its own seed (independent
     cable robots cycle through :data:`CDPR_RIGS`, drive axes through
-    :data:`AXES_RATES`). Ordered replicate by replicate, so that any prefix covers the
-    grid as evenly as it can."""
+    :data:`AXES_RATES` and what rig.yaml states of them, :data:`AXES_RIGS`). Ordered
+    replicate by replicate, so that any prefix covers the grid as evenly as it can."""
     out = []
     for k in range(replicates * len(groups) * len(runs) * len(lengths)):
         cell, rep = k % (len(groups) * len(runs) * len(lengths)), k // (
@@ -481,7 +506,8 @@ def null_grid(replicates: int, first_seed: int,
             spec.update(n=CDPR_RIGS[k % len(CDPR_RIGS)][0],
                         rate_hz=CDPR_RIGS[k % len(CDPR_RIGS)][1])
         elif sim == "independent":
-            spec.update(rate_hz=AXES_RATES[k % len(AXES_RATES)])
+            spec.update(rate_hz=AXES_RATES[k % len(AXES_RATES)],
+                        **AXES_RIGS[(k // len(groups)) % len(AXES_RIGS)])
         out.append(spec)
     return out
 
@@ -515,13 +541,16 @@ def run_null(spec: dict, settings, tmp: Path, paper_rig) -> dict:
         seed = spec["seed"]
     else:
         case = foreign_case(tmp, spec["kind"], [], spec["seed"], n=spec.get("n"),
-                            rate_hz=spec.get("rate_hz"), n_runs=n_runs, duration_s=duration)
+                            rate_hz=spec.get("rate_hz"), n_runs=n_runs, duration_s=duration,
+                            rig_options=spec.get("rig_options"))
         t_sim = time.perf_counter() - start
         record = case.diagnose(settings)
         seconds, seed = case.seconds, case.seed
         r = case.rig
+        stated = ", ".join(f"{k}={v}" for k, v in (spec.get("rig_options") or {}).items())
         rig = (f"independent {spec['kind']} rig seed {r.seed} ({r.n} "
-               f"{'cables' if spec['kind'] == 'cdpr' else 'axes'}, {r.rate_hz:g} Hz)")
+               f"{'cables' if spec['kind'] == 'cdpr' else 'axes'}, {r.rate_hz:g} Hz"
+               f"{', ' + stated if stated else ''})")
     return {**spec, "seed": seed, "rig": rig, "simulate_s": t_sim, "diagnose_s": seconds,
             "grade": grade(record, []), "verdict": record["verdict"],
             "summary": record["summary"],

@@ -67,6 +67,11 @@ def check_parameters(effect: Effect, cause: dict, d, data, case: str = "") -> No
         # drawn on every winch with one time constant: every winch is found, each with it
         assert p["cables"] == [1, 2, 3]
         assert p["time_constant_s"] == pytest.approx([effect.time_constant_s] * 3, rel=0.2)
+    elif name == "cogging":
+        # drawn on every winch alike: every winch is found, each with N and A
+        assert p["cables"] == [1, 2, 3]
+        assert p["periods"] == [effect.periods] * 3
+        assert p["amplitude"] == pytest.approx([effect.amplitude] * 3, rel=0.1)
 
 
 def _diagnose(paper_rig, effects, seed, with_data: bool = False):

@@ -232,8 +232,10 @@ def test_a_drum_radius_error_is_named_on_its_drum(tmp_path, seed):
 
 
 def test_a_position_periodic_force_on_a_linear_axis_gets_no_name(tmp_path, seed):
-    """A force periodic in a linear axis's position (a screw or magnet pitch, a period
-    that need not fit the stroke a whole number of times) was named ``actuator_lag`` in
+    """A force periodic in a linear axis's position whose pitch rig.yaml does not state
+    (a period that need not fit the stroke a whole number of times, and no motor angle
+    it repeats with: not ``cogging``, which needs rig.yaml's ``pitch_m`` on a prismatic
+    axis, ``test_cogging.py``) was named ``actuator_lag`` in
     3 of 3 draws of the detection benchmark: the free-form grammar had position
     harmonics only for winch angles. Axes now get wavenumbers in periods per stroke
     (``freeform.Periodicity.of_axes``) and a scan for each axis's best one

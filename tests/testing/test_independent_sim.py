@@ -327,7 +327,7 @@ def test_computed_torque_rig_states_its_controller_for_the_closed_loop(tmp_path)
 
 
 TORQUE_EFFECTS = ["stribeck_friction", "asymmetric_viscous_friction", "winch_parameter_error",
-                  "quadratic_drag", "periodic_torque"]
+                  "quadratic_drag", "cogging"]
 
 
 @pytest.mark.parametrize("name", TORQUE_EFFECTS)
@@ -361,7 +361,8 @@ def test_torque_effect_has_its_stated_size(name):
         elif name == "quadratic_drag":
             expect = pe["coefficient"] * w * np.abs(w)
         else:
-            expect = pe["amplitude"] * np.sin(pe["wavenumber"] * theta + pe["phase"])
+            expect = pe["amplitude"] * np.sin(pe["periods"] * pe["angle_scale"] * theta
+                                              + pe["phase"])
         assert np.abs((res - expect)[mask]).max() < 1e-8 * np.abs(run.states["tau"]).max()
         res_all.append(np.where(mask, res, 0.0))
         w_all.append(np.where(mask, w, 0.0))
@@ -377,7 +378,7 @@ def test_torque_effect_has_its_stated_size(name):
         assert np.allclose(size, pe["coefficient"][on] * reach, rtol=1e-6)
     elif name == "quadratic_drag":
         assert np.allclose(size, pe["coefficient"][on] * np.abs(w).max(0)[on] ** 2, rtol=1e-6)
-    elif name == "periodic_torque":
+    elif name == "cogging":
         assert np.all(size <= pe["amplitude"][on] + 1e-12)
         assert np.all(size > 0.3 * pe["amplitude"][on])
     else:
@@ -546,6 +547,54 @@ def test_axes_effect_identity():
     level = model.friction_level(st["v"])
     assert np.allclose(np.abs(st["friction"])[slide], np.broadcast_to(level, slide.shape)[slide])
     assert np.all(np.abs(st["friction"]) <= level + 1e-12)
+
+
+def test_axes_cogging_repeats_with_the_motor_angle(tmp_path):
+    """Cogging on drive axes: on a rotary joint periodic in q, on a prismatic axis in
+    ``2 pi q / pitch`` with the pitch written to rig.yaml (``pitch_m``, null on rotary
+    joints); whole periods per turn (per pitch), 1.5-3 periods over the swing (at least
+    2 per turn of a rotary joint), drawn only where a motor angle is known: a prismatic
+    axis without a pitch gets the periodic force outside the vocabulary instead."""
+    import yaml
+
+    rig = random_axes_rig(9, n_axes=3, rate_hz=1000,
+                          joint_types=["rotary", "prismatic", "prismatic"], pitch=True)
+    plain = random_axes_rig(9, n_axes=3, rate_hz=1000,
+                            joint_types=["rotary", "prismatic", "prismatic"])
+    assert np.array_equal(rig.amplitude, plain.amplitude)       # the same rig otherwise
+    assert np.isnan(rig.pitch_m[0])
+    assert np.all((rig.pitch_m[1:] >= 0.5 * rig.amplitude[1:])
+                  & (rig.pitch_m[1:] <= 2.0 * rig.amplitude[1:]))
+    truth = simulate_axes_dataset(tmp_path / "ax", rig, n_runs=1, duration_s=2.0, seed=3)
+    assert truth is not None
+    stated = yaml.safe_load((tmp_path / "ax" / "rig.yaml").read_text())["pitch_m"]
+    assert stated[0] is None and stated[1:] == pytest.approx(rig.pitch_m[1:].tolist())
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        eff = draw_effect("cogging", rig, rng)
+        on = list(eff.channels)
+        periods = eff.params["periods"][on]
+        assert np.all(periods == np.round(periods)) and np.all(periods >= 1)
+        scale = eff.params["angle_scale"][on]
+        assert scale == pytest.approx(np.where(rig.rotary[on], 1.0,
+                                               2 * np.pi / rig.pitch_m[on]))
+        over = periods * scale * 2 * rig.amplitude[on] / (2 * np.pi)
+        # rounding to whole periods per turn moves the count over the swing by at most
+        # half a period per turn's worth (a floor of one per turn on a short pitch)
+        assert np.all(over <= 3.0 + 0.5 * scale * 2 * rig.amplitude[on] / (2 * np.pi))
+        assert np.all(periods[rig.rotary[on]] >= 2)
+    with pytest.raises(ValueError, match="motor angle"):
+        draw_effect("cogging", plain, rng, channels=[1])
+    with pytest.raises(ValueError, match="no motor angle"):
+        draw_effect("periodic_torque", rig, rng, channels=[0])
+    assert set(draw_effect("periodic_torque", plain, rng).channels) <= {1, 2}
+    model = true_model(rig, [Effect("cogging", (0, 2), {
+        "amplitude": [2.0, 0, 3.0], "periods": [4.0, 0, 2.0],
+        "angle_scale": [1.0, 0, 2 * np.pi / rig.pitch_m[2]], "phase": [0.5, 0, 1.0]})])
+    q = np.linspace(-1, 1, 7)[:, None] * rig.amplitude
+    expect = np.stack([2.0 * np.sin(4.0 * q[:, 0] + 0.5), 0 * q[:, 1],
+                       3.0 * np.sin(2.0 * 2 * np.pi / rig.pitch_m[2] * q[:, 2] + 1.0)], axis=1)
+    assert np.allclose(model.extra_torque(np.ones_like(q), q), expect)
 
 
 def test_axes_position_dependent_load_identity(tmp_path):

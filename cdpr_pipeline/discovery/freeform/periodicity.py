@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cdpr_pipeline.sim.effects.periodic import harmonic_shares
+
 
 @dataclass(frozen=True)
 class Periodicity:
@@ -67,20 +69,6 @@ class Harmonic(float):
 PEAK_GRID = 8
 
 
-def _harmonic_shares(theta: np.ndarray, r: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """Share of ``r`` (rows,) explained by ``a sin(k theta) + b cos(k theta)``, for each
-    wavenumber of ``k`` (m,)."""
-    phase = theta[:, None] * k[None, :]
-    sn, cs = np.sin(phase), np.cos(phase)
-    ss, cc, sc = (sn * sn).sum(0), (cs * cs).sum(0), (sn * cs).sum(0)
-    rs, rc = r @ sn, r @ cs
-    det = ss * cc - sc * sc
-    ok = det > 1e-12 * np.maximum(ss * cc, 1e-300)
-    explained = np.where(ok, (cc * rs * rs - 2 * sc * rs * rc + ss * rc * rc)
-                         / np.where(ok, det, 1.0), 0.0)
-    return explained / max(float(r @ r), 1e-300)
-
-
 def periodic_peaks(state: dict[str, np.ndarray], residual: np.ndarray,
                    periodicity: Periodicity) -> list[str]:
     """Per channel, the position harmonic that explains most of its residual, as the
@@ -104,12 +92,12 @@ def periodic_peaks(state: dict[str, np.ndarray], residual: np.ndarray,
         r = residual[:, i]
         if not np.any(r) or grid.size == 0:
             continue
-        shares = _harmonic_shares(theta[:, i], r, periodicity.unit * grid)
+        shares = harmonic_shares(theta[:, i], r, periodicity.unit * grid)
         m = float(grid[int(np.argmax(shares))])
         if not periodicity.integer:
             fine = m + np.linspace(-1.0, 1.0, 2 * int(100 / PEAK_GRID) + 1) / PEAK_GRID
             fine = fine[fine > 0]
-            m = float(fine[int(np.argmax(_harmonic_shares(theta[:, i], r,
+            m = float(fine[int(np.argmax(harmonic_shares(theta[:, i], r,
                                                             periodicity.unit * fine)))])
         k = Harmonic(periodicity.wavenumber(m))
         terms += [f"sin_k(theta, {k})", f"cos_k(theta, {k})"]

@@ -18,13 +18,20 @@ every affected winch) or a list with one value per affected winch (per entry of
 ``cables``, in its order; per winch when ``cables`` is None), see :func:`per_winch`.
 
 Everything diagnosis needs to know about an effect lives on its class, so adding an
-effect is one class (and one ``conf/effects`` file): :meth:`Effect.candidates` (the
-variants diagnosis fits, with their bounds), :meth:`Effect.shapes` (the free-form terms
-it names) and :meth:`Effect.scaled` (its strength scaled, for detection studies).
+effect is one class, one line of the registry and one ``conf/effects`` file:
+:meth:`Effect.candidates` (the variants diagnosis fits, with their bounds),
+:meth:`Effect.shapes` (the free-form terms it names), :meth:`Effect.scaled` (its
+strength scaled, for detection studies), the hooks the diagnosis asks instead of
+testing classes (:attr:`Effect.reidentifies_winch`, :meth:`Effect.winch_change`,
+:attr:`Effect.elastic_cables`) and the words of the vocabulary tables
+(:attr:`Effect.cause`, :attr:`Effect.signature`, :attr:`Effect.plant_change`,
+:attr:`Effect.lab_draws`), which :mod:`~cdpr_pipeline.sim.effects.vocabulary` writes
+into the docs (``python -m cdpr_pipeline.sim.effects.vocabulary --write``).
 
-The effects, one family per module (the order of the imports below is the order of the
-registry :data:`EFFECTS`, which is the order diagnosis fits the vocabulary's candidates
-in; ``tests/sim/effects/test_registry.py`` holds it):
+The registry (:mod:`~cdpr_pipeline.sim.effects.registry`) declares the effects in the
+order diagnosis judges the vocabulary's candidates: :data:`VOCABULARY`, then
+:data:`OUTSIDE`; :data:`EFFECTS` maps names to classes in that order. The families, one
+module each:
 
 * :mod:`~cdpr_pipeline.sim.effects.winch`: ``winch_parameter_error``;
 * :mod:`~cdpr_pipeline.sim.effects.friction`: ``stribeck_friction``,
@@ -34,39 +41,46 @@ in; ``tests/sim/effects/test_registry.py`` holds it):
 * :mod:`~cdpr_pipeline.sim.effects.payload`: ``payload_mass_error``;
 * :mod:`~cdpr_pipeline.sim.effects.actuator`: ``actuator_lag``;
 * :mod:`~cdpr_pipeline.sim.effects.loads`: ``position_dependent_load``;
-* :mod:`~cdpr_pipeline.sim.effects.periodic`: ``cogging_torque`` (outside the vocabulary);
+* :mod:`~cdpr_pipeline.sim.effects.periodic`: ``cogging`` (formerly ``cogging_torque``);
 * :mod:`~cdpr_pipeline.sim.effects.symbolic`: ``symbolic_winch_torque``, what free-form
   discovery finds.
 
-:mod:`~cdpr_pipeline.sim.effects.base` holds :class:`Effect`, the registry and
-:func:`make_effect`.
+:mod:`~cdpr_pipeline.sim.effects.base` holds :class:`Effect` and the helpers the
+families share.
 """
 
 from __future__ import annotations
 
-# The imports stay in registry order, not sorted (module docstring).
-# ruff: noqa: I001
-from cdpr_pipeline.sim.effects.base import EFFECTS, Effect, Size, make_effect, per_winch
-from cdpr_pipeline.sim.effects.winch import WinchParameterError
+from cdpr_pipeline.sim.effects.actuator import ActuatorLag
+from cdpr_pipeline.sim.effects.base import Effect, Size, per_winch
+from cdpr_pipeline.sim.effects.cable import CableElasticity
 from cdpr_pipeline.sim.effects.friction import (
     AsymmetricViscousFriction,
     QuadraticDamping,
     StribeckFriction,
 )
-from cdpr_pipeline.sim.effects.cable import CableElasticity
 from cdpr_pipeline.sim.effects.geometry import AnchorOffset, DrumRadiusError
-from cdpr_pipeline.sim.effects.payload import PayloadMassError
-from cdpr_pipeline.sim.effects.actuator import ActuatorLag
 from cdpr_pipeline.sim.effects.loads import PositionDependentLoad
+from cdpr_pipeline.sim.effects.payload import PayloadMassError
 from cdpr_pipeline.sim.effects.periodic import CoggingTorque
+from cdpr_pipeline.sim.effects.registry import (
+    ALIASES,
+    EFFECTS,
+    OUTSIDE,
+    VOCABULARY,
+    effect_class,
+    make_effect,
+    vocabulary_names,
+)
 from cdpr_pipeline.sim.effects.symbolic import SymbolicWinchTorque
+from cdpr_pipeline.sim.effects.winch import WinchParameterError
 
 __all__ = [
-    "EFFECTS", "ActuatorLag", "AnchorOffset", "AsymmetricViscousFriction", "CableElasticity",
-    "CoggingTorque", "DrumRadiusError", "Effect", "PayloadMassError", "PositionDependentLoad",
-    "QuadraticDamping", "Size", "StribeckFriction", "SymbolicWinchTorque",
-    "WinchParameterError",
-    "make_effect", "per_winch",
+    "ALIASES", "EFFECTS", "OUTSIDE", "VOCABULARY", "ActuatorLag", "AnchorOffset",
+    "AsymmetricViscousFriction", "CableElasticity", "CoggingTorque", "DrumRadiusError",
+    "Effect", "PayloadMassError", "PositionDependentLoad", "QuadraticDamping", "Size",
+    "StribeckFriction", "SymbolicWinchTorque", "WinchParameterError", "effect_class",
+    "make_effect", "per_winch", "vocabulary_names",
 ]
 
 # The public name of every effect class is this package's: truth records

@@ -32,6 +32,12 @@ class ActuatorLag(Effect):
 
     name: ClassVar[str] = "actuator_lag"
     expression: ClassVar[str] = "tau u_drum' = u_cmd - u_drum"
+    cause: ClassVar[str] = "the torque reaches the drum late (drive bandwidth, delay)"
+    signature: ClassVar[str] = "residual follows du/dt; best fit at a lag of a few ms"
+    plant_change: ClassVar[str] = (
+        "a first-order lag between command and drum torque, per drive"
+    )
+    lab_draws: ClassVar[str] = "3-10 ms"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"time_constant_s": (0.003, 0.010)}
     refit_variant: ClassVar[bool] = True
     quantities: ClassVar[dict[str, str]] = {"time_constant_s": "s"}

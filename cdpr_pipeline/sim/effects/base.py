@@ -1,9 +1,9 @@
-"""The base of the hidden effects: :class:`Effect`, the registry :data:`EFFECTS` that its
-subclasses fill, :func:`make_effect`, and the helpers the effect families share
-(per-winch parameters, the candidates' arrays).
+"""The base of the hidden effects: :class:`Effect` with its hooks, and the helpers the
+effect families share (per-winch parameters, the candidates' arrays).
 
-The effects themselves live one family per module beside this one; the package
-(:mod:`cdpr_pipeline.sim.effects`) imports them all and describes the design.
+The effects themselves live one family per module beside this one; the registry
+(:mod:`~cdpr_pipeline.sim.effects.registry`) lists them in the order diagnosis judges
+them, and the package (:mod:`cdpr_pipeline.sim.effects`) describes the design.
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ from cdpr_pipeline.data.units import ChannelUnits
 from cdpr_pipeline.sim.candidate_forms import Candidate
 from cdpr_pipeline.sim.plant import Plant
 
-#: Effect classes by vocabulary name, filled by subclass registration.
-EFFECTS: dict[str, type[Effect]] = {}
+#: every named effect class defined, by name (a name is defined once); the registry
+#: (:mod:`~cdpr_pipeline.sim.effects.registry`) checks that it lists them all
+DEFINED: dict[str, type[Effect]] = {}
 
 
 def _cable_mask(cables: Sequence[int] | None, n: int) -> np.ndarray:
@@ -214,6 +215,30 @@ class Effect:
     replaces: ClassVar[dict[str, str]] = {}
     #: diagnosis also tries this effect with the winch parameters re-identified jointly
     refit_variant: ClassVar[bool] = False
+    #: former names still accepted where the effect is looked up by name (a config, a
+    #: model file); reports use :attr:`name`
+    aliases: ClassVar[tuple[str, ...]] = ()
+
+    # -- what the diagnosis asks of an effect (hooks, instead of asking for its class) --
+    #: the effect re-identifies a winch's nominal parameters (I_m, F_v, F_c, d): the
+    #: extended model's winch parameters, which other effects' sizes are relative to,
+    #: and reported as the winch's old and new values (:meth:`winch_change`)
+    reidentifies_winch: ClassVar[bool] = False
+    #: the effect makes cables elastic (fields ``damping_time_s``, ``damping_interval_s``,
+    #: ``damping_note``): once it is kept, the cables' loss time constant is fitted from
+    #: the stretch's lag behind the tension (:mod:`cdpr_pipeline.discovery.damping`)
+    elastic_cables: ClassVar[bool] = False
+
+    # -- what the vocabulary tables say (generated: :mod:`~cdpr_pipeline.sim.effects.
+    # vocabulary`); vocabulary effects fill all four --
+    #: the physical cause, in the words of the spec's vocabulary table
+    cause: ClassVar[str] = ""
+    #: the signature in the residuals the pipeline looks for (and what it reports)
+    signature: ClassVar[str] = ""
+    #: what changes in the true plant (docs/method.md's table)
+    plant_change: ClassVar[str] = ""
+    #: what the virtual lab draws (empty: not drawn by the lab)
+    lab_draws: ClassVar[str] = ""
     #: the quantity of each size parameter (:class:`Size`), by field name: a quantity of
     #: the channel it acts on (``force``, ``speed``, ...) or a fixed unit (``s``, ``m``)
     quantities: ClassVar[dict[str, str]] = {}
@@ -229,9 +254,9 @@ class Effect:
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         if cls.name:
-            if cls.name in EFFECTS:
+            if cls.name in DEFINED:
                 raise ValueError(f"effect name {cls.name!r} registered twice")
-            EFFECTS[cls.name] = cls
+            DEFINED[cls.name] = cls
 
     def __post_init__(self) -> None:
         defaults = {f.name: f.default for f in dataclasses.fields(self)}
@@ -282,6 +307,12 @@ class Effect:
         its parameters), for reports; empty for effects without such sizes."""
         return {}
 
+    def winch_change(self, nominal: Any) -> dict[str, Any] | None:
+        """For an effect that :attr:`reidentifies_winch`: ``{"winch": k, "old": {...},
+        "new": {...}}``, the winch's I_m, F_v, F_c, d before and after, from the
+        ``nominal`` :class:`~cdpr_pipeline.data.rig.WinchParams`; None otherwise."""
+        return None
+
     def sizes(self, plant: Any) -> list[Size]:
         """The fitted sizes a report states, per channel of ``plant`` (the model the
         sizes are relative to). By default every field named in :attr:`quantities`:
@@ -320,10 +351,12 @@ class Effect:
         return []
 
     @classmethod
-    def shapes(cls, speed_rms: float) -> list[str]:
+    def shapes(cls, rig: Any, scale: Any) -> list[str]:
         """Free-form expressions (:mod:`cdpr_pipeline.sim.expressions`) with this effect's
-        shape: a free-form term like one of them is this effect, so the free-form search
-        leaves such terms to its candidates (``speed_rms`` places shape parameters)."""
+        shape on a rig and the data's :class:`~cdpr_pipeline.sim.candidate_forms.
+        DataScale`: a free-form term like one of them is this effect, so the free-form
+        search leaves such terms to its candidates (``scale.speed_rms`` places shape
+        parameters)."""
         return []
 
     @classmethod
@@ -356,12 +389,6 @@ class Effect:
         return out
 
 
-def make_effect(name: str, rng: np.random.Generator, n_cables: int, **fixed: Any) -> Effect:
-    """Build effect ``name``; parameters not given (or None) are drawn from its ranges."""
-    if name not in EFFECTS:
-        raise KeyError(f"unknown effect {name!r}; known: {sorted(EFFECTS)}")
-    fixed = {k: v for k, v in fixed.items() if v is not None}
-    return EFFECTS[name].sample(rng, n_cables, **fixed)
 
 
 # ------------------------------------------------------ shared by the families' candidates

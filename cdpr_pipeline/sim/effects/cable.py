@@ -34,7 +34,21 @@ class CableElasticity(Effect):
 
     name: ClassVar[str] = "cable_elasticity"
     expression: ClassVar[str] = "dl = -t l / (EA + t)"
+    cause: ClassVar[str] = "cables stretch under tension"
+    signature: ClassVar[str] = (
+        "encoder length minus geometric length grows with tension x length; `params`: "
+        "`ea_n` per cable, and the cables' loss time constant `damping_time_s` with "
+        "its 95 % `damping_interval_s` when the stretch's lag behind the tension "
+        "determines it within 25 %, else `null` with the reason in `damping_note`"
+    )
+    plant_change: ClassVar[str] = (
+        "elastic cables, axial stiffness EA, Kelvin-Voigt loss time constant"
+    )
+    lab_draws: ClassVar[str] = (
+        "EA 1e4-5e4 N (log-uniform); `damping_time_s` 2 ms unless set"
+    )
     kinds: ClassVar[frozenset[str]] = frozenset({"cdpr"})
+    elastic_cables: ClassVar[bool] = True
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"ea_n": (1.0e4, 5.0e4)}
     log_uniform: ClassVar[frozenset[str]] = frozenset({"ea_n"})
     #: the stiffness (a rigid cable is EA infinite: no value makes it vanish)

@@ -38,6 +38,11 @@ class StribeckFriction(Effect):
 
     name: ClassVar[str] = "stribeck_friction"
     expression: ClassVar[str] = "tau_f += (F_s - F_c) exp(-(w/w_s)^2) sign(w)"
+    cause: ClassVar[str] = "friction rises at low speed"
+    signature: ClassVar[str] = ("torque residual peaks near zero winch (axis) speed, "
+                                "decays with speed")
+    plant_change: ClassVar[str] = "`(F_s - F_c) exp(-(w/w_s)^2) sign(w)` added"
+    lab_draws: ClassVar[str] = "F_s/F_c 1.6-2.5, w_s 0.5-2 rad/s"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {
         "static_ratio": (1.6, 2.5), "stribeck_velocity": (0.5, 2.0)}
     replaces: ClassVar[dict[str, str]] = {"extra_static": "static_ratio"}
@@ -105,10 +110,10 @@ class StribeckFriction(Effect):
             names=("extra_static", "stribeck_velocity"))]
 
     @classmethod
-    def shapes(cls, speed_rms):
+    def shapes(cls, rig, scale):
         # the family over every width a free-form term could take, 1.15 apart: a term
         # between two of them still matches one to a cosine of 0.9987 (see freeform)
-        widths = speed_rms * np.geomspace(1e-3, 20.0, 72)
+        widths = scale.speed_rms * np.geomspace(1e-3, 20.0, 72)
         return [f"mul(gauss(omega, {s:.6g}), sign_(omega))" for s in widths]
 
     def describe(self, plant=None):
@@ -149,6 +154,12 @@ class AsymmetricViscousFriction(Effect):
 
     name: ClassVar[str] = "asymmetric_viscous_friction"
     expression: ClassVar[str] = "tau_f += c max(s w, 0) s  (s = direction)"
+    cause: ClassVar[str] = (
+        "viscous friction differs by direction (worn screw, cable winding)"
+    )
+    signature: ClassVar[str] = "residual proportional to speed on one side of zero only"
+    plant_change: ClassVar[str] = "extra `c w` in one direction only"
+    lab_draws: ClassVar[str] = "c/F_v 0.3-0.8"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"ratio": (0.3, 0.8)}
     replaces: ClassVar[dict[str, str]] = {"coefficient": "ratio"}
     refit_variant: ClassVar[bool] = True
@@ -208,7 +219,7 @@ class AsymmetricViscousFriction(Effect):
             names=("coefficient", "direction"))]
 
     @classmethod
-    def shapes(cls, speed_rms):
+    def shapes(cls, rig, scale):
         # |w| = max(w, 0) - min(w, 0) is the direction-dependent part of any viscous law
         # with one coefficient per direction: this effect together with a winch's F_v
         return ["pos(omega)", "negpart(omega)", "abs_(omega)"]

@@ -24,6 +24,12 @@ class AnchorOffset(Effect):
 
     name: ClassVar[str] = "anchor_offset"
     expression: ClassVar[str] = "l = |A + dA - p|"
+    cause: ClassVar[str] = "an exit point is not where rig.yaml says (installation error)"
+    signature: ClassVar[str] = (
+        "one cable's length residual varies smoothly with platform position"
+    )
+    plant_change: ClassVar[str] = "one cable exit point moved"
+    lab_draws: ClassVar[str] = "1-3 cm, random direction"
     kinds: ClassVar[frozenset[str]] = frozenset({"cdpr"})
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"distance_m": (0.01, 0.03)}
     quantities: ClassVar[dict[str, str]] = {"offset_m": "m"}
@@ -82,6 +88,10 @@ class DrumRadiusError(Effect):
 
     name: ClassVar[str] = "drum_radius_error"
     expression: ClassVar[str] = "l_enc = l_0 - R_nom theta, theta = (l_0 - l) / (R (1 + e))"
+    cause: ClassVar[str] = "the length per motor turn differs from R"
+    signature: ClassVar[str] = "every length residual grows with the reeled length"
+    plant_change: ClassVar[str] = "`R_true = R (1 + e)`; the encoder still uses R"
+    lab_draws: ClassVar[str] = "|e| 1-3 %"
     kinds: ClassVar[frozenset[str]] = frozenset({"cdpr"})
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative": (0.01, 0.03)}
     signed: ClassVar[frozenset[str]] = frozenset({"relative"})

@@ -38,6 +38,18 @@ class PositionDependentLoad(Effect):
 
     name: ClassVar[str] = "position_dependent_load"
     expression: ClassVar[str] = "tau += a sin(q) + b cos(q) (rotary), a q + b (prismatic)"
+    cause: ClassVar[str] = (
+        "(axes) a load that depends on the axis position: an unbalanced rotary load's "
+        "gravity, a spring, a cable carrier"
+    )
+    signature: ClassVar[str] = (
+        "torque residual follows `a sin(q) + b cos(q)` (rotary) or `a q + b` "
+        "(prismatic)"
+    )
+    plant_change: ClassVar[str] = (
+        "(axes) `a sin(q) + b cos(q)` (rotary) or `k q + c` (prismatic)"
+    )
+    lab_draws: ClassVar[str] = ""
     kinds: ClassVar[frozenset[str]] = frozenset({"axes"})
     drawable: ClassVar[bool] = False
     #: ``a`` is a force (rotary: of ``sin q``) or a stiffness (prismatic: of ``q``)
@@ -131,7 +143,7 @@ class PositionDependentLoad(Effect):
             if n > 1 else one
 
     @classmethod
-    def shapes(cls, speed_rms):
+    def shapes(cls, rig, scale):
         # a free-form term in sin/cos of the position itself, or linear in it, is this load
         return ["sin_k(theta, 1)", "cos_k(theta, 1)", "theta"]
 

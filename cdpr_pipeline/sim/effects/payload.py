@@ -19,6 +19,12 @@ class PayloadMassError(Effect):
 
     name: ClassVar[str] = "payload_mass_error"
     expression: ClassVar[str] = "U* -= R (K^T)^+ dm (a - g)"
+    cause: ClassVar[str] = "the platform is heavier or lighter than stated"
+    signature: ClassVar[str] = (
+        "torque residual follows (J^T)^-1 (a - g) with one shared scale"
+    )
+    plant_change: ClassVar[str] = "`m_true = m (1 + e)`"
+    lab_draws: ClassVar[str] = "|e| 10-30 %"
     kinds: ClassVar[frozenset[str]] = frozenset({"cdpr"})
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative": (0.1, 0.3)}
     signed: ClassVar[frozenset[str]] = frozenset({"relative"})

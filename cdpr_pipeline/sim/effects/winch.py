@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
+from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.sim.candidate_forms import TORQUE
 from cdpr_pipeline.sim.effects.base import (
     Effect,
@@ -28,7 +29,18 @@ class WinchParameterError(Effect):
 
     name: ClassVar[str] = "winch_parameter_error"
     expression: ClassVar[str] = "U* = I_m a + F_v b + F_c c + d with re-identified I_m, F_v, F_c, d"
+    cause: ClassVar[str] = (
+        "the nominal I_m, F_v, F_c or d of a winch is wrong (wear, temperature, a "
+        "wrong data sheet)"
+    )
+    signature: ClassVar[str] = (
+        "re-identifying that winch's parameters removes the residual; report old and "
+        "new values"
+    )
+    plant_change: ClassVar[str] = "a winch's I_m, F_v, F_c or d"
+    lab_draws: ClassVar[str] = "±20-40 %"
     ranges: ClassVar[dict[str, tuple[float, float]]] = {"relative_error": (0.2, 0.4)}
+    reidentifies_winch: ClassVar[bool] = True
 
     #: the quantity of each re-identified parameter (:meth:`sizes`)
     quantities: ClassVar[dict[str, str]] = {"inertia": "inertia", "viscous": "viscous",
@@ -39,6 +51,17 @@ class WinchParameterError(Effect):
     viscous_scale: float = 1.0
     coulomb_scale: float = 1.0
     offset_delta: float = 0.0
+
+    def winch_change(self, nominal: WinchParams) -> dict[str, Any]:
+        """This winch's I_m, F_v, F_c, d in ``nominal`` and after the change."""
+        i = self.cable - 1
+        old = {k: float(getattr(nominal, k)[i]) for k in ("inertia", "viscous", "coulomb",
+                                                          "offset")}
+        new = {"inertia": old["inertia"] * self.inertia_scale,
+               "viscous": old["viscous"] * self.viscous_scale,
+               "coulomb": old["coulomb"] * self.coulomb_scale,
+               "offset": old["offset"] + self.offset_delta}
+        return {"winch": self.cable, "old": old, "new": new}
 
     def apply(self, plant: Plant) -> Plant:
         i = _cable_mask([self.cable], plant.n)
@@ -76,7 +99,7 @@ class WinchParameterError(Effect):
             affects=TORQUE, sparse=True) for cable in range(1, scale.n + 1)]
 
     @classmethod
-    def shapes(cls, speed_rms):
+    def shapes(cls, rig, scale):
         # viscous, Coulomb and offset terms are a winch's own parameters
         return ["omega", "sign_(omega)", "one(omega)"]
 

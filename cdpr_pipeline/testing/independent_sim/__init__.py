@@ -55,11 +55,18 @@ actuator_lag                  both   first-order lag of the applied torque, time
                                      3..15 ms (cdpr), 2..10 ms (axes), at most 0.3 / w_c
 quadratic_drag                both   extra ``c w |w|``, ``c`` in 0.3..0.8 F_v / w_typ
                                      (outside the pipeline's vocabulary)
-periodic_torque               both   extra ``A sin(k angle + phi)``, ``A`` in 0.3..0.8 F_c;
-                                     cdpr: ``k`` in 1..4 periods per motor turn (absolute
-                                     motor angle, 0 at the workspace centre); axes:
+periodic_torque               axes   extra ``A sin(k q + phi)`` on prismatic axes whose pitch
+                                     rig.yaml does not state, ``A`` in 0.3..0.8 F_c,
                                      ``k = 2 pi / lambda``, ``lambda`` in 0.2..0.5 amplitude
-                                     (outside the pipeline's vocabulary)
+                                     (outside the pipeline's vocabulary: no motor angle)
+cogging                       both   extra ``A sin(N phi + phase)``, ``A`` in 0.3..0.8 F_c,
+                                     ``phi`` the motor angle (absolute, 0 at the workspace
+                                     centre; a rotary joint's q; ``2 pi q / pitch`` on a
+                                     prismatic axis, ``random_axes_rig(pitch=True)``: pitch
+                                     0.5..2 amplitude, written as ``pitch_m``); cdpr: ``N``
+                                     in 1..4 per motor turn; axes: ``N`` whole periods per
+                                     turn (per pitch) giving 1.5..3 periods over the swing,
+                                     at least 2 on a rotary joint, at most 48
 position_dependent_load       axes   rotary joint: ``a sin q + b cos q = A sin(q + phi)``, ``A``
                                      in 0.3..0.8 of the typical torque, ``|cos phi| >= 0.5``;
                                      prismatic axis: ``k (q - q0)``, ``k A`` in 0.3..0.8 of the

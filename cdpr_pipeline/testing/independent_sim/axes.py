@@ -73,6 +73,9 @@ class AxesRigSpec:
     #: per axis ``prismatic`` or ``rotary`` (rig.yaml's ``joint_types``); None: not
     #: stated, every axis prismatic
     joint_types: tuple[str, ...] | None = None
+    #: per axis the travel of a prismatic axis per motor revolution, m (rig.yaml's
+    #: ``pitch_m``), NaN where not stated (a rotary joint); None: stated for none
+    pitch_m: np.ndarray | None = None
     #: state the controller in rig.yaml's ``position_loop`` schema (the data format's,
     #: so that the closed loop can be re-simulated); False: a free-form description
     controller_schema: bool = False
@@ -99,6 +102,16 @@ class AxesRigSpec:
             if len(types) != n or not set(types) <= {"prismatic", "rotary"}:
                 raise ValueError(f"joint_types {types}: one of prismatic/rotary per axis ({n})")
             object.__setattr__(self, "joint_types", types)
+        if self.pitch_m is not None:
+            object.__setattr__(self, "pitch_m", _per_axis(self.pitch_m, n))
+
+    @property
+    def angle_scale(self) -> np.ndarray:
+        """(n,) radians of motor angle per unit of q: 1 on a rotary joint, ``2 pi /
+        pitch`` on a prismatic axis whose pitch is stated, NaN where none is (no motor
+        angle is known)."""
+        pitch = np.full(self.n, np.nan) if self.pitch_m is None else self.pitch_m
+        return np.where(self.rotary, 1.0, 2 * np.pi / pitch)
 
     @property
     def rotary(self) -> np.ndarray:
@@ -154,6 +167,9 @@ class AxesRigSpec:
             "controller": self._controller(kp, kd),
             "generator": "cdpr_pipeline.testing.independent_sim",
             **({"joint_types": list(self.joint_types)} if self.joint_types else {}),
+            **({"pitch_m": [None if np.isnan(p) or r else float(p)
+                            for p, r in zip(self.pitch_m, self.rotary, strict=True)]}
+               if self.pitch_m is not None else {}),
         }
 
     def _controller(self, kp: np.ndarray, kd: np.ndarray) -> dict[str, Any]:
@@ -178,8 +194,8 @@ class AxesRigSpec:
 
 def random_axes_rig(seed: int, n_axes: int | None = None, rate_hz: float | None = None,
                     inertia: Any = None, viscous: Any = None, coulomb: Any = None,
-                    joint_types: Any = None, coulomb_tanh: float | None = None
-                    ) -> AxesRigSpec:
+                    joint_types: Any = None, pitch: bool = False,
+                    coulomb_tanh: float | None = None) -> AxesRigSpec:
     """Draw random drive axes.
 
     Parameters
@@ -197,6 +213,11 @@ def random_axes_rig(seed: int, n_axes: int | None = None, rate_hz: float | None 
     joint_types : sequence of str, optional
         ``prismatic`` or ``rotary`` per axis, written to rig.yaml as ``joint_types``;
         omitted: not stated (every axis prismatic), the same rig as before.
+    pitch : bool
+        Draw each prismatic axis's pitch (travel per motor revolution, 0.5-2 times its
+        amplitude, from a stream of its own: the rest of the rig stays the same) and
+        state it in rig.yaml as ``pitch_m`` (``null`` on rotary joints); False: no
+        pitch stated.
     coulomb_tanh : float, optional
         The Coulomb law ``F_c tanh(k q')`` with this ``k``, simulated and stated in
         rig.yaml; omitted: the hard sign (the same draws either way).
@@ -226,11 +247,17 @@ def random_axes_rig(seed: int, n_axes: int | None = None, rate_hz: float | None 
     omega = 2 * np.pi * ref_hz
     scale = inertia_v * amplitude * omega**2 + visc * amplitude * omega
     fc = _per_axis(coulomb, n) if coulomb is not None else rng.uniform(0.2, 0.6, n) * scale
+    pitch_m = None
+    if pitch:
+        rotary = np.array([j == "rotary" for j in joint_types or ("prismatic",) * n])
+        draws = np.random.default_rng([int(seed), 0x917C]).uniform(0.5, 2.0, n)
+        pitch_m = np.where(rotary, np.nan, draws * amplitude)
     return AxesRigSpec(seed=int(seed), rate_hz=rate, inertia=inertia_v, viscous=visc,
                        coulomb=fc, offset=rng.uniform(-0.2, 0.2, n) * fc, amplitude=amplitude,
                        ref_hz=ref_hz, bandwidth_hz=bandwidth,
                        damping_ratio=float(rng.uniform(0.7, 1.0)),
                        joint_types=None if joint_types is None else tuple(joint_types),
+                       pitch_m=pitch_m,
                        coulomb_tanh=None if coulomb_tanh is None else float(coulomb_tanh))
 
 

@@ -137,6 +137,12 @@ class RigSpec:
         return TYPICAL_PLATFORM_SPEED / self.radius
 
     @property
+    def angle_scale(self) -> np.ndarray:
+        """(n,) radians of motor angle per radian of winch angle: 1 (the drum is on the
+        motor shaft)."""
+        return np.ones(self.n)
+
+    @property
     def bandwidth_rad_s(self) -> np.ndarray:
         return np.full(self.n, 2 * np.pi * self.bandwidth_hz)
 

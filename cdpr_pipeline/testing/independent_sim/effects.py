@@ -26,12 +26,18 @@ EFFECT_KINDS: dict[str, tuple[str, ...]] = {
     "cable_elasticity": ("cdpr",),
     "actuator_lag": ("cdpr", "axes"),
     "quadratic_drag": ("cdpr", "axes"),
-    "periodic_torque": ("cdpr", "axes"),
+    "periodic_torque": ("axes",),
     "position_dependent_load": ("axes",),
+    "cogging": ("cdpr", "axes"),
 }
 
-#: the two effects outside the pipeline's vocabulary (its diagnosis should say `unnamed`)
+#: the two effects outside the pipeline's vocabulary (its diagnosis should say `unnamed`):
+#: a drag, and a force periodic in a prismatic axis's position where rig.yaml states no
+#: pitch (no motor angle it could repeat with: not ``cogging``)
 OUTSIDE_VOCABULARY = ("quadratic_drag", "periodic_torque")
+
+#: the most cogging periods per revolution the generator draws (the pipeline scans 1-48)
+MOST_COGGING_PERIODS = 48
 
 #: which signal an effect shows up in first (torque ``u`` or encoder length ``l``)
 _SIGNAL = {"anchor_offset": "l", "drum_radius_error": "l", "cable_elasticity": "l"}
@@ -125,9 +131,10 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
     channels : sequence of int, optional
         Affected channels (0-based); drawn (one, some or all) when omitted.
     frequency_hz : (float, float), optional
-        ``periodic_torque`` only: draw its frequency at the channel's typical speed
-        uniformly in this range instead of its wavenumber (cdpr: rounded to whole
-        periods per motor turn, at least one), e.g. to place it above the motion's band.
+        ``cogging`` and ``periodic_torque`` only: draw its frequency at the channel's
+        typical speed uniformly in this range instead of its period (cogging: rounded to
+        whole periods per motor turn, at least one), e.g. to place it above the motion's
+        band.
     damping_time_s : (float, float), optional
         ``cable_elasticity`` only: draw the named cables' Kelvin-Voigt loss time
         constant (s, one for all: one cable material) uniformly in this range, after the
@@ -147,6 +154,13 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
         chans = tuple(range(n))  # the platform couples every cable
     elif channels is None:
         chans = _pick_channels(n, rng)
+        if name in ("cogging", "periodic_torque"):
+            # cogging repeats with a motor angle (a winch, a rotary joint, a prismatic
+            # axis with a stated pitch); the periodic force acts where none is known
+            angled = np.isfinite(rig.angle_scale)
+            able = angled if name == "cogging" else ~angled
+            chans = tuple(c for c in chans if able[c]) or \
+                tuple(int(c) for c in np.flatnonzero(able)[:1])
     else:
         chans = tuple(int(c) for c in channels)
         if not chans or min(chans) < 0 or max(chans) >= n:
@@ -214,13 +228,34 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
         params = {"a": per_channel(np.where(rotary, size * np.cos(phi), stiffness)),
                   "b": per_channel(np.where(rotary, size * np.sin(phi), -stiffness * rest)),
                   "rotary": per_channel(rotary.astype(float))}
+    elif name == "cogging":
+        per_unit = rig.angle_scale[idx]
+        if not np.all(np.isfinite(per_unit)) or not m:
+            raise ValueError("cogging repeats with a motor angle: draw it on a winch, a "
+                             "rotary joint or a prismatic axis with a pitch "
+                             "(random_axes_rig(pitch=True))")
+        if frequency_hz is not None:
+            # N periods per turn pass at N w / (2 pi) turns per second
+            periods = 2 * np.pi * rng.uniform(*frequency_hz, m) / (speed[idx] * per_unit)
+        elif rig.kind == "cdpr":
+            periods = rng.integers(1, 5, m).astype(float)
+        else:
+            # 1.5-3 periods over the axis's swing (2 amplitudes), at least 2 per turn of
+            # a rotary joint (one is a load's), whole periods per turn
+            over = rng.uniform(1.5, 3.0, m)
+            periods = over * 2 * np.pi / (2 * rig.amplitude[idx] * per_unit)
+            periods = np.where(rig.rotary[idx], np.maximum(periods, 2.0), periods)
+        periods = np.clip(np.round(periods), 1.0, MOST_COGGING_PERIODS)
+        params = {"amplitude": per_channel(rng.uniform(0.3, 0.8, m) * fc[idx]),
+                  "periods": per_channel(periods),
+                  "angle_scale": per_channel(per_unit),
+                  "phase": per_channel(rng.uniform(0.0, 2 * np.pi, m))}
     elif name == "periodic_torque":
+        if np.any(np.isfinite(rig.angle_scale[idx])):
+            raise ValueError("periodic_torque acts where no motor angle is known (a "
+                             "prismatic axis without a pitch); elsewhere it is cogging")
         if frequency_hz is not None:
             wavenumber = 2 * np.pi * rng.uniform(*frequency_hz, m) / speed[idx]
-            if rig.kind == "cdpr":   # whole periods per motor turn
-                wavenumber = np.maximum(1.0, np.round(wavenumber))
-        elif rig.kind == "cdpr":
-            wavenumber = rng.integers(1, 5, m).astype(float)  # periods per motor turn
         else:
             wavenumber = 2 * np.pi / (rng.uniform(0.2, 0.5, m) * rig.amplitude[idx])
         params = {"amplitude": per_channel(rng.uniform(0.3, 0.8, m) * fc[idx]),
@@ -228,8 +263,8 @@ def draw_effect(name: str, rig: Any, rng: np.random.Generator,
                   "phase": per_channel(rng.uniform(0.0, 2 * np.pi, m))}
     else:  # pragma: no cover - guarded by EFFECT_KINDS above
         raise AssertionError(name)
-    if frequency_hz is not None and name != "periodic_torque":
-        raise ValueError(f"frequency_hz applies to periodic_torque, not {name!r}")
+    if frequency_hz is not None and name not in ("cogging", "periodic_torque"):
+        raise ValueError(f"frequency_hz applies to cogging and periodic_torque, not {name!r}")
     if damping_time_s is not None and name != "cable_elasticity":
         raise ValueError(f"damping_time_s applies to cable_elasticity, not {name!r}")
     return Effect(name, chans, params)
@@ -391,6 +426,12 @@ def true_model(rig: Any, effects: list[Effect]) -> TrueModel:
                                  "the rig's")
             model.load_a = model.load_a + p["a"]
             model.load_b = model.load_b + p["b"]
+        elif eff.name == "cogging":
+            # its own term: A sin(N phi + phase), phi the motor angle of the position
+            model.periodic_amplitude = np.where(on, p["amplitude"], model.periodic_amplitude)
+            model.periodic_wavenumber = np.where(on, p["periods"] * p["angle_scale"],
+                                                 model.periodic_wavenumber)
+            model.periodic_phase = np.where(on, p["phase"], model.periodic_phase)
         elif eff.name == "periodic_torque":
             model.periodic_amplitude = np.where(on, p["amplitude"], model.periodic_amplitude)
             model.periodic_wavenumber = np.where(on, p["wavenumber"],

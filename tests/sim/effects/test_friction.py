@@ -19,7 +19,7 @@ from tests.sim.effects.effect_runs import run_lab
     StribeckFriction(static_ratio=2.0, stribeck_velocity=1.0),
     AsymmetricViscousFriction(ratio=0.5, direction=-1),
     QuadraticDamping(ratio=0.5),
-    CoggingTorque(amplitude_nm=0.1, periods_per_rev=6),
+    CoggingTorque(amplitude=0.1, periods=6),
 ])
 def test_friction_like_effect_is_the_whole_regression_residual(paper_rig, effect):
     run = run_lab(paper_rig, [effect])
