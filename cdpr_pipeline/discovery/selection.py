@@ -600,7 +600,8 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
     3. A named cause may be a partial mimic of something outside the vocabulary. It is
        dropped when the model without it (free-form terms re-selected to take its
        place) has a BIC better by more than one parameter's worth than the model with
-       it (free-form terms re-selected around it), and either the free-form part passes
+       it (free-form terms re-selected around it, part of that model only if they
+       pass on top of it), and either the free-form part passes
        on top of the named causes (something outside the vocabulary is there anyway) or
        the terms taking its place need no more parameters than it has (a simpler
        description). A named effect wins ties, and is not displaced by a larger set of
