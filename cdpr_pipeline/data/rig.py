@@ -164,6 +164,13 @@ class Rig(Protocol):
         """Whether ``u`` is the commanded torque (held by a digital drive until the next
         command), not the force or torque applied."""
 
+    @property
+    def torque_held(self) -> bool | None:
+        """rig.yaml's optional ``u_held``: whether the recorded ``u`` is to be read as a
+        command held over the controller period (``false``: as measured, sampled);
+        None when rig.yaml does not say (the reading decides from the controller rate
+        and :attr:`torque_commanded`)."""
+
     def frame_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The box the positions must stay in, None for a rig without one."""
 
@@ -245,13 +252,24 @@ class ControllerSpec:
         }
 
 
+#: rig.yaml's optional key stating how the recorded ``u`` is read (:attr:`Rig.torque_held`)
+U_HELD = "u_held"
+
+
 class _Signals:
-    """:meth:`Rig.signal` from :attr:`Rig.signals`."""
+    """:meth:`Rig.signal` from :attr:`Rig.signals`, :attr:`Rig.torque_held` from
+    ``extra``."""
 
     signals: tuple[RecordedSignal, ...]
+    extra: dict[str, Any]
 
     def signal(self, name: str) -> RecordedSignal | None:
         return next((s for s in self.signals if s.field == name), None)
+
+    @property
+    def torque_held(self) -> bool | None:
+        """:attr:`Rig.torque_held` from rig.yaml's ``u_held`` (kept in ``extra``)."""
+        return self.extra.get(U_HELD)
 
 
 #: the recorded signals of a cable robot's run (the data spec's columns, in order)
