@@ -7,6 +7,8 @@ rig.yaml's nominal model is the published one: what a user of that rig has; its
 controller is the published one in the ``position_loop`` schema (kp, kv, gtau). The
 cross-test file's force pulses are a voltage added to the controller's output (``vir``
 records it): they go to column ``fext1`` in newtons, as measured (:func:`emps_pulse_volts`).
+rig.yaml states ``u_held: false``: ``u1`` is read as sampled, as the published IDIM-LS
+reads it, although the controller states its rate.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import numpy as np
 
 from cdpr_pipeline.data.axis_controller import POSITION_LOOP
 from cdpr_pipeline.data.io import write_dataset
-from cdpr_pipeline.data.rig import AxesRig, WinchParams
+from cdpr_pipeline.data.rig import U_HELD, AxesRig, WinchParams
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.errors import InputError
 
@@ -109,8 +111,10 @@ def convert_emps(src: str | Path, out_dir: str | Path, overwrite: bool = False) 
     rig = AxesRig(sample_rate_hz=float(round(rate)), axes=("q1",),
                   nominal=WinchParams(**{k: [v] for k, v in EMPS_PUBLISHED.items()}),
                   controller=ctrl,
+                  # u = gtau vir is the force as measured: the published IDIM-LS reads
+                  # it as sampled, not as a command held over the controller's period
                   extra={"source": "EMPS benchmark, Janot, Gautier, Brunot (2019)",
-                         "units": {"q1": "m", "u1": "N"}})
+                         "units": {"q1": "m", "u1": "N"}, U_HELD: False})
     return write_dataset(out_dir, rig, runs, overwrite=overwrite)
 
 

@@ -140,7 +140,8 @@ class RegressionSettings:
     zero_order_hold : bool or "auto"
         Treat each recorded torque as held until the next sample (see
         :func:`~cdpr_pipeline.identification.regressors.winch_regression`);
-        ``"auto"``: when rig.yaml states a digital controller
+        ``"auto"``: as rig.yaml's ``u_held`` states (:attr:`~cdpr_pipeline.data.rig.
+        Rig.torque_held`); where it does not, when rig.yaml states a digital controller
         (``controller.rate_hz``), whose commands are held over its period, and for a
         cable robot (the spec's ``u`` is the commanded torque).
     hold_fraction : float or "auto"
@@ -302,9 +303,10 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
     - speed cut-off: :data:`SMOOTH_LAW_SPEED_FACTOR` times the cut-off under a smooth
       Coulomb law (:attr:`DerivativeFilter.speed_cutoff_hz`), the cut-off under a hard sign;
     - Coulomb law: rig.yaml's ``coulomb_law`` (hard ``sign`` when absent, the spec);
-    - zero-order hold of the recorded torques when rig.yaml states a digital controller
-      rate (the command is held over a control period), and always for a cable robot,
-      whose ``u`` the spec defines as the commanded torque;
+    - zero-order hold of the recorded torques as rig.yaml's ``u_held`` states; where it
+      does not, when rig.yaml states a digital controller rate (the command is held over
+      a control period), and always for a cable robot, whose ``u`` the spec defines as
+      the commanded torque;
     - encoder rest: a channel whose recorded position stands still somewhere in any run
       (:attr:`RegressionSettings.encoder_rest`).
 
@@ -351,7 +353,13 @@ def resolve_settings(settings: RegressionSettings, trajectories: Sequence[Trajec
                  "hard sign" if law is None else f"tanh({law:g} w)")
     hold = settings.zero_order_hold
     rate = rig.controller_rate_hz
-    if hold == AUTO:
+    if hold == AUTO and rig.torque_held is not None:
+        # rig.yaml says how its u was recorded (EMPS: the force as measured, which the
+        # published protocol reads as sampled although its controller states a rate)
+        hold = bool(rig.torque_held)
+        log.info("recorded torques %s (rig.yaml's u_held)",
+                 "held over the controller period" if hold else "taken as sampled")
+    elif hold == AUTO:
         # the spec defines a cable robot's u as the commanded torque, which a digital
         # drive holds until the next command; an axis's u is the force applied
         commanded = rig.torque_commanded

@@ -220,6 +220,13 @@ class Rig(Protocol):
         command), not the force or torque applied."""
 
     @property
+    def torque_held(self) -> bool | None:
+        """rig.yaml's optional ``u_held``: whether the recorded ``u`` is to be read as a
+        command held over the controller period (``false``: as measured, sampled);
+        None when rig.yaml does not say (the reading decides from the controller rate
+        and :attr:`torque_commanded`)."""
+
+    @property
     def angle_per_position(self) -> tuple[float | None, ...]:
         """Per channel, radians of motor angle per unit of the channel's position (a
         winch angle or a rotary joint: 1; a prismatic axis: ``2 pi / pitch``), None where
@@ -307,13 +314,24 @@ class ControllerSpec:
         }
 
 
+#: rig.yaml's optional key stating how the recorded ``u`` is read (:attr:`Rig.torque_held`)
+U_HELD = "u_held"
+
+
 class _Signals:
-    """:meth:`Rig.signal` from :attr:`Rig.signals`."""
+    """:meth:`Rig.signal` from :attr:`Rig.signals`, :attr:`Rig.torque_held` from
+    ``extra``."""
 
     signals: tuple[RecordedSignal, ...]
+    extra: dict[str, Any]
 
     def signal(self, name: str) -> RecordedSignal | None:
         return next((s for s in self.signals if s.field == name), None)
+
+    @property
+    def torque_held(self) -> bool | None:
+        """:attr:`Rig.torque_held` from rig.yaml's ``u_held`` (kept in ``extra``)."""
+        return self.extra.get(U_HELD)
 
 
 #: the recorded signals of a cable robot's run (the data spec's columns, in order)

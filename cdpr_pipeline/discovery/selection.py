@@ -600,7 +600,8 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
     3. A named cause may be a partial mimic of something outside the vocabulary. It is
        dropped when the model without it (free-form terms re-selected to take its
        place) has a BIC better by more than one parameter's worth than the model with
-       it (free-form terms re-selected around it), and either the free-form part passes
+       it (free-form terms re-selected around it, part of that model only if they
+       pass on top of it), and either the free-form part passes
        on top of the named causes (something outside the vocabulary is there anyway) or
        the terms taking its place need no more parameters than it has (a simpler
        description). A named effect wins ties, and is not displaced by a larger set of
@@ -641,18 +642,22 @@ def select_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Ru
             others = [o for o in causes if o is not c]
             without = search.refit(rest, _effects(others), n_tests)
             with_c = search.refit(rest, _effects(others + [c]), n_tests)
+            # beside c, free-form terms count only if they pass on top of it (step 4):
+            # terms that fail there are no part of the model with c, and charging c
+            # for their parameters would let any free-form set undercut it
+            beside = list(with_c.effects) if with_c.passed else []
+            n_beside = with_c.n_params if with_c.passed else 0
             # c with the parameters the data need (a winch re-fit: what changed)
-            own, n_own = search.parsimonious(c, _effects(others) + list(with_c.effects))
-            bic_with = search.bic(_effects(others) + own + list(with_c.effects),
-                                  n_own + with_c.n_params)
+            own, n_own = search.parsimonious(c, _effects(others) + beside)
+            bic_with = search.bic(_effects(others) + own + beside, n_own + n_beside)
             bic_without = search.bic(_effects(others) + list(without.effects),
                                      without.n_params)
             # the free-form parameters that take c's place
-            replacing = without.n_params - with_c.n_params
+            replacing = without.n_params - n_beside
             # the same footing across families: with fewer parameters in its place, the
             # free-form description wins unless c adds, as a candidate would, beyond it
             simpler = without.passed and replacing < n_own and not search.adds_beyond(
-                _effects(others) + own + list(with_c.effects), n_own - replacing,
+                _effects(others) + own + beside, n_own - replacing,
                 _effects(others) + list(without.effects), n_tests, c.label).passed
             if simpler or bic_without + search.log_n() < bic_with and (
                     rest.passed or replacing <= n_own):

@@ -25,6 +25,7 @@ from cdpr_pipeline.data.reading import (
 )
 from cdpr_pipeline.data.rig import AxesRig, WinchParams
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.data.validation import parse_rig
 from cdpr_pipeline.errors import ConfigError
 from cdpr_pipeline.resources import emps_path
 from cdpr_pipeline.stages.identify import identify
@@ -76,6 +77,29 @@ def test_resolved_settings_follow_the_rate_and_the_motion(caplog):
     slow = _axis_run(20.0, [2.0])
     s3 = resolve_settings(AUTO, [slow], AxesRig(20.0, ("q1",), rig.nominal))
     assert s3.filter.cutoff_hz == pytest.approx(8.0) and s3.decimate == 2
+
+
+def test_rig_yaml_u_held_decides_the_hold_over_the_controller_rate():
+    """rig.yaml's ``u_held`` wins over the stated controller rate (EMPS: the force as
+    measured, read as sampled); a value other than true/false is refused, named."""
+    run = _axis_run(1000.0, [0.5, 2.0])
+    nominal = WinchParams([1.0], [1.0], [1.0], [0.0])
+    for stated, hold in ((None, True), (False, False), (True, True)):
+        extra = {} if stated is None else {"u_held": stated}
+        rig = AxesRig(1000.0, ("q1",), nominal, controller={"rate_hz": 1000.0}, extra=extra)
+        assert rig.torque_held is stated
+        assert resolve_settings(AUTO, [run], rig).zero_order_hold is hold, stated
+    no_rate = AxesRig(1000.0, ("q1",), nominal, extra={"u_held": True})
+    assert resolve_settings(AUTO, [run], no_rate).zero_order_hold is True
+    raw = {"format": "cdpr-measured/1", "kind": "axes", "sample_rate_hz": 1000.0,
+           "axes": ["q1"], "nominal": {k: [1.0] for k in ("inertia", "viscous",
+                                                           "coulomb", "offset")},
+           "u_held": "no"}
+    rig, problems = parse_rig(raw)
+    assert rig is None and [p.column for p in problems] == ["u_held"], problems
+    raw["u_held"] = False
+    rig, problems = parse_rig(raw)
+    assert not problems and rig.torque_held is False
 
 
 def test_the_wider_speed_band_finds_a_reversal_where_it_is(seed):

@@ -15,6 +15,7 @@ from ..errors import Problem
 from ..rig import (
     FORMAT,
     RIG_KINDS,
+    U_HELD,
     WINCH_KEYS,
     AxesRig,
     CdprRig,
@@ -161,6 +162,7 @@ class _RigChecker:
         extra = {k: v for k, v in raw.items() if k not in _CDPR_KEYS}
         self._frame(extra)
         virtual = self._virtual()
+        self._u_held()
         parts = (rate, gravity, mass, anchors, radius, winch)
         if self.problems or any(p is None for p in parts):
             return None
@@ -193,6 +195,7 @@ class _RigChecker:
                 self.error(key, message, "rig_controller")
         extra = {k: v for k, v in self.raw.items() if k not in _AXES_KEYS}
         virtual = self._virtual()
+        self._u_held()
         if self.problems or rate is None or names is None or nominal is None:
             return None
         return AxesRig(sample_rate_hz=rate, axes=tuple(names), nominal=nominal,
@@ -277,6 +280,11 @@ class _RigChecker:
             self.error("virtual", f"must be true or false, got {fmt_value(value)}", "rig_type")
             return False
         return value
+
+    def _u_held(self) -> None:
+        value = self.raw.get(U_HELD)
+        if value is not None and not isinstance(value, bool):
+            self.error(U_HELD, f"must be true or false, got {fmt_value(value)}", "rig_type")
 
 
 def parse_rig(raw: Any, file: str = RIG_FILE) -> tuple[Rig | None, list[Problem]]:
