@@ -58,7 +58,10 @@ def run_ci(coretype: str) -> dict[str, object]:
     steps = {m.group(1): 60 * int(m.group(2)) + int(m.group(3)) for m in STEP.finditer(out)}
     summaries = [m.group(1) for m in SUMMARY.finditer(out)]
     if proc.returncode:
-        print(out[-4000:])
+        # pytest reports on stdout; pip's build warnings fill stderr
+        failed = [line for line in proc.stdout.splitlines()
+                  if line.startswith(("FAILED", "ERROR"))]
+        print("\n".join(failed) or proc.stdout[-4000:])
     return {"coretype": coretype, "rc": proc.returncode, "wall_s": wall, "steps": steps,
             "summaries": summaries}
 
