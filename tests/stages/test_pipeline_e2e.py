@@ -150,7 +150,7 @@ def test_one_changed_param_reruns_only_what_depends_on_it(lab):
 
 
 def test_a_second_clone_pulls_every_result_and_has_nothing_to_run(lab, tmp_path):
-    """The README's sharing: `dvc push` to a remote (a folder here), the code and
+    """The sharing in docs/pipeline.md: `dvc push` to a remote (a folder here), the code and
     dvc.lock through git, then on a fresh clone `dvc pull`: every stage up to date, every
     output there, byte for byte, and `cdpr repro` has nothing to run."""
     root, env = lab

@@ -1,7 +1,7 @@
 """Scaling out, executed (slow; `make test-pipeline` runs them): Lightning's DDP on CPU
 through the `cdpr` command (2 processes over gloo), and Hydra sweeps on the joblib and
 submitit_local launchers into a fresh MLflow store, each job a run. The commands are the
-README's "Scaling out" section."""
+"Scaling out" section of docs/pipeline.md."""
 
 from __future__ import annotations
 
