@@ -18,7 +18,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import pickle
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -124,15 +124,25 @@ class _Filtered:
     derivative) before the filter. Where the projection mixes winches
     (:attr:`RunSignals.mixes`), a factor per winch (a parameter, a lag) must act before
     it: those combinations are taken from the spread rows
-    (:meth:`RunSignals.torque_spread`), filtered once."""
+    (:meth:`RunSignals.torque_spread`), filtered once.
 
-    __slots__ = ("_sig", "_x", "rows", "_slope", "_spread", "_slope_spread", "_lagged")
+    ``make`` gives ``x``; it is called again for the derivative or the spread rows, not
+    kept: thousands of these are memoised per run (an effect's extra torque at every
+    value a fit tries), and their full-rate blocks held 0.7 GB on six axes at 1 kHz."""
 
-    def __init__(self, sig: RunSignals, x: np.ndarray) -> None:
-        self._sig, self._x = sig, x
-        self.rows = sig.rows(sig.torque_weighted(x))
+    __slots__ = ("_sig", "_make", "rows", "_slope", "_spread", "_slope_spread", "_lagged")
+
+    def __init__(self, sig: RunSignals, make: Callable[[], np.ndarray],
+                 x: np.ndarray | None = None) -> None:
+        """``x``: ``make()`` where the caller has it already."""
+        self._sig, self._make = sig, make
+        self.rows = sig.rows(sig.torque_weighted(make() if x is None else x))
         self._slope = self._spread = self._slope_spread = None
         self._lagged: tuple[bytes, np.ndarray] | None = None
+
+    @property
+    def _x(self) -> np.ndarray:
+        return self._make()
 
     def _derivative(self) -> np.ndarray:
         return np.gradient(self._x, self._sig.t, axis=0)
@@ -208,7 +218,8 @@ def _extra_rows(sig: RunSignals, effect, model: Model, key: tuple | None
     memoised on the run under ``key`` (:func:`_effect_keys`)."""
     def make() -> _Filtered | None:
         extra = effect.winch_torque(sig.theta, sig.omega, model)
-        return None if extra is None else _Filtered(sig, extra)
+        return None if extra is None else _Filtered(
+            sig, lambda: effect.winch_torque(sig.theta, sig.omega, model), extra)
 
     return make() if key is None else _memo(sig, "extra", key, make, size=256)
 
@@ -278,7 +289,7 @@ def _unit_tension_values(model: Plant, sig: RunSignals, radius: bool) -> np.ndar
 def _unit_tension(model: Plant, sig: RunSignals, radius: bool) -> _Filtered:
     """The rows of :func:`_unit_tension_values`, memoised on the run per geometry."""
     return _memo(sig, "tension", _tension_key(model, radius),
-                 lambda: _Filtered(sig, _unit_tension_values(model, sig, radius)))
+                 lambda: _Filtered(sig, lambda: _unit_tension_values(model, sig, radius)))
 
 
 def _predicted_torque_rows(model: Model, sig: RunSignals, keys: list[tuple | None],
@@ -290,8 +301,9 @@ def _predicted_torque_rows(model: Model, sig: RunSignals, keys: list[tuple | Non
     plant = model.cables
     k = model.sign_sharpness
     winch = _memo(sig, "winch", None if k is None else float(k), lambda: [
-        _Filtered(sig, c) for c in (sig.alpha, sig.omega, smooth_sign(sig.omega, k),
-                                    np.ones_like(sig.omega))])
+        _Filtered(sig, c) for c in (lambda: sig.alpha, lambda: sig.omega,
+                                    lambda: smooth_sign(sig.omega, k),
+                                    lambda: np.ones_like(sig.omega))])
     tau = model.actuator_time_constant       # a number, or one per drive
     w = model.winch
     pred = sum(f.commanded(tau, p) for p, f in zip(
@@ -308,8 +320,9 @@ def _predicted_torque_rows(model: Model, sig: RunSignals, keys: list[tuple | Non
             # torque)
             change = _memo(sig, "tension change", (_tension_key(model, radius),
                                                    _tension_key(reference, radius)),
-                           lambda: _Filtered(sig, _unit_tension_values(model, sig, radius)
-                                             - _unit_tension_values(reference, sig, radius)))
+                           lambda: _Filtered(sig, lambda: _unit_tension_values(
+                               model, sig, radius) - _unit_tension_values(reference, sig,
+                                                                          radius)))
             pred = pred + _unit_tension(reference, sig, radius).commanded(tau, scale) \
                 + change.commanded(tau, scale)
         else:

@@ -30,6 +30,7 @@ from cdpr_pipeline.discovery.diagnosis import (
     diagnose,
     diagnosis_split,
 )
+from cdpr_pipeline.discovery.fitting import one_blas_thread
 from cdpr_pipeline.discovery.report import render
 from cdpr_pipeline.discovery.summary import GAIN_KEY, gain_text
 from cdpr_pipeline.models.blackbox import NetworkBlackBox
@@ -201,7 +202,11 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
     loading = time.perf_counter() - t0
     log.info("diagnose %s: %d runs loaded in %.1f s (start-up %.1f s, %.1f s CPU)",
              cfg.data.path, len(data.trajectories), loading, startup, startup_cpu)
-    d = diagnose(data, settings)
+    # one BLAS thread throughout, not only in the fits: the diagnosis's linear algebra is
+    # small (SVDs of a few thousand rows, the internal-force directions per sample), and
+    # a second thread waits on a busy core (a 2400 x 16 SVD took 25 ms with two)
+    with one_blas_thread():
+        d = diagnose(data, settings)
     d.timings.update({"startup cpu": startup_cpu, "loading": loading})
     t0 = time.perf_counter()
     paths = write_outputs(d, Path(cfg.out_dir), cfg.data.path, diagnosis_split(data, settings))
