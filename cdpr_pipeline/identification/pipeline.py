@@ -126,17 +126,25 @@ def check_torque_labels(dataset: Dataset, settings: RegressionSettings) -> None:
     theta = rig.nominal_winch.as_matrix()
     found: list[tuple[str, int, int, float, float]] = []
     for tr in dataset.trajectories:
-        reg = build_regression(tr, rig, settings)
-        labelled = float(np.sum((reg.target - reg.predict(theta)) ** 2))
+        # the target's column j is winch j's own linear filter (its sliding samples, its
+        # hold) of whichever torque column sits there, minus a load from the motion;
+        # the regressors come from the motion alone. So the regressions of the columns
+        # rotated by s = 0 .. n-1 give every column's target with any other torque in
+        # it: n regressions, where rebuilding one per exchanged pair took 1 + n(n-1)/2
+        # (29 per run on 8 cables: most of the command's time before its first phase)
+        regs = [build_regression(replace(tr, torques=np.roll(tr.torques, -s, axis=1)),
+                                 rig, settings) for s in range(rig.n)]
+        rotated = [reg.target for reg in regs]
+        predicted = regs[0].predict(theta)
+        labelled = float(np.sum((rotated[0] - predicted) ** 2))
         for a in range(rig.n):
             for b in range(a + 1, rig.n):
-                order = list(range(rig.n))
-                order[a], order[b] = b, a
-                # rebuilt, not permuted: U* = u - r t is not linear in the columns of u
-                alt = build_regression(replace(tr, torques=tr.torques[:, order]), rig,
-                                       settings)
-                swapped = float(np.sum((alt.target - alt.predict(theta)) ** 2))
-                fit_pct = 100 * np.sqrt(swapped / max(float(np.sum(alt.target ** 2)), 1e-300))
+                # winch a's column holding u_b (rotation b - a), winch b's holding u_a
+                target = rotated[0].copy()
+                target[:, a] = rotated[(b - a) % rig.n][:, a]
+                target[:, b] = rotated[(a - b) % rig.n][:, b]
+                swapped = float(np.sum((target - predicted) ** 2))
+                fit_pct = 100 * np.sqrt(swapped / max(float(np.sum(target ** 2)), 1e-300))
                 if labelled >= SWAP_FACTOR * swapped and fit_pct <= SWAP_FIT_PCT:
                     found.append((tr.name, a + 1, b + 1, labelled / max(swapped, 1e-300),
                                   fit_pct))
