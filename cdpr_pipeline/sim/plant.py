@@ -113,6 +113,7 @@ def _checked_lag(time_constant: Any, n: int) -> float | np.ndarray:
     return value
 
 
+@dataclass(frozen=True)
 class Plant:
     """Physical parameters of the true (or nominal) rig.
 

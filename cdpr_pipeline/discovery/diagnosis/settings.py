@@ -66,3 +66,12 @@ class DiagnosisSettings:
     #: winch or axis angle lies at its wavenumber times the angle's rate, above a band
     #: derived from the motion. 1 (or less): off
     follow_residual: float = 4.0
+
+    def __post_init__(self) -> None:
+        # numbers from conf/ (or a command line) as their fields say: an override
+        # `unusable_error_pct=150` is the float the stage's records write
+        for name in ("correlation_threshold", "unusable_error_pct", "unexplained_noise_ratio",
+                     "unexplained_min_error_pct", "follow_residual"):
+            setattr(self, name, float(getattr(self, name)))
+        self.max_lag = int(self.max_lag)
+        self.closed_loop = bool(self.closed_loop)
