@@ -7,12 +7,10 @@ file that ``cdpr simulate model_file=...`` runs) and logs the run to MLflow.
 
 from __future__ import annotations
 
-import importlib
 import json
 import logging
 import math
 import os
-import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -58,28 +56,6 @@ class LazyNet:
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         return instantiate(self.config)(*args, **kwargs)
-
-
-#: what the command's last phases import, loaded beside the diagnosis (seconds each on
-#: two cores: MLflow's client and store, torch for the black box), which spends them on
-#: the dataset; the phases then start at their own work
-LATE_IMPORTS = ("mlflow.tracking", "mlflow.store.tracking.sqlalchemy_store")
-BLACKBOX_IMPORTS = ("torch", "cdpr_pipeline.models.reconstruction")
-
-
-def import_in_background(modules: tuple[str, ...]) -> threading.Thread:
-    """Import ``modules`` in a daemon thread (a failed import is left for the phase that
-    needs the module to raise, where it says what is missing)."""
-    def load() -> None:
-        for name in modules:
-            try:
-                importlib.import_module(name)
-            except ImportError:      # pragma: no cover - raised again where needed
-                pass
-
-    thread = threading.Thread(target=load, name="cdpr-late-imports", daemon=True)
-    thread.start()
-    return thread
 
 
 def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
@@ -208,7 +184,6 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
     age = process_age_s()
     startup = age if age is not None else startup_cpu
     begun = time.perf_counter() - startup
-    import_in_background(LATE_IMPORTS + (BLACKBOX_IMPORTS if cfg.blackbox.enabled else ()))
     t0 = time.perf_counter()
     data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
                         min_samples=cfg.data.min_samples)
