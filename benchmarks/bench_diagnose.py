@@ -104,7 +104,8 @@ def run_case(case: str, tmp: Path) -> dict:
             "verdict": verdict, "ref_wall": ref_wall, "ref_cpu": ref_cpu, "log": log}
 
 
-def run_matrix(names: list[str] | None, no_record: bool) -> None:
+def run_matrix(names: list[str] | None, no_record: bool, datasets: Path | None = None
+               ) -> None:
     """``--matrix``: the shapes named (all when None), one ``cdpr diagnose`` each."""
     shapes = diagnose_matrix.matrix()
     known = {s.name: s for s in shapes}
@@ -118,7 +119,7 @@ def run_matrix(names: list[str] | None, no_record: bool) -> None:
         # which a user's store has behind it after its first run
         mlflow_client(f"sqlite:///{Path(tmp) / 'mlflow.db'}")
         for shape in [known[n] for n in names] if names else shapes:
-            r = diagnose_matrix.run_shape(shape, Path(tmp))
+            r = diagnose_matrix.run_shape(shape, Path(tmp), datasets)
             rows[shape.name] = diagnose_matrix.table_row(r)
             print(rows[shape.name], flush=True)
     if no_record:
@@ -155,11 +156,15 @@ def main() -> None:
                         help="the rig shapes of benchmarks.diagnose_matrix instead of --cases")
     parser.add_argument("--shapes", nargs="+",
                         help="with --matrix: only these shapes (names as the table lists)")
+    parser.add_argument("--datasets", type=Path,
+                        help="with --matrix: keep the shapes' datasets in this folder and "
+                             "reuse those found there (writing 8 cables at 1 kHz takes "
+                             "minutes)")
     parser.add_argument("--no-record", action="store_true",
                         help="print only; leave docs/measurements.md alone")
     args = parser.parse_args()
     if args.matrix:
-        run_matrix(args.shapes, args.no_record)
+        run_matrix(args.shapes, args.no_record, args.datasets)
         return
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench_diagnose_") as tmp:

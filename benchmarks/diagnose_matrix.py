@@ -91,10 +91,14 @@ def _peak_mb(report: str) -> float | None:
     return int(match.group(1)) / 1024.0 if match else None
 
 
-def run_shape(shape: Shape, tmp: Path) -> dict:
-    """Write the shape's dataset, diagnose it in a child process, read its figures."""
-    data = tmp / shape.name
-    shape.write(data)
+def run_shape(shape: Shape, tmp: Path, datasets: Path | None = None) -> dict:
+    """Write the shape's dataset, diagnose it in a child process, read its figures.
+
+    ``datasets``: a folder keeping the datasets between runs; a shape's dataset found
+    there (written by an earlier run, the same generator and seed) is used as it is."""
+    data = (datasets or tmp) / shape.name
+    if datasets is None or not (data / "rig.yaml").exists():
+        shape.write(data)
     out = tmp / f"out_{shape.name}"
     reference = reference_seconds()
     timer = shutil.which("time") if Path("/usr/bin/time").exists() else None
