@@ -68,11 +68,16 @@ def predict(model: Model, nominal: Model, sig: RunSignals,
     return {"torque": model.inverse_dynamics(sig.theta, sig.omega, sig.alpha, sig.t)["torque"]}
 
 
-def _memo(sig: RunSignals, group: str, key, make, size: int = 64):
+def _memo(sig: RunSignals, group: str, key, make, size: int = 16):
     """``make()`` memoised on the run under ``key``, at most ``size`` entries per
-    ``group`` (the oldest goes first)."""
+    ``group``, the least recently used going first: what a fit comes back to (the kept
+    effects, the point its Jacobian is taken at) stays, every trial value it moves
+    through goes. (Oldest-first kept every trial value instead, and needed room for
+    hundreds: 1.7 GB of rows on 8 cables at 1 kHz.)"""
     store = sig.cache.setdefault(("residuals", group), {})
-    if key not in store:
+    if key in store:
+        store[key] = store.pop(key)      # now the most recent
+    else:
         if len(store) >= size:
             del store[next(iter(store))]
         store[key] = make()
@@ -215,7 +220,7 @@ def _extra_rows(sig: RunSignals, effect, model: Model, key: tuple | None
         return None if extra is None else _Filtered(
             sig, lambda: effect.winch_torque(sig.theta, sig.omega, model), extra)
 
-    return make() if key is None else _memo(sig, "extra", key, make, size=256)
+    return make() if key is None else _memo(sig, "extra", key, make, size=64)
 
 
 def _linear_rows(model: Model, nominal: Model, sig: RunSignals,
