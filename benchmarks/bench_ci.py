@@ -92,8 +92,9 @@ def main() -> None:
     runs = [run_ci(c) for c in args.coretype]
     body = table(runs) + (
         "\n\n`.ci/run` on a clean clone of the commit, with nothing installed beforehand: "
-        "`make install`, the fast suite (`make test`), then the end-to-end pipeline tests "
-        "(`make test-pipeline`); each row is one clean clone.")
+        "`make install`, the fast suite and the end-to-end pipeline tests in one pytest "
+        "session (`make test-ci`), then the golden-record tests under other OpenBLAS "
+        "kernels (`make test-golden`); each row is one clean clone.")
     record("ci", "CI on a clean clone", body, command=invoked_as())
     if any(r["rc"] for r in runs):
         raise SystemExit(1)
