@@ -67,7 +67,7 @@ def test_a_default_diagnose_prints_each_message_once_and_logs_its_final_out_dir(
     # for a reason (the second look on a wider band logs its steps again, and two steps'
     # tables of candidates share rows)
     messages = [_message(line) for line in printed if line.strip()]
-    assert [m for m, after in zip(messages, messages[1:]) if m == after] == []
+    assert [m for m, after in zip(messages, messages[1:], strict=False) if m == after] == []
     assert done.stderr == ""
     assert sorted(p.name for p in tmp_path.iterdir()) == ["diag", "store"]
     assert (out / "diagnose.log").read_text().splitlines() == done.stdout.splitlines()
