@@ -4,6 +4,8 @@
 PYTHON ?= python3
 VENV ?= .venv
 TORCH_SPEC ?= torch==2.13.0
+# more pip install flags (CI: --no-compile, .ci/run)
+PIP_FLAGS ?=
 PYTEST_ARGS ?=
 # test processes (pytest-xdist; 0: none). One file per process (--dist loadfile), so a
 # module's shared fixtures (a multirun, a scratch pipeline project) are built once; files
@@ -24,9 +26,9 @@ STAMP := $(VENV)/.cdpr-installed
 # the whole package takes 0.3 s once). A stale file is ignored once the source changes.
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet $(TORCH_SPEC)
-	$(BIN)/python -m pip install --quiet -e '.[dev,pipeline]'
+	$(BIN)/python -m pip install --quiet $(PIP_FLAGS) --upgrade pip
+	$(BIN)/python -m pip install --quiet $(PIP_FLAGS) $(TORCH_SPEC)
+	$(BIN)/python -m pip install --quiet $(PIP_FLAGS) -e '.[dev,pipeline]'
 	$(BIN)/python -m compileall -q cdpr_pipeline > /dev/null
 	touch $(STAMP)
 
