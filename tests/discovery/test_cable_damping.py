@@ -19,14 +19,15 @@ Ranges drawn (documented, not tuned to a seed):
 
 The interval's honesty is checked at :data:`K_STDERR` standard errors, chosen from the
 measured spread of ``z`` (error over stated standard error;
-``benchmarks/bench_cable_damping.py --coverage``, docs/measurements.md): over 129 lab
-draws in these ranges, mean -0.14 and standard deviation 1.07; over 54 independent
-draws, mean -0.45 and 1.06. The standard error itself is honest (95 % of the truths
+``benchmarks/bench_cable_damping.py --coverage``, docs/measurements.md): over 200 lab
+draws in these ranges, mean -0.16 and standard deviation 1.03; over 60 independent
+draws, mean -0.39 and 1.07. The standard error itself is honest (96 % of the truths
 within 1.96 of them on the lab; fresh noise on one draw's recording scatters the
 estimate by 0.95-0.98 of it); the offset is the errors-in-variables attenuation of the
 stretch's lag (:mod:`~cdpr_pipeline.discovery.damping`), which the interval does not
-cover. With that offset, 3 standard errors would miss in about 0.4 % (lab) and 0.9 %
-(independent) of draws, 3.5 in 0.1 % and 0.2 %.
+cover. With that offset (normal fits to the measured z), 3 standard errors miss in
+about 0.4 % (lab) and 0.8 % (independent) of draws, 3.5 in 0.07 % and 0.2 %; of the
+measured draws 1 of 200 and 1 of 60 lay beyond 3 (3.29 and 3.40), none beyond 3.5.
 """
 
 from __future__ import annotations
