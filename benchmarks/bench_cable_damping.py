@@ -152,10 +152,11 @@ def _coverage_table(rows: list[dict], args) -> str:
              f"stiffness on the diagnosis' training runs, drawn in {args.tau_ms[0]:g}-"
              f"{args.tau_ms[1]:g} ms (lab EA {args.lab_ea_n[0]:g}-{args.lab_ea_n[1]:g} N); "
              "`z` = (estimate - truth) / standard error. An honest standard error gives "
-             "RMS 1, mean 0, 95 % within 1.96 and 99.73 % within 3.", "",
+             "RMS 1, mean 0, 95 % within 1.96 and 99.73 % within 3; the tests check 3.5 "
+             "(tests/discovery/test_cable_damping.py).", "",
              "| simulator | draws | RMS z | mean z | within 1.96 s.e. | within 3 s.e. | "
-             "largest abs z | reported |",
-             "|---|---|---|---|---|---|---|---|"]
+             "within 3.5 s.e. | largest abs z | reported |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for simulator in ("lab", "independent"):
         mine = [r for r in rows if r["simulator"] == simulator and np.isfinite(r["stderr"])]
         if not mine:
@@ -163,7 +164,9 @@ def _coverage_table(rows: list[dict], args) -> str:
         z = np.array([(r["estimate"] - r["tau"]) / r["stderr"] for r in mine])
         lines.append(f"| {simulator} | {len(z)} | {np.sqrt(np.mean(z ** 2)):.2f} | "
                      f"{z.mean():+.2f} | {100 * np.mean(np.abs(z) <= Z95):.1f} % | "
-                     f"{100 * np.mean(np.abs(z) <= 3):.1f} % | {np.abs(z).max():.2f} | "
+                     f"{100 * np.mean(np.abs(z) <= 3):.1f} % | "
+                     f"{100 * np.mean(np.abs(z) <= 3.5):.1f} % | "
+                     f"{np.abs(z).max():.2f} | "
                      f"{100 * np.mean([r['reported'] for r in mine]):.0f} % |")
     return "\n".join(lines)
 
