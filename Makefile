@@ -10,8 +10,8 @@ PYTEST_ARGS ?=
 # test processes (pytest-xdist; 0: none). One file per process (--dist loadfile), so a
 # module's shared fixtures (a multirun, a scratch pipeline project) are built once; files
 # handed out in collection order, the end-to-end files first (tests/conftest.py), not
-# xdist's default of the files with most tests first, which left a minutes-long e2e file
-# running alone at the end
+# xdist's default of the files with most tests first, which in one session with the fast
+# files (make test-ci) would start the e2e files, a few tests of minutes each, last
 TEST_WORKERS ?= 2
 XDIST = -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 BIN := $(VENV)/bin
