@@ -223,16 +223,18 @@ def _cause_text(j: Judgement, components: Sequence[CauseComponent],
 def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutGain,
                      unusable: Unusable | None = None,
                      withdrawn: Sequence[str] = (), unexplained: Unexplained | None = None,
-                     failing: Sequence[str] = (), noise_ratio: float = 10.0,
-                     sizes: Sequence[Sequence[CauseComponent]] = ()) -> str:
+                     failing: Sequence[str] = (), noise_ratio: float = 12.0,
+                     sizes: Sequence[Sequence[CauseComponent]] = (),
+                     largest_failing: float = 0.0) -> str:
     """The diagnosis in a few sentences. Every cause comes with its sizes and their
     standard errors (``sizes``, per cause: :func:`~cdpr_pipeline.discovery.sizes.
     cause_sizes`; parts below the noise left out), the gain as :func:`gain_text`.
     Without causes it says ``unexplained`` (where the residual sits, which tests
-    failed) or ``none``; ``none`` claims the nominal model explains the data as well as
-    anything tried only when no held-out column is ``failing`` a validity test, and
-    otherwise says those columns' errors stayed within ``noise_ratio`` times the
-    measurement noise (what made them no ``unexplained``)."""
+    failed) or ``none``: the nominal model explains the data as well as anything tried,
+    its held-out residual passing the calibrated validity test; where columns
+    (``failing``) fail a statistical test, it says they do so at most ``largest_failing``
+    times the measurement noise, within the ``noise_ratio`` effect-free data stay below
+    (:mod:`~cdpr_pipeline.discovery.adequacy`)."""
     prefix = ""
     if unusable:
         prefix = (f"The stated model was unusable ({unusable.relative_error_pct:.0f} % "
@@ -263,10 +265,12 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
                              "beyond chance, and the held-out residuals pass the validity "
                              "tests (verdict: none).")
         return prefix + (
-            f"No candidate effect improves the held-out runs beyond chance (verdict: none). "
-            f"The held-out residual of {', '.join(failing)} fails a validity test, but its "
-            f"size stays below {noise_ratio:g} times the measurement noise: the nominal "
-            f"model is adequate to that precision.")
+            f"The nominal model explains the measurements as well as anything tried: no "
+            f"candidate effect improves the held-out runs beyond chance, and the held-out "
+            f"residuals pass the calibrated validity test (verdict: none). The residual of "
+            f"{', '.join(failing)} fails a statistical test at "
+            f"{largest_failing:.2g} times the measurement noise at most, within what "
+            f"effect-free data show (below {noise_ratio:g} times).")
     sizes = list(sizes) or [()] * len(causes)
     text = prefix + f"Most likely cause: {_cause_text(causes[0], sizes[0], nominal)}."
     if len(causes) > 1:

@@ -80,6 +80,7 @@ def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
         correlation_threshold=float(disc.correlation_threshold),
         unusable_error_pct=float(disc.unusable_error_pct),
         unexplained_noise_ratio=float(disc.unexplained_noise_ratio),
+        unexplained_noise_ratio_wider=float(disc.unexplained_noise_ratio_wider),
         unexplained_min_error_pct=float(disc.unexplained_min_error_pct),
         follow_residual=float(disc.follow_residual),
     )
