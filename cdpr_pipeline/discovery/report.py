@@ -23,6 +23,7 @@ from cdpr_pipeline.discovery.summary import (
     cause_name,
     describe_cause,
     gain_text,
+    interaction_text,
     signal_words,
     sizes_text,
     winch_reference,
@@ -94,8 +95,9 @@ def _causes(d: Diagnosis) -> list[str]:
            _table(rows, ["cause", "fitted", "sizes (± standard error)", "channels",
                          "p (LR test)", "BIC drop", f"{GAIN_NAME} when selected (%)",
                          "share of the gain (%)"])]
-    notes = [f"<li>{html.escape(cause_name(c, d.nominal))} {html.escape(s.note)}.</li>"
-             for c, s in zip(d.causes, shares, strict=True) if s.note]
+    notes = [f"<li>{html.escape(cause_name(c, d.nominal))} "
+             f"{html.escape('; '.join(t for t in (s.note, interaction_text(c)) if t))}.</li>"
+             for c, s in zip(d.causes, shares, strict=True) if s.note or c.interaction]
     if notes:
         out.append("<p>A share is the cause's held-out contribution (its Shapley value over "
                    "the orders the causes could be added in) over the whole extension's. "

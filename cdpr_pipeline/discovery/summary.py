@@ -105,6 +105,21 @@ def gain_shares(causes: Sequence[Judgement]) -> list[GainShare]:
     return out
 
 
+def interaction_text(j: Judgement) -> str:
+    """Why ``j`` stays although its own held-out contribution is not positive, from
+    :func:`~cdpr_pipeline.discovery.never_worse.interaction` ("" for a cause with a
+    positive one): what it adds to the other causes together, what it does alone, and
+    beside which cause it adds."""
+    i = j.interaction
+    if i is None:
+        return ""
+    beside = ", ".join(f"{label} (+{i['adds_with_pct'][label]:.2g} %)" for label in i["with"])
+    return (f"kept although its own held-out contribution is "
+            f"{100 * (j.contribution or 0.0):.2g} %: it adds {i['adds_to_others_pct']:.2g} % "
+            f"of the nominal model's held-out error to the other causes together, "
+            f"{i['alone_pct']:.2g} % alone" + (f", and adds beside {beside}" if beside else ""))
+
+
 # ------------------------------------------------------------------ records
 def winch_reference(nominal: Model, causes: Sequence[Judgement]) -> Model:
     """The nominal model with every cause's re-identified winch parameters: what an
@@ -148,7 +163,9 @@ def cause_record(j: Judgement, nominal: Model, causes: Sequence[Judgement] = (),
             "sizes": [s.as_dict() for s in sizes],
             "expression": expression,
             "description": describe_cause(j, nominal, reference),
-            "share_of_gain_pct": share.pct, "interaction": share.note or None,
+            "share_of_gain_pct": share.pct,
+            "interaction": "; ".join(t for t in (share.note, interaction_text(j)) if t)
+            or None,
             "evidence": {**j.evidence(), GAIN_KEY: 100 * j.heldout_rmse_drop,
                          "heldout_rmse_drop_ci95_pct": [100 * rmse_drop(j.ci[0]),
                                                         100 * rmse_drop(j.ci[1])]}}
