@@ -115,6 +115,50 @@ def test_where_it_sits_is_every_material_column(quiet_lab, seed):
     assert verdict({c: _validity(False) for c in validity}) is None
 
 
+@pytest.mark.parametrize("look", ["motion", "wider"])
+def test_validity_fails_only_beyond_the_calibrated_size(quiet_lab, seed, look):
+    """The calibrated validity test: a held-out column failing a statistical test counts
+    only at a size beyond the look's gate (``unexplained_noise_ratio`` on the motion
+    band, ``unexplained_noise_ratio_wider`` on the second look's, which
+    :func:`~cdpr_pipeline.discovery.adequacy.wider_band` hands it). Errors drawn at
+    0.3-0.9 of the gate on every column are ``none``; one column at 1.1-3 times it is
+    ``unexplained``, on that column and the look's band."""
+    from cdpr_pipeline.discovery.adequacy import analysed_band_hz, wider_band
+
+    rng = np.random.default_rng(seed)
+    settings = DiagnosisSettings(closed_loop=False)
+    rig = quiet_lab.rig
+    fs = float(rig.sample_rate_hz)
+    regression = resolve_settings(settings.regression, quiet_lab.trajectories, rig)
+    settings = dataclasses.replace(settings, regression=regression)
+    if look == "wider":
+        motion_gate = settings.unexplained_noise_ratio
+        settings = wider_band(settings, fs)
+        assert settings.unexplained_noise_ratio == settings.unexplained_noise_ratio_wider
+        assert settings.unexplained_noise_ratio > motion_gate
+    gate = settings.unexplained_noise_ratio
+    held = dataset_signals(quiet_lab.trajectories[-1:], rig, settings.regression)
+    noise = row_noise(held)
+    t = held[0].row_times()
+    tone = np.sin(2 * np.pi * rng.uniform(0.3, 2.0, 3) * t[:, None])
+    failing = {c: _validity(True) for c in ("u1", "u2", "u3")}
+    analysed = analysed_band_hz(settings.regression, fs)
+
+    def verdict(scale):
+        res = Residuals([held[0].name], [{"torque": noise * scale * tone * np.sqrt(2)}])
+        columns = heldout_columns(res, held, failing, settings.selection.alpha)
+        return unexplained_residual(columns, gate, settings.unexplained_min_error_pct,
+                                    settings.selection.alpha, analysed)
+
+    assert verdict(gate * rng.uniform(0.3, 0.9, 3)) is None, seed
+    big = int(rng.integers(3))
+    scale = gate * rng.uniform(0.3, 0.9, 3)
+    scale[big] = gate * rng.uniform(1.1, 3.0)
+    found = verdict(scale)
+    assert found is not None and [c.channel for c in found.columns] == [f"u{big + 1}"], seed
+    assert found.noise_ratio == gate and found.analysed_hz == analysed
+
+
 def test_none_claims_adequacy_within_the_calibrated_gate():
     """``none`` claims the nominal model is adequate: its held-out residual passes the
     calibrated validity test. A column failing a statistical test below the gate's size
