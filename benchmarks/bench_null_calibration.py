@@ -8,7 +8,7 @@ random rig each)
 and its drive axes (1-6 axes, a random rig and rate each; rig.yaml in turn states nothing,
 every prismatic axis's pitch, or rotary joints beside a prismatic axis with its pitch, so
 that the candidates needing a motor angle, ``cogging``'s, are judged on the axes too:
-``foreign_cases.AXES_RIGS``). Each is diagnosed with the
+``null_cases.AXES_RIGS``). Each is diagnosed with the
 command's configuration (closed loop and black box off) and every first-step candidate's
 statistics are recorded, with the thresholds the selection holds them to
 (``cdpr_pipeline.discovery.selection.Judge``):
@@ -23,11 +23,11 @@ statistics are recorded, with the thresholds the selection holds them to
 * the diagnosis's final ``gain`` interval (the never-worse rule) and its verdict: any
   verdict but ``none`` is a false alarm.
 
-``--grid R`` draws the calibration grid instead (``foreign_cases.null_grid``): lab cable
+``--grid R`` draws the calibration grid instead (``null_cases.null_grid``): lab cable
 robot, independent cable robot and independent drive axes (the lab simulates no drive
 axes), each with one to five runs, short (10 s) and long (30 s) runs, ``R`` replicates
 with a seed each. Each verdict gate's rate on these nulls is measured
-(``foreign_cases.gate_rates``): the validity tests that send a diagnosis to the second
+(``null_cases.gate_rates``): the validity tests that send a diagnosis to the second
 look on a wider band, a cause named there, the materiality of a failing column
 (``unexplained_noise_ratio``, ``unexplained_min_error_pct``, and on the wider band
 ``unexplained_noise_ratio_wider``: the calibrated validity test, ``unexplained``), the
@@ -60,12 +60,11 @@ from pathlib import Path
 from benchmarks.measurements import commit, invoked_as, record
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.stages.simulate import rig_from_config
-from cdpr_pipeline.testing.foreign_cases import (
+from cdpr_pipeline.testing.foreign_cases import add_settings_option, named_settings
+from cdpr_pipeline.testing.null_cases import (
     GATE_OVER_Q99,
-    add_settings_option,
     derived_gates,
     gate_thresholds,
-    named_settings,
     null_datasets,
     null_grid,
     run_null,
@@ -197,7 +196,7 @@ def gates_markdown(summary: dict) -> list[str]:
                                    or "not run") + f". Largest nominal training error "
               f"{un['largest_train_error_pct']:.1f} %.",
               "", f"Calibrated validity gates these nulls give ({GATE_OVER_Q99:g} x the 99th "
-              f"percentile, `foreign_cases.derived_gates`): motion band "
+              f"percentile, `null_cases.derived_gates`): motion band "
               f"{derived['noise_ratio']:.1f} x the noise (settings: {nr['threshold']:g}), "
               f"wider band {derived['noise_ratio_wider']:.0f} x (settings: "
               f"{nw['threshold']:g})."]

@@ -24,7 +24,8 @@ from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.errors import UserError
 from cdpr_pipeline.progress import progress
 from cdpr_pipeline.sim.controller import ComputedTorquePD
-from cdpr_pipeline.sim.plant import Plant, cable_geometry, forward_kinematics
+from cdpr_pipeline.sim.kinematics import cable_geometry, forward_kinematics
+from cdpr_pipeline.sim.plant import Plant
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.trajectories import DesiredTrajectories
 
