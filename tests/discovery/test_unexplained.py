@@ -231,3 +231,24 @@ def test_power_band_finds_a_tone_above_white_noise(seed):
         + np.sqrt(5.0) * rng.standard_normal(t.size)
     lo, hi = power_band_hz(x, 200.0)
     assert tone - 0.5 <= lo <= tone <= hi <= tone + 0.5, (seed, tone, lo, hi)
+
+
+def test_what_only_the_wider_look_fails_is_unexplained_there(quiet_lab):
+    """The wider look judges validity at its own gate, and a column failing it there,
+    with no cause on either look, makes the diagnosis ``unexplained`` on that band. The
+    gates are set so that only the wider look's can be crossed (the motion band's at
+    infinity, the wider band's at zero): the effect-free lab's held-out residual fails a
+    statistical test on the motion band (the second look runs) and on the wider band."""
+    from cdpr_pipeline.discovery.diagnosis import diagnose
+
+    settings = dataclasses.replace(DiagnosisSettings(closed_loop=False),
+                                   unexplained_noise_ratio=float("inf"),
+                                   unexplained_noise_ratio_wider=0.0)
+    record = diagnose(quiet_lab, settings).as_json()
+    band = record["band"]
+    assert record["causes"] == [] and "tried" in band, record["summary"]
+    assert record["verdict"] == "unexplained" and band["tried"]["verdict"] == "unexplained"
+    u = record["unexplained"]
+    assert u["analysed_band_hz"][1] == pytest.approx(band["tried"]["analysed_hz"])
+    assert u["analysed_band_hz"][1] > band["analysed_hz"]
+    assert u["noise_ratio"] == 0.0 and u["failed_tests"]
