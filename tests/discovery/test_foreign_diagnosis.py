@@ -26,6 +26,7 @@ from cdpr_pipeline.testing.foreign_cases import (
     KINDS,
     OUTSIDE,
     VOCABULARY,
+    contribution_errors,
     foreign_case,
     parameters_ok,
     rng_for,
@@ -191,32 +192,23 @@ def test_a_drag_outside_the_vocabulary_is_not_named_after_what_imitates_it(tmp_p
     together that neither can go alone (each was fitted around the other), so the
     selection also asks what free-form terms say in place of all of them, on the same
     footing (with fewer parameters they win unless the named causes add, as a candidate
-    would, on held-out runs): never a vocabulary name, and when found ``unnamed`` with
-    the drag's size on every axis it acts on (its terms projected on ``w|w|``: seed 204
-    wrote it ``0.01063 tanh(w/0.03) w^2`` against 0.01068). Before the joint question,
-    5 of 6 axes draws were named ``winch_parameter_error`` + ``stribeck_friction``; a
-    cable robot's drag on two winches was so named while the training BIC alone decided
-    (issue 27)."""
-    from cdpr_pipeline.sim.expressions import evaluate
-
+    would, on held-out runs): never a vocabulary name, ``unnamed`` (at the upper half of
+    the range ``none`` is a miss), with the drag's torque on every axis it acts on: what
+    the extension adds on the held-out runs within 25 % RMS of the drag's own torque
+    there (``foreign_cases.contribution_errors``: the function, not one way of writing
+    it; seed 205 wrote axis 2's as ``0.0349 |w| tanh(w/7.56)``, whose projection on
+    ``w|w|`` over twice the typical speed came out 25 % low, although it matched the
+    speeds the runs reach). Before the joint question, 5 of 6 axes draws were named
+    ``winch_parameter_error`` + ``stribeck_friction``; a cable robot's drag on two winches
+    was so named while the training BIC alone decided (issue 27)."""
     draw = _upper_half("quadratic_drag", "coefficient",
                        lambda rig: rig.viscous / rig.typical_speed)
     runs, duration = FAST[kind]
     case = foreign_case(tmp_path, kind, [draw], seed, n_runs=runs, duration_s=duration)
-    terms = _unnamed_terms(case)
-    eff = case.truth.effects[0]
-    for axis in eff.channels:
-        # the drag's size: the axis's terms projected on w|w| over its speeds (a search
-        # may write it with a smooth sign, tanh(w/s) w^2 with s small, the same physics)
-        w = np.linspace(-2.0, 2.0, 801) * case.rig.typical_speed[axis]
-        shape = w * np.abs(w)
-        values = sum((t["coefficient"] * evaluate(t["expression"], {
-            "omega": w, "theta": np.zeros_like(w)}) for t in terms
-            if t["cable"] == axis + 1), np.zeros_like(w))
-        drag = float(values @ shape / (shape @ shape))
-        true = float(eff.params["coefficient"][axis])
-        assert drag == pytest.approx(true, rel=0.25), \
-            f"axis {axis + 1}: {drag:.4g} w|w| against {true:.4g}: {case.describe()}"
+    _unnamed_terms(case)
+    errors = contribution_errors(case)
+    assert all(e <= 0.25 for e in errors.values()), \
+        f"held-out torque errors {errors}: {case.describe()}"
 
 
 def test_a_drum_radius_error_is_named_on_its_drum(tmp_path, seed):
