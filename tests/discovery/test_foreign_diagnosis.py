@@ -102,8 +102,8 @@ KNOWN_GAPS = {("cdpr", "actuator_lag"), ("axes", "actuator_lag")}
 #: (A quadratic drag on a cable robot, named with an extra winch_parameter_error or
 #: Stribeck name while the training BIC alone decided, is no gap since free-form terms
 #: compete with those re-fits on the same footing: the test below passed, not as XFAIL,
-#: on 10 of 10 seeds (CDPR_TEST_SEED 101-110), and the upper-half drag test named it
-#: ``unnamed`` on both kinds for seeds 201-210.)
+#: on 10 of 10 seeds (CDPR_TEST_SEED 101-110), and the upper-half drag test below named
+#: it ``unnamed`` on both kinds for seeds 201-205, 10 of 10 draws.)
 #: ... and on redundant (4-cable) robots only: winch offsets along the internal-force
 #: direction are what the per-row internal force also explains, so a winch parameter
 #: error's offsets there are poorly determined (seed 171: one offset 134 % off, one
