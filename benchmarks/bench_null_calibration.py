@@ -28,7 +28,7 @@ robot, independent cable robot and independent drive axes (the lab simulates no 
 axes), each with one to five runs, short (10 s) and long (30 s) runs, ``R`` replicates
 with a seed each. Each verdict gate's rate on these nulls is measured
 (``null_cases.gate_rates``): the validity tests that send a diagnosis to the second
-look on a wider band, a cause named there, the materiality of a failing column
+look on a wider band, a cause named there, the calibrated validity test (any column)
 (``unexplained_noise_ratio``, ``unexplained_min_error_pct``, and on the wider band
 ``unexplained_noise_ratio_wider``: the calibrated validity test, ``unexplained``), the
 unusable-model threshold, and the verdict itself; per generator and kind, per run count
@@ -159,10 +159,10 @@ def gates_markdown(summary: dict) -> list[str]:
              f"that decide a verdict). A statistical test fails: a held-out column fails a "
              f"validity test (no verdict on its own: the second look on a wider band "
              f"runs); second look: it names a cause (a false alarm); calibrated validity "
-             f"fails, motion band: a column fails a statistical test at >= "
-             f"{nr['threshold']:g} x the noise and >= {nr['min_error_pct']:g} % of its "
-             f"signal (`unexplained` when nothing is named); the same on the wider band at "
-             f">= {nw['threshold']:g} x; the largest failing noise ratio on each look; "
+             f"fails, motion band: a column's error is >= {nr['threshold']:g} x the noise "
+             f"and >= {nr['min_error_pct']:g} % of its signal, failing a statistical test "
+             f"or not (`unexplained` when nothing is named); the same on the wider band at "
+             f">= {nw['threshold']:g} x; the largest noise ratio on each look; "
              f"unusable: nominal training error > {un['threshold']:g} %; verdict: anything "
              f"but `none`.", "",
              "Per dataset, a first-step candidate crossing each selection gate on its "
@@ -171,7 +171,7 @@ def gates_markdown(summary: dict) -> list[str]:
              "| group | datasets | LR p < alpha/m | gain >= min_gain | interval > 0 | all "
              "selection gates | a statistical test fails (second look runs) | second look "
              "names a cause | calibrated validity fails, motion band | calibrated validity "
-             "fails, wider band | largest failing noise ratio, motion (wider) | unusable | "
+             "fails, wider band | largest noise ratio, motion (wider) | unusable | "
              "verdict not none |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, s in summary.items():
         if "gates" not in s:
@@ -190,7 +190,7 @@ def gates_markdown(summary: dict) -> list[str]:
             f" | {pct(g['unusable']['rate'])} | "
             f"{pct(g['verdict']['rate'])} |")
     q1, q2 = nr["quantiles_first_look"], nw["quantiles"]
-    lines += ["", "Noise ratio of the worst failing column, quantiles: motion band "
+    lines += ["", "Noise ratio of the worst column, quantiles: motion band "
               + (", ".join(f"{k} {v:.1f}" for k, v in q1.items()) or "none failed")
               + "; wider band " + (", ".join(f"{k} {v:.1f}" for k, v in q2.items())
                                    or "not run") + f". Largest nominal training error "

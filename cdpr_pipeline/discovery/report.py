@@ -68,9 +68,9 @@ def _unexplained_parts(d: Diagnosis) -> list[str]:
              "" if c.band_hz is None else f"{c.band_hz[0]:.3g}-{c.band_hz[1]:.3g} Hz",
              ", ".join(c.failed_tests)] for c in u.columns]
     return ["<h2>Unexplained residual (held-out)</h2>",
-            f"<p>The nominal model is inadequate on these columns (validity tests failed, "
-            f"error at least {u.noise_ratio:g} times the measurement noise) and no candidate "
-            f"explains why.</p>",
+            f"<p>The nominal model is inadequate on these columns (error at least "
+            f"{u.noise_ratio:g} times the measurement noise, beyond what effect-free data "
+            f"show) and no candidate explains why.</p>",
             _table(rows, ["channel", "error (% of the measured signal)",
                           "error / measurement noise", "share of the error (%)",
                           "band (full-rate residual)", "failed tests"])]

@@ -273,8 +273,9 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
             f"{100 * u.share_of_error:.0f} % of the error"
             + ("" if band is None else f", most of it at {band[0]:.3g}-{band[1]:.3g} Hz of "
                f"the 0-{u.analysed_hz:.3g} Hz the regression analyses")
-            + f", and fails the validity tests "
-            f"{', '.join(sorted({t for c in u.columns for t in c.failed_tests}))}.")
+            + f", beyond the {u.noise_ratio:g} times the noise no effect-free dataset "
+            f"reaches (statistical tests failed: "
+            f"{', '.join(sorted({t for c in u.columns for t in c.failed_tests})) or 'none'}).")
     if not causes:
         if not failing:
             return prefix + ("The nominal model explains the measurements as well as "

@@ -196,7 +196,7 @@ def summarise(records: list[dict], alpha: float, min_gain: float,
 
 
 #: a calibrated validity gate is this many times the 99th percentile of what it
-#: thresholds on effect-free data (the worst failing column's noise ratio per dataset):
+#: thresholds on effect-free data (the worst column's noise ratio per dataset):
 #: room for the tail beyond the grid's 99th percentile (90 nulls estimate it; their
 #: largest lay within 5 % of it, docs/method.md 3.5)
 GATE_OVER_Q99 = 2.0
@@ -213,7 +213,7 @@ def gate_thresholds(settings) -> dict[str, float]:
 
 def derived_gates(gates: dict) -> dict[str, float]:
     """The calibrated validity gates these nulls give (:data:`GATE_OVER_Q99` times the
-    99th percentile of the worst failing column's noise ratio, per look), to compare
+    99th percentile of the worst column's noise ratio, per look), to compare
     with the settings' (``gates``: :func:`gate_rates`'s record)."""
     q1 = gates["noise_ratio"]["quantiles_first_look"].get("q99", 0.0)
     q2 = gates["noise_ratio_wider"]["quantiles"].get("q99", 0.0)
@@ -232,8 +232,8 @@ def gate_rates(records: list[dict], thresholds: dict[str, float]) -> dict:
       second look on a wider band runs (no verdict on its own);
     * ``second_look_cause``: the wider band names a cause (a false alarm);
     * ``noise_ratio``: a column of the motion band's look fails the calibrated validity
-      test (a statistical test failed, an RMS error of at least ``noise_ratio`` times the
-      noise and ``min_error_pct`` of its signal): with no cause, ``unexplained``;
+      test (an RMS error of at least ``noise_ratio`` times the noise and
+      ``min_error_pct`` of its signal): with no cause, ``unexplained``;
     * ``noise_ratio_wider``: the same on the wider look, at ``noise_ratio_wider``;
     * ``unusable``: the nominal model's training error exceeds ``unusable_error_pct``;
     * ``verdict``: any verdict but ``none`` (every gate together)."""
@@ -241,7 +241,9 @@ def gate_rates(records: list[dict], thresholds: dict[str, float]) -> dict:
     wider = thresholds.get("noise_ratio_wider", float("inf"))
 
     def worst(look: dict) -> float:
-        return max((c["noise_ratio"] for c in _failing_columns(look)
+        # the calibrated validity test reads every column, failing a statistical test
+        # or not (adequacy.unexplained_residual)
+        return max((c["noise_ratio"] for c in look["columns"]
                     if c["relative_error_pct"] >= pct), default=0.0)
 
     first = np.array([worst(r["looks"][0]) for r in records])
@@ -263,7 +265,7 @@ def gate_rates(records: list[dict], thresholds: dict[str, float]) -> dict:
         "noise_ratio": {"threshold": ratio, "min_error_pct": pct,
                         "rate": rate(first >= ratio),
                         "largest": float(first.max()) if len(first) else 0.0,
-                        "quantiles_first_look": quantiles(first[failing])},
+                        "quantiles_first_look": quantiles(first)},
         "noise_ratio_wider": {"threshold": wider, "rate": rate(second >= wider),
                               "largest": float(second.max()) if len(second) else 0.0,
                               "quantiles": quantiles(second[looked])},

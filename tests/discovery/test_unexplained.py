@@ -66,7 +66,9 @@ def test_what_nothing_tried_explains_is_unexplained_and_located(tmp_path, seed):
     else:
         assert set(u["channels"]) & affected, case.describe()
     assert u["share_of_error"] > 0.5, case.describe()
-    assert u["failed_tests"] and u["band_hz"][1] >= u["band_hz"][0] >= 0.0
+    # the statistical tests' verdict is recorded, not required (the prewhitening can
+    # whiten a periodic error: seed 1323947681's u3 passed them)
+    assert isinstance(u["failed_tests"], list) and u["band_hz"][1] >= u["band_hz"][0] >= 0.0
     for col in u["columns"]:
         assert col["relative_error_pct"] >= u["threshold_pct"]
         assert col["noise_ratio"] >= u["noise_ratio"]
@@ -84,9 +86,9 @@ def _validity(fails: bool) -> SimpleNamespace:
 
 def test_where_it_sits_is_every_material_column(quiet_lab, seed):
     """Held-out torque errors of 30-300 times the noise on two winches (drawn), the
-    third at the noise: one failing a validity test makes the verdict; both are where
-    the error sits, also the one whose test the prewhitening passed (independent seed
-    698269289: such a column was left out and the columns named held 42 % of it)."""
+    third at the noise: both are where the error sits, also the one whose test the
+    prewhitening passed (independent seed 698269289: such a column was left out and the
+    columns named held 42 % of it)."""
     rng = np.random.default_rng(seed)
     settings = DiagnosisSettings(closed_loop=False)
     rig = quiet_lab.rig
@@ -111,14 +113,16 @@ def test_where_it_sits_is_every_material_column(quiet_lab, seed):
     assert found.share_of_error > 0.99, seed
     assert found.columns[0].failed_tests == ("ljung_box",)
     assert found.columns[1].failed_tests == ()
-    # no material column fails a test: not unexplained
-    assert verdict({c: _validity(False) for c in validity}) is None
+    # the calibrated validity test reads the size: material columns that pass every
+    # statistical test are unexplained too; below the gate, failing or not, they are not
+    assert [c.channel for c in verdict({c: _validity(False) for c in validity}).columns] \
+        == ["u1", "u3"], seed
 
 
 @pytest.mark.parametrize("look", ["motion", "wider"])
 def test_validity_fails_only_beyond_the_calibrated_size(quiet_lab, seed, look):
-    """The calibrated validity test: a held-out column failing a statistical test counts
-    only at a size beyond the look's gate (``unexplained_noise_ratio`` on the motion
+    """The calibrated validity test: a held-out column (here failing a statistical test)
+    counts only at a size beyond the look's gate (``unexplained_noise_ratio`` on the motion
     band, ``unexplained_noise_ratio_wider`` on the second look's, which
     :func:`~cdpr_pipeline.discovery.adequacy.wider_band` hands it). Errors drawn at
     0.3-0.9 of the gate on every column are ``none``; one column at 1.1-3 times it is

@@ -47,13 +47,13 @@ class DiagnosisSettings:
     #: every winch is re-identified before causes are named
     unusable_error_pct: float = 100.0
     #: the calibrated validity test (:mod:`~cdpr_pipeline.discovery.adequacy`): a held-out
-    #: torque column of the motion band fails it when it fails a statistical validity test
-    #: with an RMS error of at least this many times the measurement noise its rows carry
+    #: torque column of the motion band fails it with an RMS error of at least this many
+    #: times the measurement noise its rows carry
     #: (:func:`~cdpr_pipeline.discovery.bands.row_noise`) and ``unexplained_min_error_pct``
     #: of its signal; with no cause on either look, such a column makes the diagnosis
     #: ``unexplained``, and ``none`` means no column fails it. The statistical tests alone
     #: fail on most effect-free datasets; this size is twice the 99th percentile of the
-    #: worst failing column on effect-free data of both generators and rig kinds
+    #: worst column on effect-free data of both generators and rig kinds
     #: (``benchmarks/bench_null_calibration.py --grid``, docs/method.md 3.5)
     unexplained_noise_ratio: float = 12.0
     #: ... the same on the second look's wider band, whose effect-free residuals are
