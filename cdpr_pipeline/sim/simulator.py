@@ -24,6 +24,12 @@ from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.errors import UserError
 from cdpr_pipeline.progress import progress
 from cdpr_pipeline.sim.controller import ComputedTorquePD
+from cdpr_pipeline.sim.integrators import (  # noqa: F401  (re-exported: the simulator's steps)
+    friction_path_step,
+    lag_response,
+    rk4_step,
+    rosenbrock_step,
+)
 from cdpr_pipeline.sim.plant import Plant, cable_geometry, forward_kinematics
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.trajectories import DesiredTrajectories
@@ -200,158 +206,6 @@ def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5,
     return steps
 
 
-def lag_response(plant: Plant, u_drum: np.ndarray, u_cmd: np.ndarray,
-                 dt: float | np.ndarray) -> np.ndarray:
-    """The drum torques ``dt`` after ``u_drum`` under a held command ``u_cmd``: the exact
-    solution ``u_cmd + (u_drum - u_cmd) exp(-dt / tau)`` of every lagged drive's
-    ``tau u' = u_cmd - u`` (a drive without lag keeps its unused state)."""
-    tau = plant.lags
-    lagged = tau > 0.0
-    decay = np.exp(-np.asarray(dt, dtype=float) / np.where(lagged, tau, 1.0))
-    return np.where(lagged, u_cmd + (u_drum - u_cmd) * decay, u_drum)
-
-
-def _impulse_shift(plant: Plant, start: np.ndarray, u_cmd: np.ndarray,
-                   dt: float | np.ndarray, quadrature: np.ndarray) -> np.ndarray:
-    """What to add to a lagged drive's stage torques so that the integrator's quadrature
-    of them (``quadrature``, their weighted mean) equals the exact mean drum torque over
-    the step; zero on drives without lag."""
-    lagged = plant.lags > 0.0
-    ratio = np.where(lagged, plant.lags, 1.0) / dt
-    mean = u_cmd + (start - u_cmd) * ratio * -np.expm1(-1.0 / ratio)
-    return np.where(lagged, mean - quadrature, 0.0)
-
-
-def rk4_step(
-    plant: Plant, state: np.ndarray, u: np.ndarray, dt: float | np.ndarray,
-    k1: np.ndarray | None = None
-) -> np.ndarray:
-    """One classical RK4 step under constant ``u``; ``k1`` (the derivative at ``state``)
-    may be passed when the caller already has it (it is recomputed on a lagged plant).
-
-    An actuator lag's state is linear in the held command and is advanced by its exact
-    solution (:func:`lag_response`), so a short lag sets no step size (it did: a 0.5 ms
-    lag at 300 Hz took 14 sub-steps). The mechanics see it at every stage time, shifted
-    by one constant so that RK4's Simpson weights integrate the drum torque's exact
-    impulse over the step: a lag far shorter than the step rises between the stages,
-    where the stage values alone would miss part of it."""
-    if not plant.lagged:
-        if k1 is None:
-            k1 = plant.derivative(state, u)
-        k2 = plant.derivative(state + 0.5 * dt * k1, u)
-        k3 = plant.derivative(state + 0.5 * dt * k2, u)
-        k4 = plant.derivative(state + dt * k3, u)
-        return state + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
-    lag = slice(state.shape[1] - plant.n, None)
-    start = state[:, lag]
-    half = lag_response(plant, start, u, 0.5 * np.asarray(dt))
-    full = lag_response(plant, start, u, dt)
-    shift = _impulse_shift(plant, start, u, dt, (start + 4.0 * half + full) / 6.0)
-    stage = state.copy()
-    stage[:, lag] = start + shift
-    k1 = plant.derivative(stage, u)
-    stage = state + 0.5 * dt * k1
-    stage[:, lag] = half + shift
-    k2 = plant.derivative(stage, u)
-    stage = state + 0.5 * dt * k2
-    stage[:, lag] = half + shift
-    k3 = plant.derivative(stage, u)
-    stage = state + dt * k3
-    stage[:, lag] = full + shift
-    k4 = plant.derivative(stage, u)
-    out = state + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
-    out[:, lag] = full
-    return out
-
-
-#: ``gamma`` of the ROS2 Rosenbrock-W step (L-stable: ``1 + 1/sqrt(2)``)
-ROS2_GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
-
-
-def friction_slope(plant: Plant, theta: np.ndarray, omega: np.ndarray,
-                   omega_end: np.ndarray | None = None) -> np.ndarray:
-    """``d(resisting torque)/d(omega)`` of every winch (B, n), by central differences
-    across a hundredth of the smooth sign's transition band; negative slopes (a friction
-    that falls with speed, as Stribeck's beside its peak) count as zero.
-
-    With ``omega_end`` (the speeds an explicit step would reach), the secant slope from
-    ``omega`` to it wherever the two lie further apart than that: a step that crosses
-    the transition band sees the friction's whole jump there, where the slope at its
-    start (flat, outside the band) would let the step cross with the friction still
-    pushing the old way (on a 4-cable rig with ``tanh(500 w)`` at 500 Hz, two steps per
-    tick: 21 um RMS from a fine-step reference with the local slope, 3 um with the
-    secant)."""
-    delta = 1e-2 / plant.sign_sharpness if np.isfinite(plant.sign_sharpness) else 1e-6
-    slope = (plant.friction_torque(theta, omega + delta)
-             - plant.friction_torque(theta, omega - delta)) / (2.0 * delta)
-    if omega_end is not None:
-        change = omega_end - omega
-        far = np.abs(change) > delta
-        if far.any():
-            secant = (plant.friction_torque(theta, omega_end)
-                      - plant.friction_torque(theta, omega)) / np.where(far, change, 1.0)
-            slope = np.where(far, secant, slope)
-    return np.maximum(slope, 0.0)
-
-
-def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
-                    k1: np.ndarray | None = None) -> np.ndarray:
-    """One ROS2 Rosenbrock-W step (Verwer et al. 1999: L-stable, second order for any
-    approximate Jacobian) of a *rigid* plant, with the Jacobian of its friction only.
-
-    A (nearly) hard Coulomb sign is a damper of slope ``k F_c`` inside its transition
-    band; explicitly that slope dictates the step (it took 16 RK4 sub-steps per tick).
-    Here the friction's slope ``D = sum_i c_i / R_i^2 k_i k_i^T`` (``c_i`` its
-    :func:`friction_slope`: the secant to the speeds an explicit step would reach,
-    where the step crosses the transition band) is treated implicitly,
-    ``W = M + gamma dt D`` on the platform velocity (``M`` the reduced mass matrix), so
-    the band costs no sub-steps: sticking is damped out, not resolved. Everything else
-    is as explicit as Heun's method. An actuator lag's state follows its exact solution,
-    as in :func:`rk4_step`.
-    """
-    if plant.elastic:
-        raise ValueError("rosenbrock_step integrates rigid plants only")
-    p, v = state[:, 0:3], state[:, 3:6]
-    g, units = cable_geometry(plant.anchors, p)
-    R = plant.drum_radius
-    omega = np.einsum("bnk,bk->bn", units, v) / R
-    lag = slice(state.shape[1] - plant.n, None)
-    if plant.lagged:
-        start = state[:, lag]
-        full = lag_response(plant, start, u, dt)
-        shift = _impulse_shift(plant, start, u, dt, (start + full) / 2.0)
-        stage = state.copy()
-        stage[:, lag] = start + shift
-        k1 = plant.derivative(stage, u)
-    elif k1 is None:
-        k1 = plant.derivative(state, u)
-    # the speeds an explicit step would reach: the friction's secant slope up to them
-    omega_end = omega + dt * np.einsum("bnk,bk->bn", units, k1[:, 3:6]) / R
-    c = friction_slope(plant, plant.winch_angle_from_length(g), omega, omega_end)
-    mass = plant.mass * np.eye(3) + np.einsum("bni,n,bnj->bij", units,
-                                              plant.winch.inertia / R ** 2, units)
-    w = mass + ROS2_GAMMA * dt * np.einsum("bni,bn,bnj->bij", units, c / R ** 2, units)
-
-    def solve(f: np.ndarray) -> np.ndarray:
-        # W^-1 f with W = I - gamma dt J, J nonzero only in dv'/dv = -M^-1 D
-        out = f.copy()
-        out[:, 3:6] = np.linalg.solve(w, np.einsum("bij,bj->bi", mass, f[:, 3:6])[..., None]
-                                      )[..., 0]
-        return out
-
-    if not plant.lagged:
-        k1 = solve(k1)
-        k2 = solve(plant.derivative(state + dt * k1, u) - 2.0 * k1)
-        return state + dt * (1.5 * k1 + 0.5 * k2)
-    k1 = solve(k1)
-    stage = state + dt * k1
-    stage[:, lag] = full + shift
-    k2 = solve(plant.derivative(stage, u) - 2.0 * k1)
-    out = state + dt * (1.5 * k1 + 0.5 * k2)
-    out[:, lag] = full
-    return out
-
-
 @dataclass
 class BatchSimulator:
     """Closed-loop simulation of a true plant under a nominal-model controller.
@@ -459,7 +313,7 @@ class BatchSimulator:
         grid = self.tick_grid(desired)
         internal = bool(set(truth_keys) - {"position", "velocity", "u_cmd"})
         plant = integration_plant(self.plant, grid.dt)
-        step = rosenbrock_step if self.implicit(grid.dt) else rk4_step
+        step = friction_path_step if self.implicit(grid.dt) else rk4_step
         substeps = self.substeps_for(grid.dt)
         dt = grid.dt / substeps
         law = ComputedTorquePD(self.nominal, self.controller)
