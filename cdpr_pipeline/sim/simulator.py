@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -134,11 +135,14 @@ def integration_plant(plant: Plant, control_dt: float, accuracy: float = 0.5) ->
 MAX_SUBSTEPS = 64
 
 
-#: sub-steps per control tick at least, where :func:`rosenbrock_step` integrates a hard
-#: sign: measured on five 15 s runs of a 250 Hz Stribeck lab against the former 16 RK4
-#: sub-steps, the closed-loop positions differ by 1e-5, 5e-6 and 2e-6 m RMS at 1, 2
-#: and 4 sub-steps (the torques by 0.01-0.02 N m RMS, almost all of it at reversals,
-#: where a hard sign leaves the friction anywhere in [-F_c, F_c])
+#: longest step of :func:`~cdpr_pipeline.sim.integrators.friction_path_step`: on a
+#: 4-cable rig at 500 Hz (independent generator, seed 3, five runs, 2 s each against a
+#: fine-step reference) the positions differ by 1.05 % of the tracking error with a
+#: ``tanh(500 w)`` law at one 2 ms step per tick, 0.35 % at two; 0.03 % and 0.01 % with
+#: the hard sign (the former ROS2 step at two: 23 % and 3.3 %)
+PATH_STEP_S = 1e-3
+#: sub-steps per control tick of the former scheme (``integrator="ros2"``: the ROS2 step
+#: throughout, kept to compare with)
 IMPLICIT_MIN_SUBSTEPS = 2
 
 
@@ -150,13 +154,13 @@ class SimulationCostError(UserError, ValueError):
 
 def implicit_friction(plant: Plant, control_dt: float | None = None,
                       accuracy: float = 0.5) -> bool:
-    """Whether :func:`rosenbrock_step` integrates ``plant``: a rigid plant whose Coulomb
+    """Whether :func:`friction_path_step` integrates ``plant``: a rigid plant whose Coulomb
     law is stiff, the one stiff term it has. A hard sign (rig.yaml's default) always is;
     a smooth ``tanh(k w)`` (a Stribeck bump on it included) is where its slope alone
     would take RK4 more than one sub-step per control tick of ``control_dt`` (a steep
     law: ``k = 500`` on light winches took 126). A gentle law (the paper's ``k = 20`` at
     300 Hz) stays with RK4, whose one sub-step is then more accurate than two of the
-    second-order scheme; without ``control_dt``, only the hard sign counts."""
+    steep-law scheme; without ``control_dt``, only the hard sign counts."""
     if plant.elastic or not plant.winch.coulomb.max() > 0:
         return False
     if not np.isfinite(plant.sign_sharpness):
@@ -171,7 +175,8 @@ def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5,
     ``max_substeps`` (:data:`MAX_SUBSTEPS` when None), else :class:`SimulationCostError`.
 
     A rigid plant with a stiff Coulomb law (:func:`implicit_friction`) is stepped by
-    :func:`rosenbrock_step`, where the friction's slope sets no rate; ``implicit``
+    :func:`friction_path_step`, where the friction's slope sets no rate (steps of at most
+    :data:`PATH_STEP_S`); ``implicit``
     False counts the sub-steps :func:`rk4_step` needs whatever the law (a caller that
     steps RK4 itself), None decides by :func:`implicit_friction`."""
     if implicit is None:
@@ -193,7 +198,7 @@ def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5,
             k * plant.drum_radius.max() ** 2 / plant.winch.inertia.min())
     # an actuator lag sets none: rk4_step advances it by its exact solution
     cause = max(rates, key=rates.get)
-    steps = max(IMPLICIT_MIN_SUBSTEPS if implicit else 1,
+    steps = max(math.ceil(control_dt / PATH_STEP_S - 1e-9) if implicit else 1,
                 math.ceil(rates[cause] * control_dt / accuracy))
     cap = MAX_SUBSTEPS if max_substeps is None else max_substeps
     if steps > cap:
@@ -222,11 +227,12 @@ class BatchSimulator:
         Recording rate; the controller rate must be an integer multiple of it.
     substeps : int or None
         Integrator steps per control tick; None picks them from the plant's time scales.
-    integrator : {"auto", "rk4"}
-        ``auto``: :func:`rosenbrock_step` where the Coulomb law is stiff
+    integrator : {"auto", "rk4", "ros2"}
+        ``auto``: :func:`friction_path_step` where the Coulomb law is steep
         (:func:`implicit_friction`), :func:`rk4_step` elsewhere; ``rk4``: RK4 whatever
-        the law (a hard sign as :func:`integration_plant`'s ``tanh``), the reference the
-        implicit scheme is measured against.
+        the law (a hard sign as :func:`integration_plant`'s ``tanh``); ``ros2``: the
+        former scheme, :func:`rosenbrock_step` where the law is steep, at
+        :data:`IMPLICIT_MIN_SUBSTEPS` at least (both kept to measure against).
     feedback : {"encoders", "mocap"}
         Where the controller's state estimate comes from. ``encoders`` (default, as on a
         real CDPR at control rate): position by forward kinematics of the encoder lengths
@@ -252,17 +258,33 @@ class BatchSimulator:
     def __post_init__(self) -> None:
         if self.feedback not in ("encoders", "mocap"):
             raise ValueError(f"feedback must be 'encoders' or 'mocap', not {self.feedback!r}")
-        if self.integrator not in ("auto", "rk4"):
-            raise ValueError(f"integrator must be 'auto' or 'rk4', not {self.integrator!r}")
+        if self.integrator not in ("auto", "rk4", "ros2"):
+            raise ValueError(f"integrator must be 'auto', 'rk4' or 'ros2', not "
+                             f"{self.integrator!r}")
+
+    @cached_property
+    def _encoders_exact(self) -> bool:
+        """Whether the encoders' estimate is the true state itself: rigid cables on the
+        nominal geometry, read without quantisation (forward kinematics of exact lengths
+        gives the position back, to rounding; the re-simulation's exact sensors)."""
+        plant, nominal = self.plant, self.nominal
+        return (not plant.elastic and self.sensors.encoder_counts_per_rev == 0
+                and all(np.array_equal(getattr(plant, k), getattr(nominal, k))
+                        for k in ("anchors", "drum_radius", "home")))
 
     def implicit(self, control_dt: float) -> bool:
-        """Whether :meth:`run` steps the plant with :func:`rosenbrock_step`."""
-        return self.integrator == "auto" and implicit_friction(self.plant, control_dt)
+        """Whether :meth:`run` steps the plant with a steep-law step
+        (:func:`friction_path_step`, or :func:`rosenbrock_step` under ``ros2``)."""
+        return self.integrator != "rk4" and implicit_friction(self.plant, control_dt)
 
     def substeps_for(self, control_dt: float) -> int:
         """Integrator steps per control tick (:attr:`substeps`, or from the plant)."""
-        return self.substeps or auto_substeps(self.plant, control_dt,
-                                              implicit=self.implicit(control_dt))
+        if self.substeps:
+            return self.substeps
+        if self.integrator == "ros2" and self.implicit(control_dt):
+            # a rigid plant: the former scheme's floor (its mechanics asked for one)
+            return IMPLICIT_MIN_SUBSTEPS
+        return auto_substeps(self.plant, control_dt, implicit=self.implicit(control_dt))
 
     def tick_grid(self, desired: DesiredTrajectories) -> TickGrid:
         """Control-tick grid and desired motion (B, ticks, 3) of a batch."""
@@ -288,6 +310,8 @@ class BatchSimulator:
         """The controller's estimate of platform position and velocity."""
         if self.feedback == "mocap":
             return pos_meas, self.plant.split_state(state)["v"]
+        if self._encoders_exact:
+            return state[:, 0:3], state[:, 3:6]
         theta, omega = self.plant.winch_state(state)
         lengths = self.sensors.encoder_lengths(theta, self.nominal)
         position = forward_kinematics(self.nominal.anchors, lengths, guess)
@@ -313,7 +337,8 @@ class BatchSimulator:
         grid = self.tick_grid(desired)
         internal = bool(set(truth_keys) - {"position", "velocity", "u_cmd"})
         plant = integration_plant(self.plant, grid.dt)
-        step = friction_path_step if self.implicit(grid.dt) else rk4_step
+        step = rk4_step if not self.implicit(grid.dt) else (
+            rosenbrock_step if self.integrator == "ros2" else friction_path_step)
         substeps = self.substeps_for(grid.dt)
         dt = grid.dt / substeps
         law = ComputedTorquePD(self.nominal, self.controller)
