@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdpr_pipeline.data.axis_controller import AxisController
+from cdpr_pipeline.sim.friction_path import friction_over_step
 from cdpr_pipeline.sim.plant import Drives
 from cdpr_pipeline.sim.simulator import MAX_SUBSTEPS, SimulationCostError, lag_response
 
@@ -216,8 +217,51 @@ def _advance(model: Drives, q: np.ndarray, v: np.ndarray, drive: np.ndarray | No
             mean = command + (drive - command) * ratio * -np.expm1(-1.0 / ratio)
             force = np.where(tau > 0.0, mean, command)
             drive = lag_response(model, drive, command, h)
-        q, v = implicit_step(model, q, v, force, h, affine)
+        q, v = path_step(model, q, v, force, h, affine)
     return q, v, drive
+
+
+def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h: float,
+              affine: AffineFriction | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`implicit_step`, except on the axes whose speed meets the friction law's
+    steep part within the step (it crosses zero, or the slope along its explicit path,
+    times ``h`` over the inertia, exceeds one half): there the speed follows its own
+    scalar path ``I v' = force - R(q, v)`` (:func:`~cdpr_pipeline.sim.friction_path.
+    friction_over_step`, the position held at the step's middle), which places the
+    reversal or the stick where it falls within the step; the position follows from the
+    friction's impulse and first moment."""
+    inertia = model.winch.inertia
+    middle = q + 0.5 * h * v
+    if affine is not None:
+        # a hard sign on an affine law: only a reversal within the step is steep
+        up = v > 0.0
+        resist = np.where(up, affine.up + affine.slope_up * v,
+                          affine.down + affine.slope_down * v)
+        crossing = v * (v + h * (force - resist) / inertia) < 0.0
+        q1, v1 = implicit_step(model, q, v, force, h, affine)
+        if not crossing.any():
+            return q1, v1
+    spread = 1e-3 * np.abs(v) + 1e-12
+    start = model.friction_torque(q, np.stack([v, v - spread, v + spread]))
+    end = v + h * (force - start[0]) / inertia
+    rest = model.friction_torque(middle, np.stack([end, np.full_like(v, REST_SPEED),
+                                                   np.full_like(v, -REST_SPEED)]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        secant = np.where(end != v, (rest[0] - start[0]) / (end - v), 0.0)
+    slope = np.maximum(np.abs(secant), np.abs(start[2] - start[1]) / (2.0 * spread))
+    # (a hard sign at rest: implicit_step's stick or slip is exact there)
+    steep = (v * end < 0.0) | (h * slope / inertia > 0.5)
+    q1, v1 = implicit_step(model, q, v, force, h, affine)
+    if not steep.any():
+        return q1, v1
+    beta = 1.0 / inertia * np.ones_like(v)
+    alpha = force * beta
+    reach = 2.0 * np.abs(np.concatenate([start[:1], rest])).max(axis=0)
+    c0, c1 = friction_over_step(lambda w: model.friction_torque(middle, w), v, alpha,
+                                beta, h, reach)
+    v_path = v + h * (alpha - beta * c0)
+    q_path = q + h * v + 0.5 * h * h * alpha - beta * (0.5 * h * h * c0 - h ** 3 * c1 / 12.0)
+    return np.where(steep, q_path, q1), np.where(steep, v_path, v1)
 
 
 @dataclass

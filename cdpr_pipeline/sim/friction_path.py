@@ -30,8 +30,8 @@ import numpy as np
 
 #: nodes per halving of the distance to zero speed (both sides), over GRADED_OCTAVES:
 #: a ``tanh`` transition spans about two octaves, a hard sign none
-NODES_PER_OCTAVE = 4
-GRADED_OCTAVES = 44
+NODES_PER_OCTAVE = 2
+GRADED_OCTAVES = 40
 #: evenly spaced nodes along the whole path
 EVEN_NODES = 17
 _GRADING = 2.0 ** -(np.arange(NODES_PER_OCTAVE * GRADED_OCTAVES) / NODES_PER_OCTAVE)
