@@ -136,12 +136,16 @@ MAX_SUBSTEPS = 64
 
 
 #: longest step of :func:`~cdpr_pipeline.sim.integrators.friction_path_step` on a steep
-#: smooth law (a hard sign: the mechanics' own step, one per tick at 500 Hz): on a
+#: smooth law: on a
 #: 4-cable rig at 500 Hz (independent generator, seed 3, five runs, 2 s each against a
 #: fine-step reference) the positions differ by 1.05 % of the tracking error with a
 #: ``tanh(500 w)`` law at one 2 ms step per tick, 0.35 % at two; 0.03 % and 0.01 % with
 #: the hard sign (the former ROS2 step at two: 23 % and 3.3 %)
 PATH_STEP_S = 1e-3
+#: the same for a hard sign: 0.03 % at one 2 ms step on that rig, 0.04 % at one 4 ms
+#: step on a 3-cable 250 Hz one, but 46 % at one 3.3 ms step on the paper's 3-cable rig
+#: at 300 Hz (0.04 % at two)
+HARD_PATH_STEP_S = 2e-3
 #: sub-steps per control tick of the former scheme (``integrator="ros2"``: the ROS2 step
 #: throughout, kept to compare with)
 IMPLICIT_MIN_SUBSTEPS = 2
@@ -200,7 +204,8 @@ def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5,
             k * plant.drum_radius.max() ** 2 / plant.winch.inertia.min())
     # an actuator lag sets none: rk4_step advances it by its exact solution
     cause = max(rates, key=rates.get)
-    steps = max(math.ceil(control_dt / PATH_STEP_S - 1e-9) if implicit and smooth_law else 1,
+    longest = PATH_STEP_S if smooth_law else HARD_PATH_STEP_S
+    steps = max(math.ceil(control_dt / longest - 1e-9) if implicit else 1,
                 math.ceil(rates[cause] * control_dt / accuracy))
     cap = MAX_SUBSTEPS if max_substeps is None else max_substeps
     if steps > cap:

@@ -83,7 +83,8 @@ def test_cable_robot_closed_loop_within_one_percent_of_tracking(paper_rig, law):
     tracking = np.sqrt(np.mean((fine.truth["position"] - fine.measured["desired"]) ** 2))
     gap = np.sqrt(np.mean((now.truth["position"] - fine.truth["position"]) ** 2))
     print(f"{law}: {now.substeps} sub-steps, {100 * gap / tracking:.3f} % of tracking")
-    assert now.substeps <= 2          # the mechanics' step at 300 Hz (1 ms at most)
+    # steps of at most 1 ms (a smooth law) or 2 ms (a hard sign) at 300 Hz
+    assert now.substeps == (4 if law == "tanh500" else 2)
     assert gap < 0.01 * tracking
 
 
