@@ -159,9 +159,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="bench_diagnose_") as tmp:
         for case in args.cases:
             r = run_case(case, Path(tmp))
-            order = ["startup", "loading", "signals", "candidates", "free_form",
-                     "validity", "closed_loop", "black_box", "writing", "mlflow", "other",
-                     "total"]
+            order = ["startup", "loading", "signals", "candidates", "free_form", "selection",
+                     "never_worse", "validity", "second_look", "closed_loop", "black_box",
+                     "sizes", "writing", "mlflow", "other", "total"]
             parts = ", ".join(f"{k.replace('_', ' ')} {r['phases'][k]:.1f}" for k in order
                               if k in r["phases"])
             first = "n/a" if r["first_log"] is None else f"{r['first_log']:.1f} s"

@@ -8,7 +8,7 @@ random rig each)
 and its drive axes (1-6 axes, a random rig and rate each; rig.yaml in turn states nothing,
 every prismatic axis's pitch, or rotary joints beside a prismatic axis with its pitch, so
 that the candidates needing a motor angle, ``cogging``'s, are judged on the axes too:
-``foreign_cases.AXES_RIGS``). Each is diagnosed with the
+``null_cases.AXES_RIGS``). Each is diagnosed with the
 command's configuration (closed loop and black box off) and every first-step candidate's
 statistics are recorded, with the thresholds the selection holds them to
 (``cdpr_pipeline.discovery.selection.Judge``):
@@ -23,11 +23,11 @@ statistics are recorded, with the thresholds the selection holds them to
 * the diagnosis's final ``gain`` interval (the never-worse rule) and its verdict: any
   verdict but ``none`` is a false alarm.
 
-``--grid R`` draws the calibration grid instead (``foreign_cases.null_grid``): lab cable
+``--grid R`` draws the calibration grid instead (``null_cases.null_grid``): lab cable
 robot, independent cable robot and independent drive axes (the lab simulates no drive
 axes), each with one to five runs, short (10 s) and long (30 s) runs, ``R`` replicates
 with a seed each. Each verdict gate's rate on these nulls is measured
-(``foreign_cases.gate_rates``): the validity tests that send a diagnosis to the second
+(``null_cases.gate_rates``): the validity tests that send a diagnosis to the second
 look on a wider band, a cause named there, the materiality of a failing column
 (``unexplained_noise_ratio``, ``unexplained_min_error_pct``: ``unexplained``), the
 unusable-model threshold, and the verdict itself; per generator and kind, per run count
@@ -59,14 +59,8 @@ from pathlib import Path
 from benchmarks.measurements import commit, invoked_as, record
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.stages.simulate import rig_from_config
-from cdpr_pipeline.testing.foreign_cases import (
-    add_settings_option,
-    named_settings,
-    null_datasets,
-    null_grid,
-    run_null,
-    summarise,
-)
+from cdpr_pipeline.testing.foreign_cases import add_settings_option, named_settings
+from cdpr_pipeline.testing.null_cases import null_datasets, null_grid, run_null, summarise
 
 
 def print_summary(summary: dict) -> None:
@@ -192,7 +186,7 @@ def gates_markdown(summary: dict) -> list[str]:
 
 
 def thresholds_of(settings) -> dict[str, float]:
-    """The verdict thresholds :func:`~cdpr_pipeline.testing.foreign_cases.gate_rates`
+    """The verdict thresholds :func:`~cdpr_pipeline.testing.null_cases.gate_rates`
     measures, as ``settings`` holds them."""
     return {"noise_ratio": settings.unexplained_noise_ratio,
             "min_error_pct": settings.unexplained_min_error_pct,

@@ -11,6 +11,7 @@ ever written there.
 from __future__ import annotations
 
 import difflib
+import inspect
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ from hydra.core.global_hydra import GlobalHydra
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.core.override_parser.types import IntervalSweep, Override, OverrideType
 from hydra.errors import HydraException, MissingConfigException
+from hydra.utils import get_object
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
@@ -181,6 +183,21 @@ def _composed(name: str, overrides: Sequence[str]) -> DictConfig:
         raise ConfigError(" ".join(lines[:2]) or type(err).__name__) from None
 
 
+def _check_argument(key: str, target: str, command: str) -> None:
+    """Refuse ``+key`` when the object ``target`` builds takes no argument of that name
+    (only looked up then: importing the target may take a moment)."""
+    try:
+        params = inspect.signature(get_object(target)).parameters
+    except (ImportError, AttributeError, ValueError, TypeError, HydraException):
+        # a target that cannot be resolved or inspected here: instantiating it will say so
+        return
+    if any(p.kind == inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        return
+    prefix, _, arg = key.rpartition(".")
+    if arg not in params:
+        raise _unknown(key, [f"{prefix}.{p}" for p in params if p != "self"], command)
+
+
 def check_overrides(name: str, overrides: Sequence[str], *, command: str,
                     multirun: bool = False) -> None:
     """Refuse settings ``cdpr <command>`` does not have, or of the wrong type, in one line.
@@ -244,6 +261,7 @@ def check_overrides(name: str, overrides: Sequence[str], *, command: str,
         if o.type in (OverrideType.ADD, OverrideType.FORCE_ADD) and default is _MISSING:
             parent = _node(tree, key.rpartition(".")[0]) if "." in key else tree
             if isinstance(parent, Mapping) and TARGET_KEY in parent:
+                _check_argument(key, parent[TARGET_KEY], command)
                 continue                      # an argument more for the object it builds
             raise _unknown(key, keys, command)
         if default is _MISSING:

@@ -137,6 +137,12 @@ def test_booleans_and_numbers_are_read_strictly(capsys, tmp_path, sub):
     (["diagnose", "+blackbox.enabled=false"],
      "blackbox.enabled is a setting already: blackbox.enabled=VALUE sets it (without +)"),
     (["diagnose", "blackbox.model=tcn"], "blackbox.model holds settings"),
+    # +key into an object: only an argument its constructor takes
+    (["diagnose", "+discovery.unexplained_noise_rato=5"],
+     "unknown setting discovery.unexplained_noise_rato (did you mean "
+     "discovery.unexplained_noise_ratio?)"),
+    (["train", "+optimizer.weight_decy=1e-4"],
+     "unknown setting optimizer.weight_decy (did you mean optimizer.weight_decay?)"),
     (["train", "model=tcnx"], "unknown option model=tcnx (choices: arx, "),
     (["train", "trainer.max_epochs=2.5"], "trainer.max_epochs=2.5: expected an integer"),
     (["train", "trainer.deterministic=flase"],

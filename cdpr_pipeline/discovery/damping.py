@@ -105,7 +105,7 @@ class _Problem:
     """The elongation residual of every run in the stretch band, ``tau`` free.
 
     With more than three cables the platform's motion leaves the internal cable force
-    unknown (:func:`~cdpr_pipeline.sim.plant.tensions_for_force` answers least-norm);
+    unknown (:func:`~cdpr_pipeline.sim.kinematics.tensions_for_force` answers least-norm);
     whatever the rig holds there stretches the cables along ``diag(L / EA) N`` (``N``
     the null space of ``K^T``), so each row is compared only across that direction
     (projected out), where the elastic cables outnumber it. Measured on a 4-cable

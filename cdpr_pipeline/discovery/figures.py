@@ -18,9 +18,9 @@ import numpy as np
 
 from cdpr_pipeline.discovery.closed_loop_report import scaled_unit
 from cdpr_pipeline.discovery.diagnosis import Diagnosis
+from cdpr_pipeline.discovery.judge import Judgement
 from cdpr_pipeline.discovery.plots import VARIABLES, ColumnPlot
 from cdpr_pipeline.discovery.results import Discrepancy
-from cdpr_pipeline.discovery.selection import Judgement
 from cdpr_pipeline.discovery.summary import cause_name, signal_words
 
 TIME_LABEL = "time (s)"

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from cdpr_pipeline.discovery.judge import Judgement, SelectionSettings
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,
@@ -33,7 +34,6 @@ from cdpr_pipeline.discovery.residuals import (
     residuals,
 )
 from cdpr_pipeline.discovery.results import ChannelGain, HeldoutGain
-from cdpr_pipeline.discovery.selection import Judgement, SelectionSettings
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.discovery.validity import block_bootstrap, split_blocks
 from cdpr_pipeline.sim.effects import Effect

@@ -25,14 +25,8 @@ import numpy as np
 
 from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.discovery.signals import RunSignals
-from cdpr_pipeline.sim.plant import (
-    PLANTS,
-    Drives,
-    Plant,
-    cable_geometry,
-    nominal_plant,
-    smooth_sign,
-)
+from cdpr_pipeline.sim.kinematics import cable_geometry
+from cdpr_pipeline.sim.plant import PLANTS, Drives, Plant, nominal_plant, smooth_sign
 from cdpr_pipeline.sim.sensors import Sensors
 
 #: channel -> column prefix in the data contract

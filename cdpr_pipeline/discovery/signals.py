@@ -62,13 +62,8 @@ from cdpr_pipeline.data.reading import (
 )
 from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.sim.plant import (
-    Drives,
-    Plant,
-    cable_geometry,
-    internal_force_directions,
-    nominal_plant,
-)
+from cdpr_pipeline.sim.kinematics import cable_geometry, internal_force_directions
+from cdpr_pipeline.sim.plant import Drives, Plant, nominal_plant
 
 #: statistics rows per cut-off period: rows are thinned to ``2 * cutoff_hz`` (the
 #: low-pass band sampled at its Nyquist rate: band-limited white noise stays white)

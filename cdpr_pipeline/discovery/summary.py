@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
+from cdpr_pipeline.discovery.judge import Judgement
 from cdpr_pipeline.discovery.residuals import Model
 from cdpr_pipeline.discovery.results import HeldoutGain, Unexplained, Unusable
-from cdpr_pipeline.discovery.selection import Judgement
 from cdpr_pipeline.discovery.sizes import CauseComponent
 from cdpr_pipeline.sim.effects import Effect
 from cdpr_pipeline.sim.effects.base import drive, with_unit

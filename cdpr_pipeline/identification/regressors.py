@@ -36,12 +36,12 @@ from cdpr_pipeline.data.reading import (
 )
 from cdpr_pipeline.data.rig import AxesRig, CdprRig, Rig
 from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.sim.plant import (
+from cdpr_pipeline.sim.kinematics import (
     cable_geometry,
     internal_force_directions,
-    smooth_sign,
     tensions_for_force,
 )
+from cdpr_pipeline.sim.plant import smooth_sign
 
 log = logging.getLogger(__name__)
 

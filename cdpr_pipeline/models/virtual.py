@@ -27,8 +27,9 @@ from cdpr_pipeline.data.rig import AxesRig, CdprRig, Rig
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.models.features import RunArrays, run_arrays
 from cdpr_pipeline.models.forecast import Forecaster
+from cdpr_pipeline.sim.kinematics import cable_geometry, static_tensions
 from cdpr_pipeline.sim.lab import family_list
-from cdpr_pipeline.sim.plant import Plant, cable_geometry, static_tensions
+from cdpr_pipeline.sim.plant import Plant
 from cdpr_pipeline.sim.trajectories import TrajectoryRanges, draw_trajectories
 
 

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdpr_pipeline.data.rig import ControllerSpec
-from cdpr_pipeline.sim.plant import Plant, cable_geometry, winch_rates
+from cdpr_pipeline.sim.kinematics import cable_geometry, winch_rates
+from cdpr_pipeline.sim.plant import Plant
 
 
 def distribute_tensions(units: np.ndarray, force: np.ndarray, min_tension: float) -> np.ndarray:

@@ -13,7 +13,8 @@ from collections.abc import Callable
 import numpy as np
 
 from cdpr_pipeline.sim.friction_path import friction_over_step
-from cdpr_pipeline.sim.plant import Plant, cable_geometry, winch_rates
+from cdpr_pipeline.sim.kinematics import cable_geometry, winch_rates
+from cdpr_pipeline.sim.plant import Plant
 
 
 def lag_response(plant: Plant, u_drum: np.ndarray, u_cmd: np.ndarray,

@@ -40,6 +40,13 @@ import numpy as np
 
 from cdpr_pipeline.data.rig import CdprRig, Rig, WinchParams
 from cdpr_pipeline.data.units import JOINT_UNITS, WINCH_UNITS, ChannelUnits
+from cdpr_pipeline.sim.kinematics import (
+    cable_geometry,
+    default_home,
+    static_tensions,
+    tensions_for_force,
+    winch_rates,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from cdpr_pipeline.sim.effects import Effect
@@ -104,24 +111,6 @@ def _checked_lag(time_constant: Any, n: int) -> float | np.ndarray:
     if np.any(tau < 0.0) or not np.all(np.isfinite(tau)):
         raise ValueError(f"actuator_time_constant must be finite and >= 0, not {tau}")
     return value
-
-
-def cable_geometry(anchors: np.ndarray, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Geometric cable lengths and unit vectors from platform to anchors.
-
-    Parameters
-    ----------
-    anchors : (n, 3) array
-    position : (..., 3) array
-
-    Returns
-    -------
-    lengths : (..., n) array, ``|A_i - p|``
-    units : (..., n, 3) array, ``k_i = (A_i - p) / |A_i - p|``
-    """
-    diff = anchors - position[..., None, :]
-    lengths = np.sqrt(np.einsum("...i,...i->...", diff, diff))
-    return lengths, diff / lengths[..., None]
 
 
 @dataclass(frozen=True)
@@ -565,91 +554,3 @@ def nominal_plant(rig: Rig, sign_sharpness: float | None) -> Plant | Drives:
     """The model exactly as rig.yaml states it, with the Coulomb law of
     ``sign_sharpness`` (``tanh(k w)``; None: the hard sign)."""
     return plant_kind(rig).stated(rig, sign_sharpness)
-
-
-def winch_rates(
-    units: np.ndarray,
-    lengths: np.ndarray,
-    velocity: np.ndarray,
-    acceleration: np.ndarray | None,
-    radius: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """Rigid-cable winch speed and acceleration from platform motion.
-
-    ``theta' = k.v / R`` and ``theta'' = (k.a + k'.v) / R`` with
-    ``k'.v = ((k.v)^2 - |v|^2) / l``.
-
-    Returns
-    -------
-    omega : (B, n), alpha : (B, n) or None (when ``acceleration`` is None), curvature :
-    (B, n) the ``k'.v`` term.
-    """
-    kv = np.einsum("bnk,bk->bn", units, velocity)
-    curvature = (kv**2 - np.sum(velocity * velocity, axis=-1, keepdims=True)) / lengths
-    alpha = None
-    if acceleration is not None:
-        alpha = (np.einsum("bnk,bk->bn", units, acceleration) + curvature) / radius
-    return kv / radius, alpha, curvature
-
-
-def forward_kinematics(
-    anchors: np.ndarray, lengths: np.ndarray, guess: np.ndarray, iterations: int = 4,
-    tol: float = 1e-12
-) -> np.ndarray:
-    """Platform position whose cable lengths best match ``lengths`` (B, n), by Gauss-Newton
-    from ``guess`` (B, 3). Converges quadratically from a nearby guess (the last tick):
-    at most ``iterations``, stopping once no position moved by more than ``tol`` (m)."""
-    p = np.array(guess, dtype=float, copy=True)
-    for _ in range(iterations):
-        g, units = cable_geometry(anchors, p)
-        # d|A - p|/dp = -k^T
-        jac = -units
-        resid = g - lengths
-        jtj = np.einsum("bni,bnj->bij", jac, jac)
-        jtr = np.einsum("bni,bn->bi", jac, resid)
-        step = np.linalg.solve(jtj, jtr[..., None])[..., 0]
-        p -= step
-        if np.abs(step).max(initial=0.0) <= tol:
-            break
-    return p
-
-
-def default_home(anchors: np.ndarray) -> np.ndarray:
-    """Encoder zero pose: below the anchors' centroid, 40 % of the way down to the floor
-    (or 1 m below the anchors when they sit at or below z = 0)."""
-    anchors = np.asarray(anchors, dtype=float)
-    centre = anchors.mean(axis=0)
-    top = anchors[:, 2].max()
-    drop = 0.6 * top if top > 0 else 1.0
-    return np.array([centre[0], centre[1], top - drop])
-
-
-def tensions_for_force(units: np.ndarray, force: np.ndarray) -> np.ndarray:
-    """Cable tensions ``t`` with ``K^T t = force`` (least-norm for n > 3, unique for 3).
-
-    ``units`` (..., n, 3), ``force`` (..., 3) -> (..., n). No sign constraint: this is the
-    analysis direction (what tensions the measured motion implies), not the controller's
-    tension distribution. The least-norm solution ``K (K^T K)^-1 f`` needs only a 3x3
-    solve per sample (a batched SVD pseudo-inverse is ten times slower), valid wherever
-    the cables span space, i.e. inside any workspace a CDPR can hold.
-    """
-    force = np.broadcast_to(force, units.shape[:-2] + (3,))
-    gram = np.einsum("...ni,...nj->...ij", units, units)
-    return np.einsum("...ni,...i->...n", units, np.linalg.solve(gram, force[..., None])[..., 0])
-
-
-def internal_force_directions(units: np.ndarray, radius: np.ndarray) -> np.ndarray | None:
-    """``(..., n, n - 3)`` winch-torque directions ``R N`` of internal cable forces (``N``
-    the null space of ``K^T``: tensions that move no platform), or None with three
-    cables or fewer. What :func:`tensions_for_force`'s least-norm answer cannot tell: a
-    rig's controller may hold any such force (a pretension, a lower tension bound)."""
-    if units.shape[-2] <= 3:
-        return None
-    # left singular vectors of K (n x 3) beyond its rank span the null space of K^T
-    basis = np.linalg.svd(units, full_matrices=True)[0][..., 3:]
-    return np.asarray(radius, float)[..., :, None] * basis
-
-
-def static_tensions(units: np.ndarray, mass: float, gravity_vector: np.ndarray) -> np.ndarray:
-    """Tensions holding the platform at rest, ``K^T t = -m g``."""
-    return tensions_for_force(units, -mass * np.asarray(gravity_vector))

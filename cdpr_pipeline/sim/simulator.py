@@ -31,7 +31,8 @@ from cdpr_pipeline.sim.integrators import (  # noqa: F401  (re-exported: the sim
     rk4_step,
     rosenbrock_step,
 )
-from cdpr_pipeline.sim.plant import Plant, cable_geometry, forward_kinematics
+from cdpr_pipeline.sim.kinematics import cable_geometry, forward_kinematics
+from cdpr_pipeline.sim.plant import Plant
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.trajectories import DesiredTrajectories
 

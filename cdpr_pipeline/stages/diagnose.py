@@ -41,7 +41,6 @@ from cdpr_pipeline.tracking import (
     make_logger,
     run_name,
 )
-from cdpr_pipeline.wavelet.split import WaveletSplit
 
 log = logging.getLogger(__name__)
 
@@ -59,7 +58,11 @@ class LazyNet:
 
 
 def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
-    disc = cfg.discovery
+    """The diagnosis's settings of a composed ``conf/diagnose.yaml``: ``discovery``
+    instantiated (``conf/discovery``: its ``_target_`` is
+    :class:`~cdpr_pipeline.discovery.diagnosis.DiagnosisSettings`), with the reading
+    (``regression``), the split (``split``) and the black box (``blackbox``) the other
+    groups give."""
     blackbox = None
     if cfg.blackbox.enabled:
         bb = cfg.blackbox
@@ -67,22 +70,12 @@ def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
                                    int(bb.max_windows), int(bb.seed))
     heldout = cfg.split.heldout
     crosstest = cfg.split.get("crosstest")
-    return DiagnosisSettings(
-        regression=instantiate(cfg.regression),
-        selection=instantiate(disc.selection),
-        freeform=instantiate(disc.freeform) if disc.freeform else None,
-        heldout=list(heldout) if heldout else None,
-        crosstest=list(crosstest) if crosstest else None,
-        closed_loop=bool(disc.closed_loop),
-        blackbox=blackbox,
-        max_lag=int(disc.max_lag),
-        wavelet=WaveletSplit("db4", int(disc.wavelet_level)),
-        correlation_threshold=float(disc.correlation_threshold),
-        unusable_error_pct=float(disc.unusable_error_pct),
-        unexplained_noise_ratio=float(disc.unexplained_noise_ratio),
-        unexplained_min_error_pct=float(disc.unexplained_min_error_pct),
-        follow_residual=float(disc.follow_residual),
-    )
+    # a partial: objects passed to instantiate itself would be read as configs
+    settings = instantiate(cfg.discovery, _partial_=True)
+    return settings(regression=instantiate(cfg.regression),
+                    heldout=list(heldout) if heldout else None,
+                    crosstest=list(crosstest) if crosstest else None,
+                    blackbox=blackbox)
 
 
 def _plain(value: Any) -> Any:

@@ -20,7 +20,7 @@ from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.discovery import residuals as R
 from cdpr_pipeline.discovery.signals import dataset_signals, internal_force_projection
 from cdpr_pipeline.sim.effects import ActuatorLag, StribeckFriction, SymbolicWinchTorque
-from cdpr_pipeline.sim.plant import cable_geometry
+from cdpr_pipeline.sim.kinematics import cable_geometry
 from cdpr_pipeline.testing.foreign_cases import foreign_case, foreign_settings, parameters_ok
 from cdpr_pipeline.testing.lab_cases import candidate_effects
 

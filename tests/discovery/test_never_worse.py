@@ -11,7 +11,6 @@ import pytest
 
 from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.data.split import heldout_split
-from cdpr_pipeline.discovery import diagnosis as diagnosis_module
 from cdpr_pipeline.discovery import never_worse as never_worse_module
 from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.discovery.never_worse import never_worse
@@ -121,7 +120,7 @@ def test_a_cause_that_harms_alone_is_kept_only_with_its_interaction(payload_lab)
 # ------------------------------------------------------------------ in the diagnosis
 
 
-def test_a_cause_that_makes_held_out_runs_worse_is_withdrawn(paper_rig, monkeypatch, seed):
+def test_a_cause_that_makes_held_out_runs_worse_is_withdrawn(paper_rig, fix_selection, seed):
     """Whatever the selection proposes, a cause whose held-out gain is not above zero with
     95 % confidence is withdrawn: verdict none, an extended model without it."""
     data = lab_dataset(paper_rig, [], seed, duration_s=6.0)
@@ -130,10 +129,7 @@ def test_a_cause_that_makes_held_out_runs_worse_is_withdrawn(paper_rig, monkeypa
                         (PayloadMassError(wrong),), 1, {}, {}, 100.0, 1e-9, 90.0, "torque",
                         0.5, (0.4, 0.6), ("u1",), passed=True)
 
-    def fake_select(*args, **kwargs):
-        return Selection((harmful,), ((harmful,),), harmful.effects)
-
-    monkeypatch.setattr(diagnosis_module, "select_causes", fake_select)
+    fix_selection(Selection((harmful,), ((harmful,),), harmful.effects))
     d = diagnose(data, fast_settings())
     assert d.verdict == "none", seed
     assert d.effects == [] and d.causes == ()
@@ -141,7 +137,7 @@ def test_a_cause_that_makes_held_out_runs_worse_is_withdrawn(paper_rig, monkeypa
     assert "withdrawn" in d.sentence
 
 
-def _drum_and_payload(paper_rig, monkeypatch, seed):
+def _drum_and_payload(paper_rig, fix_selection, seed):
     """A lab with a drum radius error and a payload mass error (sizes drawn from the
     effects' ranges: drum 1-3 %, payload 10-30 %, either sign), and the selection fixed
     to both, each judged on the lengths (the drum's joint re-fit improved them)."""
@@ -155,17 +151,16 @@ def _drum_and_payload(paper_rig, monkeypatch, seed):
                          bic_drop, "length", 0.9, (0.8, 0.95), ("l1",), passed=True)
 
     causes = (judged(drum, 2e4), judged(payload, 1e4))
-    monkeypatch.setattr(diagnosis_module, "select_causes", lambda *a, **k: Selection(
-        causes, (causes,), tuple(e for c in causes for e in c.effects)))
+    fix_selection(Selection(causes, (causes,), tuple(e for c in causes for e in c.effects)))
     return data, f"seed {seed}: {drum.describe()}, {payload.describe()}"
 
 
-def test_a_cause_is_kept_for_what_it_adds_on_any_channel(paper_rig, monkeypatch, seed):
+def test_a_cause_is_kept_for_what_it_adds_on_any_channel(paper_rig, fix_selection, seed):
     """A payload error found after a drum radius error was judged on the lengths (the
     drum's joint re-fit improved them), added nothing there, and was withdrawn although
     it explains the torque (seed 507 of the two-effect lab test). Each cause must add
     to the others on the held-out channel where it adds most."""
-    data, drawn = _drum_and_payload(paper_rig, monkeypatch, seed)
+    data, drawn = _drum_and_payload(paper_rig, fix_selection, seed)
     d = diagnose(data, fast_settings())
     case = f"{drawn}: {d.sentence}"
     # both kept; their order is by held-out contribution (test_ranking): measured on seed
@@ -199,14 +194,15 @@ def test_an_unusable_stated_model_is_re_identified_first(paper_rig, seed):
         0, abs=0.1 * d.nominal_metrics.heldout.relative_error_pct)
 
 
-def test_a_cause_whose_own_interval_reaches_zero_is_withdrawn(paper_rig, monkeypatch, seed):
+def test_a_cause_whose_own_interval_reaches_zero_is_withdrawn(paper_rig, monkeypatch,
+                                                              fix_selection, seed):
     """Each cause's own addition must have a 95 % interval above zero, not only a point
     estimate over ``min_gain``: the two true causes of the test above are both kept, and
     when the first interval asked for (the weaker cause's, checked first) is made to reach
     below zero, that cause alone is withdrawn while its point estimate still passes."""
     import dataclasses
 
-    data, drawn = _drum_and_payload(paper_rig, monkeypatch, seed)
+    data, drawn = _drum_and_payload(paper_rig, fix_selection, seed)
     real_gain, own = never_worse_module.heldout_gain, []
 
     def uncertain_first(*args, **kwargs):

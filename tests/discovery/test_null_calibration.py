@@ -1,5 +1,5 @@
 """Slow: null calibration. Effect-free datasets over the calibration grid, one replicate
-(``foreign_cases.null_grid``): both simulators (the virtual lab's paper rig; the
+(``null_cases.null_grid``): both simulators (the virtual lab's paper rig; the
 independent simulator's cable robots, 3 and 4 cables at several sample rates, and drive
 axes, a random rig each), one to five runs, short and long runs. ``cdpr diagnose`` may
 name a cause or say ``unexplained`` on at most 5 % of them. Every first-step test
@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import pytest
 
-from cdpr_pipeline.testing.foreign_cases import foreign_settings, null_grid, run_null, summarise
+from cdpr_pipeline.testing.foreign_cases import foreign_settings
+from cdpr_pipeline.testing.null_cases import null_grid, run_null, summarise
 
 
 @pytest.mark.slow

@@ -9,7 +9,6 @@ import html
 import numpy as np
 import pytest
 
-from cdpr_pipeline.discovery import diagnosis as diagnosis_module
 from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.discovery.plots import Plots
 from cdpr_pipeline.discovery.report import render
@@ -19,7 +18,7 @@ from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset, rng_for
 
 
 def test_the_report_renders_the_causes_and_figures_of_the_typed_diagnosis(paper_rig,
-                                                                           monkeypatch, seed):
+                                                                           fix_selection, seed):
     """A payload mass error (10-30 %, either sign) with the selection fixed to it: the
     page's cause row holds the record's description, p-value, BIC drop and held-out RMSE
     drop, and every residual column has its figure's arrays on the statistics rows."""
@@ -28,8 +27,7 @@ def test_the_report_renders_the_causes_and_figures_of_the_typed_diagnosis(paper_
     data = lab_dataset(paper_rig, [true], seed, duration_s=6.0)
     cause = Judgement(true.name, true.name, (true,), 1, {}, {}, 1e4, 1e-9, 1e4, "torque",
                       0.9, (0.8, 0.95), ("u1", "u2", "u3"), passed=True)
-    monkeypatch.setattr(diagnosis_module, "select_causes", lambda *a, **k: Selection(
-        (cause,), ((cause,),), cause.effects))
+    fix_selection(Selection((cause,), ((cause,),), cause.effects))
     d = diagnose(data, fast_settings())
     record = d.as_json()
     assert d.verdict == "payload_mass_error", f"seed {seed}: {d.sentence}"

@@ -75,7 +75,7 @@ def test_what_nothing_tried_explains_is_unexplained_and_located(tmp_path, seed):
 
 
 def _validity(fails: bool) -> SimpleNamespace:
-    """What :func:`~cdpr_pipeline.discovery.diagnosis.failed_tests` reads of a column's
+    """What :func:`~cdpr_pipeline.discovery.adequacy.failed_tests` reads of a column's
     validity: every correlation test passed, Ljung-Box failed or not."""
     return SimpleNamespace(tests=SimpleNamespace(tests={}),
                            ljung_box_pvalue=0.0 if fails else 0.5)

@@ -5,8 +5,8 @@ import pytest
 
 from cdpr_pipeline.data.rig import CdprRig, ControllerSpec, WinchParams
 from cdpr_pipeline.sim.controller import distribute_tensions
+from cdpr_pipeline.sim.kinematics import cable_geometry, forward_kinematics
 from cdpr_pipeline.sim.lab import simulate_lab
-from cdpr_pipeline.sim.plant import cable_geometry, forward_kinematics
 
 
 def square_rig(n_sample_rate=250.0):

@@ -7,8 +7,9 @@ import numpy as np
 
 from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.sim.effects import ActuatorLag, CableElasticity, StribeckFriction
+from cdpr_pipeline.sim.kinematics import tensions_for_force
 from cdpr_pipeline.sim.lab import simulate_lab
-from cdpr_pipeline.sim.plant import Drives, commanded_torque, tensions_for_force
+from cdpr_pipeline.sim.plant import Drives, commanded_torque
 from cdpr_pipeline.sim.sensors import Sensors
 
 IDEAL = Sensors(0.0, 0, 0.0)

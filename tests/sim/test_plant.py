@@ -6,8 +6,9 @@ import pytest
 from cdpr_pipeline.data.rig import ControllerSpec, WinchParams
 from cdpr_pipeline.identification.regressors import WinchRegression, winch_regression
 from cdpr_pipeline.sim.effects import CableElasticity
+from cdpr_pipeline.sim.kinematics import cable_geometry, static_tensions
 from cdpr_pipeline.sim.lab import simulate_lab
-from cdpr_pipeline.sim.plant import Plant, cable_geometry, smooth_sign, static_tensions
+from cdpr_pipeline.sim.plant import Plant, smooth_sign
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import BatchSimulator, simulate_reference
 from cdpr_pipeline.sim.trajectories import draw_trajectories, hold

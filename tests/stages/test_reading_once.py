@@ -20,7 +20,8 @@ from cdpr_pipeline.data.reading import (
     as_resolved,
     resolve_settings,
 )
-from cdpr_pipeline.discovery import diagnosis
+from cdpr_pipeline.discovery.diagnosis import admission
+from cdpr_pipeline.discovery.diagnosis import signals as signals_step
 from cdpr_pipeline.identification import pipeline
 from cdpr_pipeline.identification.identifiers import LeastSquares
 from cdpr_pipeline.stages.diagnose import run_diagnosis
@@ -95,8 +96,8 @@ def test_the_resolved_settings_are_frozen_and_complete(lab):
 
 def test_diagnose_resolves_its_reading_once(lab, tmp_path, new_mlflow_store, resolutions,
                                             monkeypatch):
-    read_with = spy(monkeypatch, diagnosis, "dataset_signals", 2)
-    split_with = spy(monkeypatch, diagnosis, "min_block_samples", 0)
+    read_with = spy(monkeypatch, signals_step, "dataset_signals", 2)
+    split_with = spy(monkeypatch, admission, "min_block_samples", 0)
     cfg = compose_config("diagnose", [
         f"data.path={lab}", f"out_dir={tmp_path / 'out'}",
         f"tracking.uri={new_mlflow_store(tmp_path / 'mlflow.db')}", *LEAN])

@@ -11,7 +11,6 @@ from __future__ import annotations
 import contextlib
 import io
 import shutil
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +21,7 @@ from cdpr_pipeline.cli import main as cdpr
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data import load_dataset, validate_dataset
 from cdpr_pipeline.data.convert import convert_emps
-from cdpr_pipeline.discovery.diagnosis import diagnose
+from cdpr_pipeline.discovery.diagnosis import signals as signals_step
 from cdpr_pipeline.resources import emps_path, foreign_rig_path
 from cdpr_pipeline.stages.validate import validate
 
@@ -40,7 +39,8 @@ def diagnose_checks_only(monkeypatch):
     """``cdpr diagnose`` stops with :class:`Admitted` once its checks pass."""
     def admitted(*args, **kwargs):
         raise Admitted("ADMITTED: the checks passed")
-    monkeypatch.setattr(sys.modules[diagnose.__module__], "diagnosis_split", admitted)
+    # the first step of the analysis (``signals``) starts with the split
+    monkeypatch.setattr(signals_step, "diagnosis_split", admitted)
 
 
 def run(argv: list[str]) -> tuple[int, str]:

@@ -8,7 +8,7 @@ from cdpr_pipeline.sim.effects import (
     AnchorOffset,
     DrumRadiusError,
 )
-from cdpr_pipeline.sim.plant import cable_geometry
+from cdpr_pipeline.sim.kinematics import cable_geometry
 from tests.sim.effects.effect_runs import run_lab
 
 

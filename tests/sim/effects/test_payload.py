@@ -7,7 +7,7 @@ import pytest
 from cdpr_pipeline.sim.effects import (
     PayloadMassError,
 )
-from cdpr_pipeline.sim.plant import cable_geometry
+from cdpr_pipeline.sim.kinematics import cable_geometry
 from tests.sim.effects.effect_runs import run_lab
 
 

@@ -1,0 +1,452 @@
+"""The search that names causes: forward passes over candidate effects, the comparison
+of named causes with free-form terms, and the backward pass, as
+:mod:`~cdpr_pipeline.discovery.selection` runs them. Every fit is judged by
+:class:`~cdpr_pipeline.discovery.judge.Judge`.
+
+Winch-side candidates have one magnitude per winch, and each step first lets the data
+choose their winches (:func:`~cdpr_pipeline.discovery.fitting.fit_winches`): only the
+kept winches' parameters count in the tests.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from cdpr_pipeline.discovery.fitting import (
+    FitContext,
+    fit_at_start,
+    fit_candidate,
+    fit_winches,
+)
+from cdpr_pipeline.discovery.freeform.periodicity import WINCH_ANGLE, Periodicity
+from cdpr_pipeline.discovery.freeform.search import (
+    FreeFormResult,
+    FreeFormSearch,
+    symbolic_torque,
+)
+from cdpr_pipeline.discovery.judge import Judge, Judgement, SelectionSettings, fit_weights
+from cdpr_pipeline.discovery.residuals import Model, relative_sse, signal_scales
+from cdpr_pipeline.discovery.signals import RunSignals
+from cdpr_pipeline.sim.candidate_forms import SLOW_SHARE, Candidate, DataScale
+from cdpr_pipeline.sim.effects import Effect, WinchParameterError
+
+#: the vocabulary name of a winch re-identification
+WINCH_PARAMETER_ERROR = WinchParameterError.name
+
+
+
+def data_scale(signals: Sequence[RunSignals], kind: str, nominal: Model) -> DataScale:
+    """What the candidate forms scale by: the training runs' speed RMS, their winch
+    count, the rig kind, the nominal winch parameters and the slow speed of
+    :data:`~cdpr_pipeline.sim.candidate_forms.SLOW_SHARE` (rows of known friction)."""
+    omega = np.concatenate([s.omega for s in signals])
+    rows = [s.row_index() for s in signals]
+    speed = np.abs(np.concatenate([s.omega[i] for s, i in zip(signals, rows, strict=True)]))
+    known = np.concatenate([np.ones_like(s.omega[i]) if s.friction_known is None
+                            else s.friction_known[i] for s, i in zip(signals, rows,
+                                                                     strict=True)]) > 0
+    slow = float(np.quantile(speed[known], SLOW_SHARE)) if known.any() else 0.0
+    return DataScale(float(np.sqrt(np.mean(omega ** 2))) or 1.0, omega.shape[1], kind,
+                     nominal.winch, slow)
+
+
+@dataclass
+class CauseSearch:
+    """What the forward passes of one selection share: the models, the runs, the column
+    scales and every step's judgements."""
+
+    nominal: Model
+    train: list[RunSignals]
+    heldout: list[RunSignals]
+    settings: SelectionSettings
+    freeform: FreeFormSearch | None
+    scale: DataScale
+    kind: str
+    log: Any = None
+    columns: np.ndarray | None = None
+    steps: list[list[Judgement]] = field(default_factory=list)
+    nominal_held: dict[str, np.ndarray] | None = None
+    scales: dict[str, np.ndarray] | None = None
+    shapes: list[str] = field(default_factory=list)
+    _log_n: float | None = None
+
+    def _reference(self) -> None:
+        """The column scales and the nominal model's held-out sums of squares, once per
+        selection (every judgement compares against the same reference)."""
+        if self.scales is not None and self.nominal_held is not None:
+            return
+        nominal = FitContext(self.nominal, self.train, [], {}, self.columns)
+        self.columns = nominal.columns
+        held = nominal.residuals([], self.heldout)
+        self.scales = signal_scales(self.train, held.channels)
+        self.nominal_held = {c: held.column_sse(c) for c in held.channels}
+
+    def fit_context(self, kept: list[Effect]) -> FitContext:
+        """A context fitting on top of ``kept``, weighted as every judgement weighs."""
+        self._reference()
+        base_res = FitContext(self.nominal, self.train, kept, {}, self.columns).residuals([])
+        weights = fit_weights(base_res, self.scales)
+        return FitContext(self.nominal, self.train, kept, weights, self.columns)
+
+    def context(self, kept: list[Effect]) -> tuple[FitContext, Judge]:
+        ctx = self.fit_context(kept)
+        return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held,
+                          scales=self.scales)
+
+    def joint_context(self, fixed: list[Effect], parts: list[tuple[Candidate, np.ndarray]]
+                      ) -> tuple[FitContext, Judge]:
+        """A context fitting on the nominal model directly (earlier causes are re-fitted
+        jointly with every new candidate) and a judge comparing with the current model."""
+        self._reference()
+        current = fixed + _build(parts)
+        base_res = FitContext(self.nominal, self.train, current, {}, self.columns
+                              ).residuals([])
+        weights = fit_weights(base_res, self.scales)
+        ctx = FitContext(self.nominal, self.train, fixed, weights, self.columns)
+        return ctx, Judge(ctx, self.heldout, self.settings, self.nominal_held,
+                          base_effects=_build(parts), scales=self.scales)
+
+    def forward(self, fixed: list[Effect], candidates: list[Candidate], freeform: bool,
+                max_steps: int) -> list[Judgement]:
+        """Add the best passing candidate (by BIC) until none passes. Every candidate is
+        fitted jointly with the causes already kept (their parameters start where they
+        are and may move), so an earlier cause does not keep what a later one explains
+        better (a winch offset absorbing a payload error). ``max_steps`` counts
+        distinct effects (see :attr:`SelectionSettings.max_causes`)."""
+        causes: list[Judgement] = []
+        parts: list[tuple[Candidate, np.ndarray]] = []
+        for _ in range(max_steps + self.scale.n):
+            if len({c.effect for c in causes}) >= max_steps:
+                break
+            ctx, judge = self.joint_context(fixed, parts)
+            n_tests = len(candidates) + bool(freeform and self.freeform)
+            step = [_judge_joint(parts, c, ctx, judge, n_tests) for c in candidates]
+            if freeform and self.freeform is not None:
+                f_ctx, f_judge = self.context(fixed + _build(parts))
+                ff = judge_freeform(self.freeform, f_ctx, f_judge, self.scale, self.kind,
+                                    n_tests, shapes=self.shapes)
+                step.append(ff)
+            # a sparse candidate (a winch re-identification) ranks by the parameters the
+            # data need, as in the comparison with free-form terms: a wrong offset alone
+            # is one parameter, not four (counted as four, a prismatic load's a q + b
+            # took an offset error's place with an insignificant slope)
+            current = fixed + _build(parts)
+            if any(self.sparse(j) for j in step):
+                base_bic = self.bic(current, 0)
+                step = [self.lean(j, current, base_bic) if self.sparse(j) else j
+                        for j in step]
+            # the winch re-identifications that pass on their own, also as one cause: a
+            # variant acting on every winch at once (a load on every axis) would
+            # otherwise take winches one re-identification at a time explains exactly
+            # (a 6-axis rig with wrong parameters on five axes named a load, a Stribeck
+            # friction and free-form terms beside them)
+            together = _winches_together([j.candidate for j in step if j.passed and
+                                          j.effect == WINCH_PARAMETER_ERROR and
+                                          j.candidate is not None])
+            if together is not None:
+                step.append(_judge_joint(parts, together, ctx, judge, n_tests))
+            self.steps.append(step)
+            self.log_step(step)
+            passed = sorted((j for j in step if j.passed), key=lambda j: -j.bic_drop)
+            if not passed:
+                break
+            best = passed[0]
+            if best.freeform is not None:
+                parts = parts + [freeform_part(best.freeform)]
+            else:
+                parts = _split(parts, best)
+            causes = [replace(cause, effects=tuple(cand.build(x)), part=(cand, x))
+                      for cause, (cand, x) in zip(causes + [best], parts, strict=True)]
+            freeform = freeform and best.effect != "unnamed"    # one free-form part
+            # the same variant again adds nothing (winches are re-identified one by one)
+            candidates = [c for c in candidates if c.label != best.label
+                          or best.effect == WINCH_PARAMETER_ERROR]
+        return causes
+
+    def refit(self, judgement: Judgement, kept: list[Effect], n_tests: int) -> Judgement:
+        """The same candidate (or free-form library) re-fitted on top of ``kept``."""
+        ctx, judge = self.context(kept)
+        if judgement.freeform is not None:
+            search = self.freeform.with_terms(judgement.freeform)
+            return judge_freeform(search, ctx, judge, self.scale, self.kind, n_tests,
+                                  gp=False, shapes=self.shapes)
+        return _judge_candidate(judgement.candidate, ctx, judge, n_tests)
+
+    def bic(self, effects: list[Effect], n_params: int) -> float:
+        """BIC of the nominal model extended by ``effects`` on the training runs (per
+        channel Gaussian likelihood of the columns relative to their signals, as the
+        judge's; constant terms dropped)."""
+        self._reference()
+        res = FitContext(self.nominal, self.train, [], {}, self.columns).residuals(effects)
+        return float(sum(res.count(c) * np.log(relative_sse(res, c, self.scales)
+                                               / res.count(c)) for c in res.channels)
+                     + n_params * self.log_n())
+
+    def adds_beyond(self, richer: list[Effect], n_extra: int, simpler: list[Effect],
+                    n_tests: int, label: str) -> Judgement:
+        """The model extended by ``richer`` judged on top of the one extended by
+        ``simpler`` as every candidate is judged (:class:`Judge`: significant on the
+        training runs with its ``n_extra`` further parameters, and a held-out gain of
+        ``min_gain`` whose interval excludes zero). Two descriptions of one thing from
+        different families compete on this footing: the one with more parameters must
+        pass it on top of the one with fewer."""
+        self._reference()
+        ctx = FitContext(self.nominal, self.train, [], {}, self.columns)
+        judge = Judge(ctx, self.heldout, self.settings, self.nominal_held,
+                      base_effects=list(simpler), scales=self.scales)
+        return judge(label, label, list(richer), max(int(n_extra), 1), n_tests)
+
+    def refit_jointly(self, causes: list[Judgement]) -> list[Judgement]:
+        """``causes`` re-fitted jointly on the training runs from where they are (their
+        :attr:`Judgement.part`), with nothing else in the model: what they explain
+        without a cause that was fitted beside them."""
+        self._reference()
+        parts = [c.part for c in causes]
+        current = _build(parts)
+        base_res = FitContext(self.nominal, self.train, current, {}, self.columns
+                              ).residuals([])
+        ctx = FitContext(self.nominal, self.train, [], fit_weights(base_res, self.scales),
+                         self.columns)
+        last, x_last = parts[-1]
+        joint = _joint(parts[:-1], replace(last, starts=[np.asarray(x_last, float)]))
+        fit = fit_candidate(joint, ctx)
+        if not fit.success and not fit.effects:
+            return list(causes)
+        out, k = [], 0
+        for c, (cand, _) in zip(causes, parts, strict=True):
+            x = np.asarray(fit.x[k:k + cand.n_params], float)
+            k += cand.n_params
+            out.append(replace(c, effects=tuple(cand.build(x)), part=(cand, x)))
+        return out
+
+    def backward(self, causes: list[Judgement], n_tests: int) -> list[Judgement]:
+        """Drop the causes that add nothing beyond the others re-fitted without them.
+
+        Causes were fitted jointly as they were added, and one found early can end with
+        nothing the others, re-fitted, would not explain (or explain only by
+        compensating another's parameters: alone it makes the model worse). Weakest
+        first (BIC), each cause is judged as a candidate on top of the others re-fitted
+        without it (:meth:`adds_beyond`); one that fails goes, the others keep their
+        re-fit, and the rest are asked again. Causes without a recorded fit are kept."""
+        causes = list(causes)
+        dropped = True
+        while dropped and len(causes) >= 2 and all(c.part is not None for c in causes):
+            dropped = False
+            for c in sorted(causes, key=lambda c: c.bic_drop):
+                others = self.refit_jointly([o for o in causes if o is not c])
+                j = self.adds_beyond(effects_of(causes), c.n_params, effects_of(others),
+                                     n_tests, c.label)
+                if not j.passed:
+                    if self.log:
+                        self.log.info("  %s dropped: nothing beyond the other causes "
+                                      "re-fitted without it (%s)", c.label, j.reason)
+                    causes, dropped = others, True
+                    break
+        return causes
+
+    def parsimonious(self, cause: Judgement, others: list[Effect]
+                     ) -> tuple[list[Effect], int]:
+        """``cause`` on top of ``others`` with the parameters the data need: for a sparse
+        candidate (:attr:`Candidate.sparse`, linear, starting at the nominal model) the
+        subset of its parameters with the best BIC, each re-fitted by least squares;
+        any other cause as it is, with all its parameters."""
+        cand = cause.candidate
+        if cand is None or not cand.sparse or not cand.linear or cand.refit_winches:
+            return list(cause.effects), cause.n_params
+        ctx = self.fit_context(others)      # no judge: only the fit's weights are needed
+        x0 = np.asarray(cand.starts[0], float)
+
+        def vector(x: np.ndarray) -> np.ndarray:
+            return ctx.vector(ctx.training_residuals(cand.build(x), cand.affects), False)
+
+        v0 = vector(x0)
+        # linear in the parameters: one step per parameter gives the exact Jacobian
+        J = np.stack([(vector(x0 + h * e) - v0) / h for h, e in
+                      zip(cand.x_scale, np.eye(cand.n_params), strict=True)], axis=1)
+        best: dict[int, tuple[float, np.ndarray]] = {}
+        for mask in range(1, 2 ** cand.n_params):
+            keep = np.array([(mask >> k) & 1 for k in range(cand.n_params)], bool)
+            step = np.linalg.lstsq(J[:, keep], -v0, rcond=None)[0]
+            x = x0.copy()
+            x[keep] += step
+            x = np.clip(x, cand.lower, cand.upper)
+            sse = float(np.sum((v0 + J @ (x - x0)) ** 2))
+            size = int(keep.sum())
+            if size not in best or sse < best[size][0]:
+                best[size] = (sse, x)
+        # the BIC of the best subset of each size (the sums above are weighted alike,
+        # the BIC is the judge's likelihood)
+        scored = [(self.bic(others + list(cand.build(x)), size), size, x)
+                  for size, (_, x) in sorted(best.items())]
+        _, size, x = min(scored, key=lambda t: t[:2])
+        return list(cand.build(x)), size
+
+    @staticmethod
+    def sparse(j: Judgement) -> bool:
+        """Whether ``j`` passed and is a sparse candidate :meth:`parsimonious` thins."""
+        cand = j.candidate
+        return j.passed and cand is not None and cand.sparse and cand.linear \
+            and not cand.refit_winches
+
+    def lean(self, j: Judgement, current: list[Effect], base_bic: float) -> Judgement:
+        """``j`` (:meth:`sparse`) with the BIC drop of its leanest form
+        (:meth:`parsimonious`) on top of ``current`` (whose :meth:`bic` is ``base_bic``)
+        when that is higher: it counts the parameters the data need."""
+        own, size = self.parsimonious(j, current)
+        drop = base_bic - self.bic(current + own, size)
+        return replace(j, bic_drop=float(drop)) if drop > j.bic_drop else j
+
+    def log_n(self) -> float:
+        """log of the number of training residual values (rows x columns x channels)."""
+        if self._log_n is None:
+            res = FitContext(self.nominal, self.train, [], {}, self.columns).residuals([])
+            self._log_n = float(np.log(sum(res.count(c) for c in res.channels)))
+        return self._log_n
+
+    def log_step(self, step: list[Judgement]) -> None:
+        """Log a step's six best judgements (by BIC drop)."""
+        if self.log:
+            for j in sorted(step, key=lambda j: -j.bic_drop)[:6]:
+                self.log.info("  %-48s LR %10.1f BIC %+10.1f held-out RMSE drop %6.1f %% %s",
+                              j.label, j.lr, j.bic_drop, 100 * j.heldout_rmse_drop,
+                              "PASS" if j.passed else j.reason)
+
+
+def effects_of(causes: Sequence[Judgement]) -> list[Effect]:
+    """The effects of ``causes``, in order."""
+    return [e for c in causes for e in c.effects]
+
+
+def _winches_together(cands: list[Candidate]) -> Candidate | None:
+    """One candidate re-identifying the winches of several one-winch re-identifications
+    (``winch_parameter_error[winch k]``) together (:func:`_joint` of them, each from its
+    start), None for fewer than two. It counts all their parameters (not only those the
+    data need: not :attr:`Candidate.sparse`, whose best-subset search would take
+    ``2^(4k)`` fits)."""
+    if len(cands) < 2:
+        return None
+    cands = sorted(cands, key=lambda c: c.label)
+    winches = ", ".join(str(e.cable) for c in cands for e in c.build(c.starts[0]))
+    together = _joint([(c, np.asarray(c.starts[0], float)) for c in cands[:-1]], cands[-1])
+    return replace(together, label=f"{WINCH_PARAMETER_ERROR}[winches {winches}]",
+                   sparse=False)
+
+
+def _build(parts: Sequence[tuple[Candidate, np.ndarray]]) -> list[Effect]:
+    return [e for cand, x in parts for e in cand.build(x)]
+
+
+def _joint(parts: list[tuple[Candidate, np.ndarray]], new: Candidate) -> Candidate:
+    """One candidate whose parameters are the kept causes' (starting where they are)
+    followed by ``new``'s."""
+    sizes = [c.n_params for c, _ in parts]
+    x0 = np.concatenate([x for _, x in parts]) if parts else np.zeros(0)
+    bounds = np.cumsum([0, *sizes])
+
+    def build(x: np.ndarray) -> list[Effect]:
+        kept = [(c, x[bounds[k]:bounds[k + 1]]) for k, (c, _) in enumerate(parts)]
+        return _build(kept) + list(new.build(x[bounds[-1]:]))
+
+    cat = lambda attr: np.concatenate([getattr(c, attr) for c, _ in parts]  # noqa: E731
+                                      + [getattr(new, attr)])
+    affects = frozenset().union(new.affects, *(c.affects for c, _ in parts))
+    return replace(new, build=build, starts=[np.concatenate([x0, s]) for s in new.starts],
+                   lower=cat("lower"), upper=cat("upper"), x_scale=cat("x_scale"),
+                   linear=new.linear and all(c.linear for c, _ in parts), affects=affects,
+                   names=[n for c, _ in parts for n in c.names] + new.names)
+
+
+def _split(parts: list[tuple[Candidate, np.ndarray]], best: Judgement
+           ) -> list[tuple[Candidate, np.ndarray]]:
+    """The kept causes with their jointly re-fitted parameters, plus the new one."""
+    x = best.fit.x
+    out, k = [], 0
+    for cand, _ in parts:
+        out.append((cand, x[k:k + cand.n_params]))
+        k += cand.n_params
+    out.append((best.candidate, x[k:]))
+    return out
+
+
+def freeform_part(result: FreeFormResult) -> tuple[Candidate, np.ndarray]:
+    """A kept free-form model as a linear candidate in its term coefficients."""
+    terms = result.terms
+    coef = np.array([t.coefficient for t in terms], float)
+
+    def build(x: np.ndarray) -> list[Effect]:
+        return [symbolic_torque([t.with_coefficient(v) for t, v in zip(terms, x, strict=True)])]
+
+    inf = np.full(len(coef), np.inf)
+    return (Candidate("unnamed", "free-form", build, [coef], -inf, inf,
+                      np.maximum(np.abs(coef), 1e-6), linear=True,
+                      names=[t.expression for t in terms],
+                      affects=frozenset({"torque"})), coef)
+
+
+def _on_winches(cand: Candidate, ctx: FitContext, judge: Judge) -> Candidate:
+    """A winch-separable candidate acting where the data put it (on the model being
+    extended); any other candidate as it is."""
+    if cand.form is None:
+        return cand
+    return fit_winches(cand, ctx, judge.base_effects, judge.base_train,
+                       judge.settings.min_winch_gain)
+
+
+def _judge_joint(parts: list[tuple[Candidate, np.ndarray]], cand: Candidate, ctx: FitContext,
+                 judge: Judge, n_tests: int) -> Judgement:
+    # variable projection per winch is exact only where winches do not mix
+    projected = cand.form is not None and not cand.refit_winches \
+        and not any(s.mixes for s in ctx.train)
+    cand = _on_winches(cand, ctx, judge)
+    if projected and not parts:
+        # fitted alone on the model it extends, variable projection found the optimum
+        fit = fit_at_start(cand, ctx)
+    else:
+        fit = fit_candidate(_joint(parts, cand) if parts else cand, ctx)
+    j = replace(judge(cand.effect, cand.label, fit.effects, cand.n_params, n_tests),
+                fit=fit, candidate=cand)
+    return j.failed("fit failed") if not fit.success and not fit.effects else j
+
+
+def _judge_candidate(cand: Candidate, ctx: FitContext, judge: Judge, n_tests: int
+                     ) -> Judgement:
+    cand = _on_winches(cand, ctx, judge)
+    fit = fit_candidate(cand, ctx)
+    j = replace(judge(cand.effect, cand.label, fit.effects, fit.n_params, n_tests),
+                fit=fit, candidate=cand)
+    return j.failed("fit failed") if not fit.success and not fit.effects else j
+
+
+def judge_freeform(search: FreeFormSearch, ctx: FitContext, judge: Judge, scale: DataScale,
+                   kind: str, n_tests: int, gp: bool = True, shapes: Sequence[str] = ()
+                   ) -> Judgement:
+    """The free-form search on what ``judge``'s base model leaves of the torque (no term
+    of the ``shapes`` the named candidates own), judged as the ``unnamed`` cause."""
+    torque = judge.base_train.stacked("torque")
+    periodicity = WINCH_ANGLE if kind == "cdpr" else \
+        Periodicity.of_axes([s.theta for s in ctx.train])
+    result = search.fit(ctx.train, torque, scale.speed_rms, periodicity, use_gp=gp,
+                        exclude=shapes)
+    j = replace(judge("unnamed", "free-form",
+                      judge.base_effects + ([result.effect] if result.terms else []),
+                      result.n_params, n_tests), freeform=result)
+    return j if result.terms else j.failed("no term selected")
+
+
+def merge_causes(causes: list[Judgement]) -> list[Judgement]:
+    """One entry per effect name (several winches re-identified become one cause)."""
+    out: dict[str, Judgement] = {}
+    for j in causes:
+        if j.effect in out and j.effect == WINCH_PARAMETER_ERROR:
+            first = out[j.effect]
+            out[j.effect] = replace(first, effects=first.effects + j.effects,
+                                    channels=tuple(sorted(set(first.channels)
+                                                          | set(j.channels))),
+                                    n_params=first.n_params + j.n_params)
+        else:
+            out.setdefault(j.effect, j)
+    return list(out.values())

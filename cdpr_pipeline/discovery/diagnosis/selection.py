@@ -1,0 +1,23 @@
+"""Step ``selection``: a named cause that free-form terms describe better gives way, the
+free-form terms are the cause ``unnamed`` if they pass the same gates, and every cause
+must add beyond the others re-fitted without it
+(:func:`~cdpr_pipeline.discovery.selection.settle`)."""
+
+from __future__ import annotations
+
+import logging
+
+from cdpr_pipeline.discovery.diagnosis.state import DiagnosisState
+from cdpr_pipeline.discovery.selection import settle
+
+log = logging.getLogger(__name__)
+
+
+def run(state: DiagnosisState) -> None:
+    """Set the selection and the causes: the re-identification of an unusable stated
+    model first, then the selection's."""
+    state.selection = settle(state.pending)
+    state.causes = ([state.first] if state.first else []) + list(state.selection.causes)
+    log.info("causes: candidates %.1f s, free-form %.1f s; checking that the causes hold on "
+             "the held-out runs (never worse, validity)", state.clock["candidates"],
+             state.clock["free-form"])
