@@ -4,7 +4,8 @@ CI runs ``.ci/run`` on a clean clone of main with nothing installed. This script
 same here: it clones ``HEAD`` into a scratch directory (with ``../shared`` beside it, as
 CI has it), runs ``CI=true bash .ci/run`` once per OpenBLAS kernel asked for, and writes
 what each step took, the test counts and the exit status to ``docs/measurements.md``
-(section ``ci``). The README quotes no CI figure of its own; it points here.
+(section ``ci``), and the total per kernel into the README (its ``measured ci`` quote:
+no CI figure there is typed by hand).
 
     python -m benchmarks.bench_ci                          # the machine's own kernel
     python -m benchmarks.bench_ci --coretype default Prescott
@@ -22,7 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.measurements import ROOT, invoked_as, record
+from benchmarks.measurements import ROOT, invoked_as, quote, record
 
 #: ``ci: <step> took M min S s`` lines that ``.ci/run`` prints
 STEP = re.compile(r"^ci: (.+?) took (\d+) min (\d+) s", re.MULTILINE)
@@ -84,6 +85,15 @@ def table(runs: list[dict[str, object]]) -> str:
     return "\n".join(lines)
 
 
+def summary(runs: list[dict[str, object]]) -> str:
+    """The README's sentence: CI's total time per kernel, and whether it passed."""
+    parts = [f"**{_minutes(r['wall_s'])}**"
+             + ("" if r["coretype"] == "default" else f" with `OPENBLAS_CORETYPE={r['coretype']}`")
+             + ("" if not r["rc"] else f" (failed, exit {r['rc']})") for r in runs]
+    return ("CI (`.ci/run` on a clean clone, nothing installed beforehand) takes "
+            + " and ".join(parts) + " on this machine (target: under 10 min).")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--coretype", nargs="+", default=["default"],
@@ -92,9 +102,11 @@ def main() -> None:
     runs = [run_ci(c) for c in args.coretype]
     body = table(runs) + (
         "\n\n`.ci/run` on a clean clone of the commit, with nothing installed beforehand: "
-        "`make install`, the fast suite (`make test`), then the end-to-end pipeline tests "
-        "(`make test-pipeline`); each row is one clean clone.")
+        "`make install`, the fast suite and the end-to-end pipeline tests in one pytest "
+        "session (`make test-ci`), then the golden-record tests under other OpenBLAS "
+        "kernels (`make test-golden`); each row is one clean clone.")
     record("ci", "CI on a clean clone", body, command=invoked_as())
+    quote("ci", summary(runs), command=invoked_as())
     if any(r["rc"] for r in runs):
         raise SystemExit(1)
 

@@ -28,8 +28,9 @@ robot, independent cable robot and independent drive axes (the lab simulates no 
 axes), each with one to five runs, short (10 s) and long (30 s) runs, ``R`` replicates
 with a seed each. Each verdict gate's rate on these nulls is measured
 (``null_cases.gate_rates``): the validity tests that send a diagnosis to the second
-look on a wider band, a cause named there, the materiality of a failing column
-(``unexplained_noise_ratio``, ``unexplained_min_error_pct``: ``unexplained``), the
+look on a wider band, a cause named there, the calibrated validity test (any column)
+(``unexplained_noise_ratio``, ``unexplained_min_error_pct``, and on the wider band
+``unexplained_noise_ratio_wider``: the calibrated validity test, ``unexplained``), the
 unusable-model threshold, and the verdict itself; per generator and kind, per run count
 and per run length. ``--part i/k`` runs the i-th of k consecutive shares of the datasets (parts run
 one after another or side by side), ``--merge a.json b.json ...`` summarises parts together.
@@ -60,7 +61,15 @@ from benchmarks.measurements import commit, invoked_as, record
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.stages.simulate import rig_from_config
 from cdpr_pipeline.testing.foreign_cases import add_settings_option, named_settings
-from cdpr_pipeline.testing.null_cases import null_datasets, null_grid, run_null, summarise
+from cdpr_pipeline.testing.null_cases import (
+    GATE_OVER_Q99,
+    derived_gates,
+    gate_thresholds,
+    null_datasets,
+    null_grid,
+    run_null,
+    summarise,
+)
 
 
 def print_summary(summary: dict) -> None:
@@ -140,27 +149,30 @@ def gates_markdown(summary: dict) -> list[str]:
     if "gates" not in summary["all"]:
         return []
     g = summary["all"]["gates"]
-    nr, un = g["noise_ratio"], g["unusable"]
+    nr, nw, un = g["noise_ratio"], g["noise_ratio_wider"], g["unusable"]
+    derived = derived_gates(g)
 
     def pct(x: float) -> str:
         return f"{100 * x:.1f} %"
 
     lines = ["", f"Verdict gates on the same nulls (target: at most 1 % each for the gates "
-             f"that decide a verdict). Validity: a held-out column fails a validity test "
-             f"(no verdict on its own: the second look on a wider band runs); second look: "
-             f"it names a cause (a false alarm); materiality: a failing column of the "
-             f"motion band at >= {nr['threshold']:g} x the noise and "
-             f">= {nr['min_error_pct']:g} % of its signal (`unexplained`), with the "
-             f"largest failing noise ratio there and, for comparison, on the wider look "
-             f"(which decides nothing); unusable: nominal training error "
-             f"> {un['threshold']:g} %; verdict: anything but `none`.", "",
+             f"that decide a verdict). A statistical test fails: a held-out column fails a "
+             f"validity test (no verdict on its own: the second look on a wider band "
+             f"runs); second look: it names a cause (a false alarm); calibrated validity "
+             f"fails, motion band: a column's error is >= {nr['threshold']:g} x the noise "
+             f"and >= {nr['min_error_pct']:g} % of its signal, failing a statistical test "
+             f"or not (`unexplained` when nothing is named); the same on the wider band at "
+             f">= {nw['threshold']:g} x; the largest noise ratio on each look; "
+             f"unusable: nominal training error > {un['threshold']:g} %; verdict: anything "
+             f"but `none`.", "",
              "Per dataset, a first-step candidate crossing each selection gate on its "
              "own: the likelihood ratio (p < alpha/m), the held-out gain (>= min_gain), "
              "its bootstrap interval (lower end > 0), and all of them (a cause named).", "",
              "| group | datasets | LR p < alpha/m | gain >= min_gain | interval > 0 | all "
-             "selection gates | validity fails (second look runs) | second look names a "
-             "cause | material failing column | largest failing noise ratio (wider look) "
-             "| unusable | verdict not none |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "selection gates | a statistical test fails (second look runs) | second look "
+             "names a cause | calibrated validity fails, motion band | calibrated validity "
+             "fails, wider band | largest noise ratio, motion (wider) | unusable | "
+             "verdict not none |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, s in summary.items():
         if "gates" not in s:
             continue
@@ -173,24 +185,22 @@ def gates_markdown(summary: dict) -> list[str]:
             f"{pct(s['passed_all_tests']['datasets_with_any'])} | "
             f"{pct(g['validity']['rate'])} | "
             f"{pct(g['second_look_cause']['rate'])} | {pct(g['noise_ratio']['rate'])} | "
-            f"{g['noise_ratio']['largest']:.1f} ({g['noise_ratio']['largest_wider_look']:.0f})"
+            f"{pct(g['noise_ratio_wider']['rate'])} | "
+            f"{g['noise_ratio']['largest']:.1f} ({g['noise_ratio_wider']['largest']:.0f})"
             f" | {pct(g['unusable']['rate'])} | "
             f"{pct(g['verdict']['rate'])} |")
-    q1, q2 = nr["quantiles_first_look"], nr["quantiles_wider_look"]
-    lines += ["", "Noise ratio of the worst failing column, quantiles: motion band "
+    q1, q2 = nr["quantiles_first_look"], nw["quantiles"]
+    lines += ["", "Noise ratio of the worst column, quantiles: motion band "
               + (", ".join(f"{k} {v:.1f}" for k, v in q1.items()) or "none failed")
               + "; wider band " + (", ".join(f"{k} {v:.1f}" for k, v in q2.items())
                                    or "not run") + f". Largest nominal training error "
-              f"{un['largest_train_error_pct']:.1f} %."]
+              f"{un['largest_train_error_pct']:.1f} %.",
+              "", f"Calibrated validity gates these nulls give ({GATE_OVER_Q99:g} x the 99th "
+              f"percentile, `null_cases.derived_gates`): motion band "
+              f"{derived['noise_ratio']:.1f} x the noise (settings: {nr['threshold']:g}), "
+              f"wider band {derived['noise_ratio_wider']:.0f} x (settings: "
+              f"{nw['threshold']:g})."]
     return lines
-
-
-def thresholds_of(settings) -> dict[str, float]:
-    """The verdict thresholds :func:`~cdpr_pipeline.testing.null_cases.gate_rates`
-    measures, as ``settings`` holds them."""
-    return {"noise_ratio": settings.unexplained_noise_ratio,
-            "min_error_pct": settings.unexplained_min_error_pct,
-            "unusable_error_pct": settings.unusable_error_pct}
 
 
 def main() -> None:
@@ -236,13 +246,13 @@ def main() -> None:
                         if "n_runs" in rec else "")
                 print(f"{rec['rig']:55s} {runs:10s} seed {rec['seed']}: verdict "
                       f"{rec['verdict']:22s} {rec['diagnose_s']:5.1f} s; {best}", flush=True)
-    summary = summarise(records, sel.alpha, sel.min_gain, thresholds_of(settings))
+    summary = summarise(records, sel.alpha, sel.min_gain, gate_thresholds(settings))
     print_summary(summary)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({
         "benchmark": "null calibration of cdpr diagnose",
         "settings": args.settings, "alpha": sel.alpha, "min_gain": sel.min_gain,
-        "thresholds": thresholds_of(settings), "part": part,
+        "thresholds": gate_thresholds(settings), "part": part,
         "command": invoked_as(), "commit": commit(),
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
                     "load_avg_at_end": os.getloadavg()},

@@ -4,6 +4,9 @@ Every benchmark script ends with :func:`record`: its section of ``docs/measureme
 (between ``<!-- begin NAME -->`` and ``<!-- end NAME -->``) is replaced by the figures of
 this run, headed by the command, the machine (and its load), the date and the commit.
 Sections of other benchmarks are left as they are. The file is never edited by hand.
+A benchmark whose figures the README quotes (how long CI and the quick start take) also
+writes that quote with :func:`quote`, between ``<!-- begin measured NAME -->`` and
+``<!-- end measured NAME -->`` in ``README.md``: no figure there is typed by hand either.
 
     from benchmarks.measurements import invoked_as, record
     record("diagnose", "Speed of cdpr diagnose", table_markdown, command=invoked_as())
@@ -29,6 +32,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCUMENT = ROOT / "docs" / "measurements.md"
+README = ROOT / "README.md"
 HEADER = """# Measurements
 
 Written by the benchmark scripts in `benchmarks/` (`make bench` and the targets beside
@@ -61,13 +65,15 @@ def load_average() -> str:
 
 def commit() -> str:
     """Short commit of the checkout, ``+dirty`` when it has uncommitted changes (other than
-    to this document, which the benchmark run before may have just written)."""
+    to this document and to the README's quotes, which the benchmark run before may have
+    just written)."""
     def git(*args: str) -> str:
         return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
                               check=False).stdout.strip()
     head = git("rev-parse", "--short", "HEAD") or "unknown"
     dirty = git("status", "--porcelain", "--untracked-files=no", "--", ".",
-                f":!{DOCUMENT.relative_to(ROOT).as_posix()}")
+                f":!{DOCUMENT.relative_to(ROOT).as_posix()}",
+                f":!{README.relative_to(ROOT).as_posix()}")
     return f"{head}+dirty" if dirty else head
 
 
@@ -113,3 +119,32 @@ def record(name: str, title: str, body: str, command: str,
     document.write_text(text)
     print(f"figures written to {document} (section {name})")
     return document
+
+
+def quote(name: str, text: str, command: str, readme: Path = README) -> bool:
+    """Replace the README's quote of section ``name`` by ``text`` (markdown), ending with
+    where it came from. The README decides where a quote sits: without its markers
+    nothing is written (and False returned).
+
+    Parameters
+    ----------
+    name : str
+        The section of ``docs/measurements.md`` the figures are from.
+    text : str
+        What the README says, figures included.
+    command : str
+        The benchmark's command line.
+    """
+    begin, end = f"<!-- begin measured {name} -->", f"<!-- end measured {name} -->"
+    current = readme.read_text() if readme.exists() else ""
+    if begin not in current or end not in current:
+        print(f"{readme.name} has no {begin!r}: nothing quoted")
+        return False
+    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d")
+    block = (f"{begin}\n{text.rstrip()}\n\n*Measured by `{command}` on {machine()}"
+             f"{load_average()}, {stamp}, commit {commit()}; the figures and their details: "
+             f"[docs/measurements.md](docs/measurements.md), section `{name}`.*\n{end}")
+    pattern = re.compile(rf"{re.escape(begin)}.*?{re.escape(end)}", re.DOTALL)
+    readme.write_text(pattern.sub(lambda _: block, current))
+    print(f"quoted in {readme} ({name})")
+    return True

@@ -55,6 +55,11 @@ def pytest_collection_modifyitems(config, items) -> None:
         params = getattr(getattr(item, "callspec", None), "params", {})
         if any(f in item.fixturenames and f not in params for f in DRAWING_FIXTURES):
             item.add_marker(pytest.mark.random_draw)
+    # The end-to-end files first (a stable sort: each file's tests keep their order).
+    # pytest-xdist hands whole files to its workers in this order (`make test-ci` passes
+    # --no-loadscope-reorder): each e2e file is one module fixture of minutes (a whole
+    # `cdpr repro`), so started last it would run alone while the other worker idles.
+    items.sort(key=lambda item: item.get_closest_marker("e2e") is None)
 
 
 @pytest.hookimpl(wrapper=True)

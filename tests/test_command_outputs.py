@@ -44,6 +44,7 @@ def _message(line: str) -> str:
 
 
 @pytest.mark.slow
+@pytest.mark.e2e
 def test_a_default_diagnose_prints_each_message_once_and_logs_its_final_out_dir(
         tmp_path, new_mlflow_store):
     """The black box on (the default: Lightning trains it), one epoch to keep it short: no
@@ -66,7 +67,7 @@ def test_a_default_diagnose_prints_each_message_once_and_logs_its_final_out_dir(
     # for a reason (the second look on a wider band logs its steps again, and two steps'
     # tables of candidates share rows)
     messages = [_message(line) for line in printed if line.strip()]
-    assert [m for m, after in zip(messages, messages[1:]) if m == after] == []
+    assert [m for m, after in zip(messages, messages[1:], strict=False) if m == after] == []
     assert done.stderr == ""
     assert sorted(p.name for p in tmp_path.iterdir()) == ["diag", "store"]
     assert (out / "diagnose.log").read_text().splitlines() == done.stdout.splitlines()
@@ -243,6 +244,7 @@ def test_a_dataset_writer_refuses_to_overwrite_when_told_not_to(tmp_path, capsys
 
 
 @pytest.mark.slow
+@pytest.mark.e2e
 def test_diagnose_killed_after_writing_diagnosis_json_leaves_the_previous_outputs(tmp_path):
     """The issue's case: killed once diagnosis.json was written, the folder mixed two
     datasets' results. Now the new results are only in the partial directory."""
@@ -265,6 +267,7 @@ def test_diagnose_killed_after_writing_diagnosis_json_leaves_the_previous_output
 
 
 @pytest.mark.slow
+@pytest.mark.e2e
 def test_ctrl_c_during_diagnose_exits_130_in_one_line_with_the_outputs_as_they_were(tmp_path):
     out = tmp_path / "diag"
     _previous(out)

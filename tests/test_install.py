@@ -61,6 +61,7 @@ def _tree(root: Path) -> set[str]:
 
 
 @pytest.mark.slow
+@pytest.mark.e2e
 def test_the_installed_wheel_works_from_an_empty_directory(wheel, tmp_path):
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)],

@@ -3,9 +3,11 @@ document, headed by its command, and leaves the others as they were."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
-from benchmarks.measurements import HEADER, invoked_as, record
+from benchmarks.measurements import DOCUMENT, HEADER, README, invoked_as, quote, record
 
 
 def test_a_section_is_replaced_and_the_others_are_kept(tmp_path):
@@ -33,3 +35,34 @@ def test_the_command_line_is_the_module_form_with_its_arguments():
     argv = ["/somewhere/benchmarks/bench_null_calibration.py", "--lab", "2", "--out", "a b.json"]
     assert invoked_as(argv) == ("python -m benchmarks.bench_null_calibration --lab 2 "
                                 "--out 'a b.json'")
+
+
+def test_a_quote_replaces_only_its_own_block_of_the_readme(tmp_path):
+    readme = tmp_path / "README.md"
+    readme.write_text("intro\n<!-- begin measured ci -->\nold 12 min\n<!-- end measured ci -->\n"
+                      "<!-- begin measured other -->\nkept\n<!-- end measured other -->\n")
+    assert quote("ci", "CI takes **9 min 10 s**", "python -m benchmarks.bench_ci", readme)
+    text = readme.read_text()
+    assert "old 12 min" not in text and "CI takes **9 min 10 s**" in text
+    assert "`python -m benchmarks.bench_ci`" in text and "section `ci`" in text
+    assert "kept" in text and text.startswith("intro\n")
+
+
+def test_a_quote_without_its_markers_writes_nothing(tmp_path):
+    readme = tmp_path / "README.md"
+    readme.write_text("no markers\n")
+    assert not quote("ci", "9 min", "cmd", readme)
+    assert readme.read_text() == "no markers\n"
+
+
+def test_every_figure_the_readme_quotes_was_written_by_its_benchmark():
+    """The README's measured quotes (how long CI and the quick start take) are filled by
+    the benchmark that wrote the same section of docs/measurements.md, never by hand."""
+    readme, document = README.read_text(), DOCUMENT.read_text()
+    names = re.findall(r"<!-- begin measured ([\w-]+) -->", readme)
+    assert set(names) >= {"ci", "quickstart"}
+    for name in names:
+        block = readme.split(f"<!-- begin measured {name} -->")[1].split(
+            f"<!-- end measured {name} -->")[0]
+        assert "*Measured by `python -m benchmarks." in block, f"{name}: not written"
+        assert f"<!-- begin {name} -->" in document, f"{name}: no such section"

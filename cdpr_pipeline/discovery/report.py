@@ -23,6 +23,7 @@ from cdpr_pipeline.discovery.summary import (
     cause_name,
     describe_cause,
     gain_text,
+    interaction_text,
     signal_words,
     sizes_text,
     winch_reference,
@@ -67,9 +68,9 @@ def _unexplained_parts(d: Diagnosis) -> list[str]:
              "" if c.band_hz is None else f"{c.band_hz[0]:.3g}-{c.band_hz[1]:.3g} Hz",
              ", ".join(c.failed_tests)] for c in u.columns]
     return ["<h2>Unexplained residual (held-out)</h2>",
-            f"<p>The nominal model is inadequate on these columns (validity tests failed, "
-            f"error at least {u.noise_ratio:g} times the measurement noise) and no candidate "
-            f"explains why.</p>",
+            f"<p>The nominal model is inadequate on these columns (error at least "
+            f"{u.noise_ratio:g} times the measurement noise, beyond what effect-free data "
+            f"show) and no candidate explains why.</p>",
             _table(rows, ["channel", "error (% of the measured signal)",
                           "error / measurement noise", "share of the error (%)",
                           "band (full-rate residual)", "failed tests"])]
@@ -94,8 +95,9 @@ def _causes(d: Diagnosis) -> list[str]:
            _table(rows, ["cause", "fitted", "sizes (± standard error)", "channels",
                          "p (LR test)", "BIC drop", f"{GAIN_NAME} when selected (%)",
                          "share of the gain (%)"])]
-    notes = [f"<li>{html.escape(cause_name(c, d.nominal))} {html.escape(s.note)}.</li>"
-             for c, s in zip(d.causes, shares, strict=True) if s.note]
+    notes = [f"<li>{html.escape(cause_name(c, d.nominal))} "
+             f"{html.escape('; '.join(t for t in (s.note, interaction_text(c)) if t))}.</li>"
+             for c, s in zip(d.causes, shares, strict=True) if s.note or c.interaction]
     if notes:
         out.append("<p>A share is the cause's held-out contribution (its Shapley value over "
                    "the orders the causes could be added in) over the whole extension's. "

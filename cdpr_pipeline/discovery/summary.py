@@ -105,6 +105,21 @@ def gain_shares(causes: Sequence[Judgement]) -> list[GainShare]:
     return out
 
 
+def interaction_text(j: Judgement) -> str:
+    """Why ``j`` stays although its own held-out contribution is not positive, from
+    :func:`~cdpr_pipeline.discovery.never_worse.interaction` ("" for a cause with a
+    positive one): what it adds to the other causes together, what it does alone, and
+    beside which cause it adds."""
+    i = j.interaction
+    if i is None:
+        return ""
+    beside = ", ".join(f"{label} (+{i['adds_with_pct'][label]:.2g} %)" for label in i["with"])
+    return (f"kept although its own held-out contribution is "
+            f"{100 * (j.contribution or 0.0):.2g} %: it adds {i['adds_to_others_pct']:.2g} % "
+            f"of the nominal model's held-out error to the other causes together, "
+            f"{i['alone_pct']:.2g} % alone" + (f", and adds beside {beside}" if beside else ""))
+
+
 # ------------------------------------------------------------------ records
 def winch_reference(nominal: Model, causes: Sequence[Judgement]) -> Model:
     """The nominal model with every cause's re-identified winch parameters: what an
@@ -148,7 +163,9 @@ def cause_record(j: Judgement, nominal: Model, causes: Sequence[Judgement] = (),
             "sizes": [s.as_dict() for s in sizes],
             "expression": expression,
             "description": describe_cause(j, nominal, reference),
-            "share_of_gain_pct": share.pct, "interaction": share.note or None,
+            "share_of_gain_pct": share.pct,
+            "interaction": "; ".join(t for t in (share.note, interaction_text(j)) if t)
+            or None,
             "evidence": {**j.evidence(), GAIN_KEY: 100 * j.heldout_rmse_drop,
                          "heldout_rmse_drop_ci95_pct": [100 * rmse_drop(j.ci[0]),
                                                         100 * rmse_drop(j.ci[1])]}}
@@ -223,16 +240,18 @@ def _cause_text(j: Judgement, components: Sequence[CauseComponent],
 def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutGain,
                      unusable: Unusable | None = None,
                      withdrawn: Sequence[str] = (), unexplained: Unexplained | None = None,
-                     failing: Sequence[str] = (), noise_ratio: float = 10.0,
-                     sizes: Sequence[Sequence[CauseComponent]] = ()) -> str:
+                     failing: Sequence[str] = (), noise_ratio: float = 12.0,
+                     sizes: Sequence[Sequence[CauseComponent]] = (),
+                     largest_failing: float = 0.0) -> str:
     """The diagnosis in a few sentences. Every cause comes with its sizes and their
     standard errors (``sizes``, per cause: :func:`~cdpr_pipeline.discovery.sizes.
     cause_sizes`; parts below the noise left out), the gain as :func:`gain_text`.
     Without causes it says ``unexplained`` (where the residual sits, which tests
-    failed) or ``none``; ``none`` claims the nominal model explains the data as well as
-    anything tried only when no held-out column is ``failing`` a validity test, and
-    otherwise says those columns' errors stayed within ``noise_ratio`` times the
-    measurement noise (what made them no ``unexplained``)."""
+    failed) or ``none``: the nominal model explains the data as well as anything tried,
+    its held-out residual passing the calibrated validity test; where columns
+    (``failing``) fail a statistical test, it says they do so at most ``largest_failing``
+    times the measurement noise, within the ``noise_ratio`` effect-free data stay below
+    (:mod:`~cdpr_pipeline.discovery.adequacy`)."""
     prefix = ""
     if unusable:
         prefix = (f"The stated model was unusable ({unusable.relative_error_pct:.0f} % "
@@ -254,8 +273,9 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
             f"{100 * u.share_of_error:.0f} % of the error"
             + ("" if band is None else f", most of it at {band[0]:.3g}-{band[1]:.3g} Hz of "
                f"the 0-{u.analysed_hz:.3g} Hz the regression analyses")
-            + f", and fails the validity tests "
-            f"{', '.join(sorted({t for c in u.columns for t in c.failed_tests}))}.")
+            + f", beyond the {u.noise_ratio:g} times the noise no effect-free dataset "
+            f"reaches (statistical tests failed: "
+            f"{', '.join(sorted({t for c in u.columns for t in c.failed_tests})) or 'none'}).")
     if not causes:
         if not failing:
             return prefix + ("The nominal model explains the measurements as well as "
@@ -263,10 +283,12 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
                              "beyond chance, and the held-out residuals pass the validity "
                              "tests (verdict: none).")
         return prefix + (
-            f"No candidate effect improves the held-out runs beyond chance (verdict: none). "
-            f"The held-out residual of {', '.join(failing)} fails a validity test, but its "
-            f"size stays below {noise_ratio:g} times the measurement noise: the nominal "
-            f"model is adequate to that precision.")
+            f"The nominal model explains the measurements as well as anything tried: no "
+            f"candidate effect improves the held-out runs beyond chance, and the held-out "
+            f"residuals pass the calibrated validity test (verdict: none). The residual of "
+            f"{', '.join(failing)} fails a statistical test at "
+            f"{largest_failing:.2g} times the measurement noise at most, within what "
+            f"effect-free data show (below {noise_ratio:g} times).")
     sizes = list(sizes) or [()] * len(causes)
     text = prefix + f"Most likely cause: {_cause_text(causes[0], sizes[0], nominal)}."
     if len(causes) > 1:

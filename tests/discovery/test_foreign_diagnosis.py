@@ -26,6 +26,7 @@ from cdpr_pipeline.testing.foreign_cases import (
     KINDS,
     OUTSIDE,
     VOCABULARY,
+    contribution_errors,
     foreign_case,
     parameters_ok,
     rng_for,
@@ -86,9 +87,7 @@ def test_one_long_run_without_effect_gives_none(tmp_path, seed, kind):
 #: 90 random seeds; docs/method.md, known limits): an actuator lag of a
 #: few ms on some winches of a cable robot (named winch_parameter_error, or none when its
 #: held-out interval reaches zero; per-winch sizes 30-120 % off on some winch of 4-cable
-#: and sub-150 Hz rigs), a quadratic drag on a 4-cable robot with an extra
-#: winch_parameter_error or Stribeck name, an axis lag with an extra
-#: winch_parameter_error (errors
+#: and sub-150 Hz rigs), an axis lag with an extra winch_parameter_error (errors
 #: in the variables: the lag's column is the time derivative of the torque the measured
 #: motion implies, whose acceleration noise differentiated once more dominates on a
 #: light axis at a low rate, so the lag comes out short and a winch re-fit takes the
@@ -99,8 +98,12 @@ def test_one_long_run_without_effect_gives_none(tmp_path, seed, kind):
 #: (A winch parameter error on several axes, named a load, Stribeck friction or
 #: free-form terms in 4 of 4 many-axis draws, is no gap since one-axis
 #: re-identifications are also judged together: 10 of 10 draws, seeds 1-10.)
-KNOWN_GAPS = {("cdpr", "actuator_lag"), ("cdpr", "quadratic_drag"),
-              ("axes", "actuator_lag")}
+KNOWN_GAPS = {("cdpr", "actuator_lag"), ("axes", "actuator_lag")}
+#: (A quadratic drag on a cable robot, named with an extra winch_parameter_error or
+#: Stribeck name while the training BIC alone decided, is no gap since free-form terms
+#: compete with those re-fits on the same footing: the test below passed, not as XFAIL,
+#: on 10 of 10 seeds (CDPR_TEST_SEED 101-110), and the upper-half drag test below named
+#: it ``unnamed`` on both kinds for seeds 201-205, 10 of 10 draws.)
 #: ... and on redundant (4-cable) robots only: winch offsets along the internal-force
 #: direction are what the per-row internal force also explains, so a winch parameter
 #: error's offsets there are poorly determined (seed 171: one offset 134 % off, one
@@ -171,14 +174,14 @@ def _upper_half(name: str, key: str, base):
 
 
 def _unnamed_terms(case) -> list[dict]:
-    """The free-form terms of a diagnosis that must name nothing from the vocabulary
-    (empty when the verdict is ``none``: on a rig whose viscous or Coulomb share of the
-    force is small, even the upper half of the range does not show on the held-out run,
-    which is no wrong name; measured: 2 of 10 drag draws, 0 of 10 periodic)."""
+    """The free-form terms of a diagnosis that must name nothing from the vocabulary and
+    be ``unnamed``: at the upper half of the range the effect shows on the held-out runs,
+    so ``none`` (adequate) or ``unexplained`` (seen, not named) is a miss."""
     record = case.diagnose()
     found = {c["effect"] for c in record["causes"]}
     assert found <= {"unnamed"}, case.describe()
-    return record["causes"][0]["params"]["terms"] if found else []
+    assert record["verdict"] == "unnamed", case.describe()
+    return record["causes"][0]["params"]["terms"]
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -189,32 +192,23 @@ def test_a_drag_outside_the_vocabulary_is_not_named_after_what_imitates_it(tmp_p
     together that neither can go alone (each was fitted around the other), so the
     selection also asks what free-form terms say in place of all of them, on the same
     footing (with fewer parameters they win unless the named causes add, as a candidate
-    would, on held-out runs): never a vocabulary name, and when found ``unnamed`` with
-    the drag's size on every axis it acts on (its terms projected on ``w|w|``: seed 204
-    wrote it ``0.01063 tanh(w/0.03) w^2`` against 0.01068). Before the joint question,
-    5 of 6 axes draws were named ``winch_parameter_error`` + ``stribeck_friction``; a
-    cable robot's drag on two winches was so named while the training BIC alone decided
-    (issue 27)."""
-    from cdpr_pipeline.sim.expressions import evaluate
-
+    would, on held-out runs): never a vocabulary name, ``unnamed`` (at the upper half of
+    the range ``none`` is a miss), with the drag's torque on every axis it acts on: what
+    the extension adds on the held-out runs within 25 % RMS of the drag's own torque
+    there (``foreign_cases.contribution_errors``: the function, not one way of writing
+    it; seed 205 wrote axis 2's as ``0.0349 |w| tanh(w/7.56)``, whose projection on
+    ``w|w|`` over twice the typical speed came out 25 % low, although it matched the
+    speeds the runs reach). Before the joint question, 5 of 6 axes draws were named
+    ``winch_parameter_error`` + ``stribeck_friction``; a cable robot's drag on two winches
+    was so named while the training BIC alone decided (issue 27)."""
     draw = _upper_half("quadratic_drag", "coefficient",
                        lambda rig: rig.viscous / rig.typical_speed)
     runs, duration = FAST[kind]
     case = foreign_case(tmp_path, kind, [draw], seed, n_runs=runs, duration_s=duration)
-    terms = _unnamed_terms(case)
-    eff = case.truth.effects[0]
-    for axis in eff.channels if terms else []:
-        # the drag's size: the axis's terms projected on w|w| over its speeds (a search
-        # may write it with a smooth sign, tanh(w/s) w^2 with s small, the same physics)
-        w = np.linspace(-2.0, 2.0, 801) * case.rig.typical_speed[axis]
-        shape = w * np.abs(w)
-        values = sum((t["coefficient"] * evaluate(t["expression"], {
-            "omega": w, "theta": np.zeros_like(w)}) for t in terms
-            if t["cable"] == axis + 1), np.zeros_like(w))
-        drag = float(values @ shape / (shape @ shape))
-        true = float(eff.params["coefficient"][axis])
-        assert drag == pytest.approx(true, rel=0.25), \
-            f"axis {axis + 1}: {drag:.4g} w|w| against {true:.4g}: {case.describe()}"
+    _unnamed_terms(case)
+    errors = contribution_errors(case)
+    assert all(e <= 0.25 for e in errors.values()), \
+        f"held-out torque errors {errors}: {case.describe()}"
 
 
 def test_a_drum_radius_error_is_named_on_its_drum(tmp_path, seed):
@@ -246,7 +240,6 @@ def test_a_position_periodic_force_on_a_linear_axis_gets_no_name(tmp_path, seed)
     draw = _upper_half("periodic_torque", "amplitude", lambda rig: rig.coulomb)
     case = foreign_case(tmp_path, "axes", [draw], seed, n_runs=3, duration_s=10.0)
     terms = _unnamed_terms(case)
-    assert terms, f"not found: {case.describe()}"
     eff = case.truth.effects[0]
     nominal = np.abs(np.asarray(case.dataset.rig.nominal.coulomb, float)) + 1e-12
     axis = max(eff.channels, key=lambda c: eff.params["amplitude"][c] / nominal[c])

@@ -17,6 +17,7 @@ from cdpr_pipeline.discovery.never_worse import never_worse
 from cdpr_pipeline.discovery.residuals import nominal_model, residuals, signal_scales
 from cdpr_pipeline.discovery.selection import Judgement, Selection, SelectionSettings
 from cdpr_pipeline.discovery.signals import dataset_signals
+from cdpr_pipeline.discovery.summary import interaction_text
 from cdpr_pipeline.sim.effects import DrumRadiusError, PayloadMassError
 from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset, rng_for
 
@@ -115,6 +116,11 @@ def test_a_cause_that_harms_alone_is_kept_only_with_its_interaction(payload_lab)
     assert i["alone_pct"] < 0 < i["adds_to_others_pct"], (lab["case"], i)
     assert i["with"] == ["overshoot"] and i["adds_with_pct"]["overshoot"] > 0, lab["case"]
     assert second.evidence()["interaction"] == i
+    # the report says why it stays: what it adds to the others, alone, and beside which
+    text = interaction_text(second)
+    assert "kept although its own held-out contribution is -" in text, text
+    assert "overshoot" in text and f"{i['adds_to_others_pct']:.2g} %" in text, text
+    assert interaction_text(first) == ""
 
 
 # ------------------------------------------------------------------ in the diagnosis

@@ -1,6 +1,7 @@
 """The verdict ``unexplained`` (spec/diagnosis.md): no candidate generalises, yet the
-held-out residual fails the validity tests with a material size. ``none`` keeps its
-meaning: the effect-free datasets of ``test_foreign_diagnosis.py`` and
+held-out residual fails the calibrated validity test (a statistical test failed, at a
+size beyond what effect-free data show: ``adequacy``). ``none`` keeps its meaning, the
+model is adequate: the effect-free datasets of ``test_foreign_diagnosis.py`` and
 ``test_null_calibration.py`` (slow) still get ``none``.
 
 A position-periodic torque (the independent generator's ``cogging``, upper half of its
@@ -65,7 +66,9 @@ def test_what_nothing_tried_explains_is_unexplained_and_located(tmp_path, seed):
     else:
         assert set(u["channels"]) & affected, case.describe()
     assert u["share_of_error"] > 0.5, case.describe()
-    assert u["failed_tests"] and u["band_hz"][1] >= u["band_hz"][0] >= 0.0
+    # the statistical tests' verdict is recorded, not required (the prewhitening can
+    # whiten a periodic error: seed 1323947681's u3 passed them)
+    assert isinstance(u["failed_tests"], list) and u["band_hz"][1] >= u["band_hz"][0] >= 0.0
     for col in u["columns"]:
         assert col["relative_error_pct"] >= u["threshold_pct"]
         assert col["noise_ratio"] >= u["noise_ratio"]
@@ -83,9 +86,9 @@ def _validity(fails: bool) -> SimpleNamespace:
 
 def test_where_it_sits_is_every_material_column(quiet_lab, seed):
     """Held-out torque errors of 30-300 times the noise on two winches (drawn), the
-    third at the noise: one failing a validity test makes the verdict; both are where
-    the error sits, also the one whose test the prewhitening passed (independent seed
-    698269289: such a column was left out and the columns named held 42 % of it)."""
+    third at the noise: both are where the error sits, also the one whose test the
+    prewhitening passed (independent seed 698269289: such a column was left out and the
+    columns named held 42 % of it)."""
     rng = np.random.default_rng(seed)
     settings = DiagnosisSettings(closed_loop=False)
     rig = quiet_lab.rig
@@ -110,17 +113,68 @@ def test_where_it_sits_is_every_material_column(quiet_lab, seed):
     assert found.share_of_error > 0.99, seed
     assert found.columns[0].failed_tests == ("ljung_box",)
     assert found.columns[1].failed_tests == ()
-    # no material column fails a test: not unexplained
-    assert verdict({c: _validity(False) for c in validity}) is None
+    # the calibrated validity test reads the size: material columns that pass every
+    # statistical test are unexplained too; below the gate, failing or not, they are not
+    assert [c.channel for c in verdict({c: _validity(False) for c in validity}).columns] \
+        == ["u1", "u3"], seed
 
 
-def test_none_never_claims_adequacy_when_tests_failed():
+@pytest.mark.parametrize("look", ["motion", "wider"])
+def test_validity_fails_only_beyond_the_calibrated_size(quiet_lab, seed, look):
+    """The calibrated validity test: a held-out column (here failing a statistical test)
+    counts only at a size beyond the look's gate (``unexplained_noise_ratio`` on the motion
+    band, ``unexplained_noise_ratio_wider`` on the second look's, which
+    :func:`~cdpr_pipeline.discovery.adequacy.wider_band` hands it). Errors drawn at
+    0.3-0.9 of the gate on every column are ``none``; one column at 1.1-3 times it is
+    ``unexplained``, on that column and the look's band."""
+    from cdpr_pipeline.discovery.adequacy import analysed_band_hz, wider_band
+
+    rng = np.random.default_rng(seed)
+    settings = DiagnosisSettings(closed_loop=False)
+    rig = quiet_lab.rig
+    fs = float(rig.sample_rate_hz)
+    regression = resolve_settings(settings.regression, quiet_lab.trajectories, rig)
+    settings = dataclasses.replace(settings, regression=regression)
+    if look == "wider":
+        motion_gate = settings.unexplained_noise_ratio
+        settings = wider_band(settings, fs)
+        assert settings.unexplained_noise_ratio == settings.unexplained_noise_ratio_wider
+        assert settings.unexplained_noise_ratio > motion_gate
+    gate = settings.unexplained_noise_ratio
+    held = dataset_signals(quiet_lab.trajectories[-1:], rig, settings.regression)
+    noise = row_noise(held)
+    t = held[0].row_times()
+    tone = np.sin(2 * np.pi * rng.uniform(0.3, 2.0, 3) * t[:, None])
+    failing = {c: _validity(True) for c in ("u1", "u2", "u3")}
+    analysed = analysed_band_hz(settings.regression, fs)
+
+    def verdict(scale):
+        res = Residuals([held[0].name], [{"torque": noise * scale * tone * np.sqrt(2)}])
+        columns = heldout_columns(res, held, failing, settings.selection.alpha)
+        return unexplained_residual(columns, gate, settings.unexplained_min_error_pct,
+                                    settings.selection.alpha, analysed)
+
+    assert verdict(gate * rng.uniform(0.3, 0.9, 3)) is None, seed
+    big = int(rng.integers(3))
+    scale = gate * rng.uniform(0.3, 0.9, 3)
+    scale[big] = gate * rng.uniform(1.1, 3.0)
+    found = verdict(scale)
+    assert found is not None and [c.channel for c in found.columns] == [f"u{big + 1}"], seed
+    assert found.noise_ratio == gate and found.analysed_hz == analysed
+
+
+def test_none_claims_adequacy_within_the_calibrated_gate():
+    """``none`` claims the nominal model is adequate: its held-out residual passes the
+    calibrated validity test. A column failing a statistical test below the gate's size
+    is named, with its size and the gate (what effect-free data stay below)."""
     gain = HeldoutGain("torque", 1.0, 1.0, 0.0, (-0.1, 0.1), {})
     passing = summary_sentence([], None, gain)
     assert ADEQUATE in passing and "verdict: none" in passing
-    failing = summary_sentence([], None, gain, failing=["u2"], noise_ratio=10.0)
-    assert ADEQUATE not in failing and "verdict: none" in failing
-    assert "u2" in failing and "10 times the measurement noise" in failing
+    failing = summary_sentence([], None, gain, failing=["u2"], noise_ratio=12.0,
+                               largest_failing=3.4)
+    assert ADEQUATE in failing and "verdict: none" in failing
+    assert "u2" in failing and "3.4 times the measurement noise" in failing
+    assert "below 12 times" in failing
 
 
 @pytest.mark.slow
@@ -181,3 +235,24 @@ def test_power_band_finds_a_tone_above_white_noise(seed):
         + np.sqrt(5.0) * rng.standard_normal(t.size)
     lo, hi = power_band_hz(x, 200.0)
     assert tone - 0.5 <= lo <= tone <= hi <= tone + 0.5, (seed, tone, lo, hi)
+
+
+def test_what_only_the_wider_look_fails_is_unexplained_there(quiet_lab):
+    """The wider look judges validity at its own gate, and a column failing it there,
+    with no cause on either look, makes the diagnosis ``unexplained`` on that band. The
+    gates are set so that only the wider look's can be crossed (the motion band's at
+    infinity, the wider band's at zero): the effect-free lab's held-out residual fails a
+    statistical test on the motion band (the second look runs) and on the wider band."""
+    from cdpr_pipeline.discovery.diagnosis import diagnose
+
+    settings = dataclasses.replace(DiagnosisSettings(closed_loop=False),
+                                   unexplained_noise_ratio=float("inf"),
+                                   unexplained_noise_ratio_wider=0.0)
+    record = diagnose(quiet_lab, settings).as_json()
+    band = record["band"]
+    assert record["causes"] == [] and "tried" in band, record["summary"]
+    assert record["verdict"] == "unexplained" and band["tried"]["verdict"] == "unexplained"
+    u = record["unexplained"]
+    assert u["analysed_band_hz"][1] == pytest.approx(band["tried"]["analysed_hz"])
+    assert u["analysed_band_hz"][1] > band["analysed_hz"]
+    assert u["noise_ratio"] == 0.0 and u["failed_tests"]

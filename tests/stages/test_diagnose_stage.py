@@ -136,7 +136,10 @@ def test_foreign_rig_is_diagnosed(tmp_path, cfg):
     # decisions exactly, numbers within what rounding moves them (GOLDEN_SPREAD); it
     # was rewritten when `cogging` joined the vocabulary (one more first-step candidate,
     # so the step's Bonferroni level and bootstrap intervals moved, and the free-form
-    # harmonics of the final step are cogging's shapes now: verdict none as before)
+    # harmonics of the final step are cogging's shapes now: verdict none as before), and
+    # when `none` came to claim adequacy under the calibrated validity test (the
+    # summary's words only; regenerated: run_diagnosis with this configuration under
+    # OPENBLAS_CORETYPE=Haswell, the record without its "dataset")
     expected = json.loads((Path(__file__).parent / "foreign_rig_diagnosis.json").read_text())
     record.pop("dataset")
     _assert_same(record, expected, "diagnosis.json")

@@ -21,7 +21,7 @@ from mlflow.tracking import MlflowClient
 
 from cdpr_pipeline.config import PROJECT_ROOT
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.e2e]
 
 #: who commits in the scratch repositories
 GIT_USER = {"GIT_AUTHOR_NAME": "cdpr test", "GIT_AUTHOR_EMAIL": "cdpr@test.invalid",

@@ -38,7 +38,7 @@ from mlflow.tracking import MlflowClient
 
 from cdpr_pipeline.config import PROJECT_ROOT
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.e2e]
 
 #: dataset -> (dataset.path inside the scratch project, kind, stages expected skipped),
 #: in the order they run

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from mlflow.tracking import MlflowClient
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.e2e]
 
 #: one short training (the sizes of tests/stages/test_train_stage.py)
 TINY_TRAIN = ["trainer.max_epochs=2", "data.window=16", "data.train_windows=256",

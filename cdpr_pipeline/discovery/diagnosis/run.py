@@ -19,6 +19,7 @@ import numpy as np
 from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.data.reading import as_resolved
 from cdpr_pipeline.data.split import crosstest_runs
+from cdpr_pipeline.discovery.adequacy import largest_failing_ratio
 from cdpr_pipeline.discovery.diagnosis import (
     blackbox,
     candidates,
@@ -108,7 +109,8 @@ def _diagnosis(state: DiagnosisState) -> Diagnosis:
     settings, held, channel = state.settings, state.held, state.channel
     sentence = summary_sentence(state.causes, state.nominal, state.gain, state.unusable,
                                 state.withdrawn, state.unexplained, state.failing,
-                                settings.unexplained_noise_ratio, state.sizes)
+                                settings.unexplained_noise_ratio, state.sizes,
+                                largest_failing_ratio(state.held_columns))
     band, clock, again = state.band, state.clock, state.again
     if again is not None:
         sentence += (f" Sought again on 0-{again.band['analysed_hz']:.3g} Hz (the band "

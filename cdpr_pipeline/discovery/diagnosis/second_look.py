@@ -40,6 +40,9 @@ def run(state: DiagnosisState) -> Diagnosis | None:
         return dataclasses.replace(again, timings={
             **{f"{k} (motion band)": v for k, v in state.clock.items()}, **again.timings})
     state.again = again
+    # nothing named on either look: a column failing the calibrated validity test on the
+    # wider band only (at its own size gate) is where the unexplained residual sits
+    state.unexplained = state.unexplained or again.unexplained
     return None
 
 

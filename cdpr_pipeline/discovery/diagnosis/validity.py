@@ -1,7 +1,8 @@
 """Step ``validity``: every channel column of the nominal model described (size, band,
 whiteness, what it follows, the correlation tests), the correlation and whiteness tests
 on the held-out runs before and after the extension, and the adequacy verdict: no cause,
-and a material held-out column failing a test, is ``unexplained``
+and a held-out column failing the calibrated validity test (a statistical test failed at
+a size beyond what effect-free data show), is ``unexplained``
 (:mod:`~cdpr_pipeline.discovery.adequacy`; docs/method.md 3.5)."""
 
 from __future__ import annotations
