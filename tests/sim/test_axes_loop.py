@@ -101,16 +101,18 @@ def test_one_sub_step_is_as_good_as_eight(label):
 
 
 def test_the_closed_form_and_the_newton_path_agree(monkeypatch):
-    """The closed form of an affine friction law and the general Newton path are the same
-    scheme."""
+    """The closed form of an affine friction law (a reversal solved exactly) and the
+    general path (Newton, a reversal along the friction's scalar path) solve the same
+    equations: they agree to a thousandth of the tracking error (measured: 2e-4)."""
     model = Drives(WinchParams([2.0, 0.5, 5.0], [5.0, 1.0, 30.0], [3.0, 0.4, 6.0],
                                [0.2, 0.0, -0.5]), sign_sharpness=None)
     refs = _references()
     closed = AxesLoop(model, PD, 1000.0, feedforward=model).run(refs)
     monkeypatch.setattr(axes_loop, "affine_friction", lambda m: False)
     newton = AxesLoop(model, PD, 1000.0, feedforward=model).run(refs)
-    np.testing.assert_allclose(newton.position, closed.position, atol=1e-12)
-    np.testing.assert_allclose(newton.force, closed.force, atol=1e-8)
+    tracking = np.sqrt(np.mean((refs.reference - closed.position) ** 2))
+    assert np.sqrt(np.mean((newton.position - closed.position) ** 2)) < 1e-3 * tracking
+    assert np.linalg.norm(newton.force - closed.force) < 1e-5 * np.linalg.norm(closed.force)
 
 
 def test_a_velocity_loop_with_limit_and_external_force():
