@@ -138,8 +138,10 @@ def test_foreign_rig_is_diagnosed(tmp_path, cfg):
     # so the step's Bonferroni level and bootstrap intervals moved, and the free-form
     # harmonics of the final step are cogging's shapes now: verdict none as before), and
     # when `none` came to claim adequacy under the calibrated validity test (the
-    # summary's words only; regenerated: run_diagnosis with this configuration under
-    # OPENBLAS_CORETYPE=Haswell, the record without its "dataset")
+    # summary's words only), and when the closed loop's steep friction came to be
+    # stepped along each winch's path (sim/friction_path.py: the closed-loop figures and
+    # their discrepancies moved, every decision stayed; regenerated: run_diagnosis with
+    # this configuration under OPENBLAS_CORETYPE=Haswell, the record without "dataset")
     expected = json.loads((Path(__file__).parent / "foreign_rig_diagnosis.json").read_text())
     record.pop("dataset")
     _assert_same(record, expected, "diagnosis.json")
