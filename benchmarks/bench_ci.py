@@ -9,6 +9,7 @@ no CI figure there is typed by hand).
 
     python -m benchmarks.bench_ci                          # the machine's own kernel
     python -m benchmarks.bench_ci --coretype default Prescott
+    python -m benchmarks.bench_ci --requote     # the README's quote of the recorded figures
 
 Each run takes as long as CI (about 10 minutes on 2 cores).
 """
@@ -23,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.measurements import ROOT, invoked_as, quote, record
+from benchmarks.measurements import DOCUMENT, ROOT, invoked_as, quote, record
 
 #: ``ci: <step> took M min S s`` lines that ``.ci/run`` prints
 STEP = re.compile(r"^ci: (.+?) took (\d+) min (\d+) s", re.MULTILINE)
@@ -94,11 +95,36 @@ def summary(runs: list[dict[str, object]]) -> str:
             + " and ".join(parts) + " on this machine (target: under 10 min).")
 
 
+def recorded(document: Path = DOCUMENT) -> tuple[list[dict[str, object]], str, str]:
+    """The runs of the recorded ``ci`` section (kernel, wall seconds, exit status), its
+    command and its provenance (``on MACHINE, ..., commit C``)."""
+    text = document.read_text()
+    section = text.split("<!-- begin ci -->", 1)[1].split("<!-- end ci -->", 1)[0]
+    head = re.search(r"^`(.+?)` (on .+?)\.$", section, re.MULTILINE)
+    if head is None:
+        raise SystemExit(f"{document}: no recorded ci section to quote")
+    lines = [line for line in section.splitlines() if line.startswith("|")]
+    names = [c.strip() for c in lines[0].strip("|").split("|")]
+    runs = []
+    for line in lines[2:]:
+        cells = dict(zip(names, (c.strip() for c in line.strip("|").split("|")), strict=True))
+        minutes, seconds = re.fullmatch(r"(\d+) min (\d+) s", cells["in all"]).groups()
+        runs.append({"coretype": cells["OPENBLAS_CORETYPE"], "rc": int(cells["exit"]),
+                     "wall_s": 60 * int(minutes) + int(seconds)})
+    return runs, head.group(1), head.group(2)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--coretype", nargs="+", default=["default"],
                         help="OpenBLAS kernels to run CI under ('default': OpenBLAS's choice)")
+    parser.add_argument("--requote", action="store_true",
+                        help="run nothing: quote the recorded section in the README again")
     args = parser.parse_args()
+    if args.requote:
+        runs, command, provenance = recorded()
+        quote("ci", summary(runs), command=command, provenance=provenance)
+        return
     runs = [run_ci(c) for c in args.coretype]
     body = table(runs) + (
         "\n\n`.ci/run` on a clean clone of the commit, with nothing installed beforehand: "

@@ -121,7 +121,8 @@ def record(name: str, title: str, body: str, command: str,
     return document
 
 
-def quote(name: str, text: str, command: str, readme: Path = README) -> bool:
+def quote(name: str, text: str, command: str, readme: Path = README,
+          provenance: str | None = None) -> bool:
     """Replace the README's quote of section ``name`` by ``text`` (markdown), ending with
     where it came from. The README decides where a quote sits: without its markers
     nothing is written (and False returned).
@@ -134,15 +135,20 @@ def quote(name: str, text: str, command: str, readme: Path = README) -> bool:
         What the README says, figures included.
     command : str
         The benchmark's command line.
+    provenance : str, optional
+        Where and when the figures were measured (``on MACHINE, load average X, DATE,
+        commit C``) when not by this run (a quote remade from a recorded section).
     """
     begin, end = f"<!-- begin measured {name} -->", f"<!-- end measured {name} -->"
     current = readme.read_text() if readme.exists() else ""
     if begin not in current or end not in current:
         print(f"{readme.name} has no {begin!r}: nothing quoted")
         return False
-    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d")
-    block = (f"{begin}\n{text.rstrip()}\n\n*Measured by `{command}` on {machine()}"
-             f"{load_average()}, {stamp}, commit {commit()}; the figures and their details: "
+    if provenance is None:
+        stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d")
+        provenance = f"on {machine()}{load_average()}, {stamp}, commit {commit()}"
+    block = (f"{begin}\n{text.rstrip()}\n\n*Measured by `{command}` {provenance}; "
+             "the figures and their details: "
              f"[docs/measurements.md](docs/measurements.md), section `{name}`.*\n{end}")
     pattern = re.compile(rf"{re.escape(begin)}.*?{re.escape(end)}", re.DOTALL)
     readme.write_text(pattern.sub(lambda _: block, current))
