@@ -13,6 +13,7 @@ into that stage run instead of opening its own.
 from __future__ import annotations
 
 import functools
+import logging
 import os
 import re
 from collections.abc import Iterator, Mapping
@@ -67,6 +68,11 @@ def _create_store(uri: str) -> None:
     from filelock import FileLock
     from mlflow.tracking import MlflowClient
 
+    # the migration's progress lines ("Creating initial MLflow database tables...", one per
+    # step) are MLflow's business: the terminal gets the command's own lines only (a Ctrl-C
+    # while they print left two lines where the command promises one)
+    for name in ("mlflow.store.db.utils", "alembic.runtime.migration"):
+        logging.getLogger(name).setLevel(logging.WARNING)
     with FileLock(f"{path}.lock"):
         MlflowClient(uri).search_experiments(max_results=1)
 
