@@ -24,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.measurements import DOCUMENT, ROOT, invoked_as, quote, record
+from benchmarks.measurements import DOCUMENT, ROOT, commit, invoked_as, quote, record
 
 #: ``ci: <step> took M min S s`` lines that ``.ci/run`` prints
 STEP = re.compile(r"^ci: (.+?) took (\d+) min (\d+) s", re.MULTILINE)
@@ -125,14 +125,16 @@ def main() -> None:
         runs, command, provenance = recorded()
         quote("ci", summary(runs), command=command, provenance=provenance)
         return
+    measured = commit()       # what the clones hold (HEAD may move while CI runs)
     runs = [run_ci(c) for c in args.coretype]
     body = table(runs) + (
         "\n\n`.ci/run` on a clean clone of the commit, with nothing installed beforehand: "
         "`make install`, the fast suite and the end-to-end pipeline tests in one pytest "
         "session (`make test-ci`), then the golden-record tests under other OpenBLAS "
         "kernels (`make test-golden`); each row is one clean clone.")
-    record("ci", "CI on a clean clone", body, command=invoked_as())
-    quote("ci", summary(runs), command=invoked_as())
+    record("ci", "CI on a clean clone", body, command=invoked_as(), measured=measured)
+    quote("ci", summary(runs), command=invoked_as(), provenance=None if measured == commit()
+          else recorded()[2])
     if any(r["rc"] for r in runs):
         raise SystemExit(1)
 
