@@ -8,9 +8,12 @@ from __future__ import annotations
 import logging
 import time
 
+import numpy as np
+
 from cdpr_pipeline.data.split import crosstest_runs
 from cdpr_pipeline.discovery.closed_loop import compare_motion
 from cdpr_pipeline.discovery.diagnosis.state import DiagnosisState
+from cdpr_pipeline.discovery.results import ClosedLoopComparison
 
 log = logging.getLogger(__name__)
 
@@ -24,10 +27,20 @@ def applies(state: DiagnosisState) -> bool:
 def run(state: DiagnosisState) -> None:
     """Set the motion comparison and its plot, and add its rows to the discrepancies."""
     dataset = state.dataset
-    state.closed, rows, state.closed_plot = compare_motion(
-        state.nominal, state.extended, dataset.rig, state.trajectories, state.held_names,
-        bool(state.causes), state.split.blocks,
-        crosstest_runs(dataset.trajectories, state.settings.crosstest))
+    try:
+        state.closed, rows, state.closed_plot = compare_motion(
+            state.nominal, state.extended, dataset.rig, state.trajectories,
+            state.held_names, bool(state.causes), state.split.blocks,
+            crosstest_runs(dataset.trajectories, state.settings.crosstest))
+    except (FloatingPointError, np.linalg.LinAlgError) as exc:
+        # a model unstable under the stated controller runs away in the re-simulation:
+        # its state overflows (FloatingPointError) or, finite still, its platform flies
+        # so far that every cable points alike and the controller's forward kinematics
+        # meets a singular K^T K (LinAlgError). A finding of the comparison, not a crash
+        # of the diagnosis: the comparison is reported as not made, and why
+        reason = f"the re-simulation diverged ({type(exc).__name__}: {exc})"
+        log.warning("closed loop: %s", reason)
+        state.closed, rows, state.closed_plot = ClosedLoopComparison(False, reason), [], None
     state.found += rows
     if state.closed.available:
         log.info("%s: %.1f s", "closed loop" if state.closed.mode == "closed_loop"
