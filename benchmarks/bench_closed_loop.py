@@ -1,41 +1,55 @@
-"""The closed-loop re-simulation of ``cdpr diagnose``: the implicit friction step against
-today's RK4, for time and accuracy, on datasets of the independent generator (issue 28).
+"""The closed-loop re-simulation of ``cdpr diagnose``, for time and accuracy, on the rig
+shapes the format accepts (issue 28): cable robots of 3 to 8 cables and drive axes of 1
+to 6 joints at up to 1 kHz, under a hard Coulomb sign, a steep ``tanh`` and a Stribeck
+law.
 
-For each shape (cables, rate, Coulomb law) a rig with the format's computed-torque
+A cable robot's shape is ``CABLES:RATE:LAW``: a rig with the format's computed-torque
 controller is drawn and five runs are written by the independent generator
-(:mod:`cdpr_pipeline.testing.independent_sim`). The nominal model is then re-simulated
-along the recorded desired paths, as the diagnosis's closed-loop phase does, by
+(:mod:`cdpr_pipeline.testing.independent_sim`); the model is then re-simulated along
+the recorded desired paths, as the diagnosis's closed-loop phase does, by
 
-- ``implicit``: what the command does (:class:`~cdpr_pipeline.sim.simulator.
-  BatchSimulator`'s ``integrator=auto``: the ROS2 friction step where the Coulomb law
-  is stiff), on the full runs (its CPU seconds are the figure the target is stated for:
-  at most 2 s per model for five 15 s runs);
-- ``rk4``: RK4 at the sub-steps the friction's slope demands (``integrator=rk4``; what
-  the command did before, refusing over 64 sub-steps per tick), on the accuracy runs
-  (its time scaled to the full runs);
-- ``reference``: the implicit scheme at 16 times its sub-steps (second order: its own
-  step error is 1/256 of the implicit run's), on the accuracy runs.
+- ``now``: what the command does (:class:`~cdpr_pipeline.sim.simulator.
+  BatchSimulator`'s ``integrator=auto``: :func:`~cdpr_pipeline.sim.integrators.
+  friction_path_step` where the law is steep), its CPU seconds on the full runs (the
+  target: at most 2 s per model for five 15 s runs);
+- ``before``: the former scheme, the ROS2 step at two sub-steps per tick
+  (``integrator=ros2``), in the same process;
+- ``reference``: ``now`` at 16 times its sub-steps, on the accuracy runs.
 
-Accuracy is the RMS of the positions' difference to the reference, against the RMS of
-the reference's tracking error (simulated minus desired position): the target is 1 %.
+A drive axes' shape is ``AXESax:RATE:LAW``: the axes of :mod:`benchmarks.bench_axes_loop`
+(the first ``AXES`` of them) along its default references under a PD controller with
+the nominal feedforward (:class:`~cdpr_pipeline.sim.axes_loop.AxesLoop`, one scheme:
+``before`` is left empty), the reference at 64 times its sub-steps.
 
-    python -m benchmarks.bench_closed_loop [--shapes 4:500:tanh500 4:500:sign 8:1000:tanh500]
+LAW is ``sign``, ``tanhK`` (``tanh(K w)``) or ``stribeck`` (the hard sign with a
+Stribeck bump, ``F_s = 2 F_c`` and a Stribeck velocity of 0.1 rad/s or m/s, the model
+an extended one). Accuracy is the RMS of the positions' difference to the reference,
+against the RMS of the reference's tracking error (simulated minus desired position):
+the target is at most 1 %.
+
+    python -m benchmarks.bench_closed_loop [--shapes 4:500:tanh500 6ax:1000:sign ...]
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks.measurements import invoked_as, record
+from benchmarks.measurements import DOCUMENT, invoked_as, record
+from cdpr_pipeline.data.axis_controller import AxisController
 from cdpr_pipeline.data.io import load_dataset
-from cdpr_pipeline.sim.plant import nominal_plant
+from cdpr_pipeline.data.rig import WinchParams
+from cdpr_pipeline.sim.axes_loop import AxesLoop, AxesReferences
+from cdpr_pipeline.sim.axis_references import AxisReferenceSet
+from cdpr_pipeline.sim.effects import EFFECTS
+from cdpr_pipeline.sim.plant import Drives, nominal_plant
 from cdpr_pipeline.sim.sensors import Sensors
-from cdpr_pipeline.sim.simulator import BatchSimulator, auto_substeps
+from cdpr_pipeline.sim.simulator import BatchSimulator
 from cdpr_pipeline.sim.trajectories import SampledDesired
 from cdpr_pipeline.testing.independent_sim import random_rig, simulate_dataset
 
@@ -43,12 +57,37 @@ EXACT = Sensors(mocap_noise_m=0.0, encoder_counts_per_rev=0, torque_noise_nm=0.0
 TARGET_S = 2.0
 TARGET_RATIO = 0.01
 REFERENCE_FACTOR = 16
+AXES_REFERENCE_FACTOR = 64
+DEFAULT_SHAPES = ("3:250:sign", "4:500:tanh500", "4:500:sign", "4:500:stribeck",
+                  "8:1000:tanh500", "8:1000:sign", "6ax:1000:sign", "6ax:1000:tanh500",
+                  "6ax:1000:stribeck", "1ax:1000:sign", "1ax:1000:tanh500")
+#: the Stribeck law's bump: F_s / F_c and the Stribeck velocity
+STRIBECK = {"static_ratio": 2.0, "stribeck_velocity": 0.1}
+#: the axes of bench_axes_loop (inertia, viscous, Coulomb, offset per axis)
+AXES = WinchParams(inertia=[0.5, 1.0, 2.0, 5.0, 20.0, 95.0],
+                   viscous=[2.0, 5.0, 8.0, 30.0, 60.0, 200.0],
+                   coulomb=[0.5, 1.0, 2.0, 6.0, 10.0, 20.0],
+                   offset=[0.0, 0.1, -0.2, 0.5, 0.0, -3.0])
 
 
-def parse_shape(text: str) -> tuple[int, float, float | None]:
-    """``CABLES:RATE:LAW`` (LAW ``sign`` or ``tanhK``) -> (cables, rate, k or None)."""
-    cables, rate, law = text.split(":")
-    return int(cables), float(rate), None if law == "sign" else float(law.removeprefix("tanh"))
+def parse_shape(text: str) -> tuple[str, int, float, str]:
+    """``CABLES:RATE:LAW`` or ``AXESax:RATE:LAW`` -> (kind, count, rate, law)."""
+    count, rate, law = text.split(":")
+    if not (law in ("sign", "stribeck") or law.startswith("tanh")):
+        raise ValueError(f"{text}: the law is sign, tanhK or stribeck")
+    kind = "axes" if count.endswith("ax") else "cdpr"
+    return kind, int(count.removesuffix("ax")), float(rate), law
+
+
+def _sharpness(law: str) -> float | None:
+    return float(law.removeprefix("tanh")) if law.startswith("tanh") else None
+
+
+def _law_name(law: str) -> str:
+    if law == "stribeck":
+        return (f"sign + Stribeck (F_s = {STRIBECK['static_ratio']:g} F_c, "
+                f"w_s = {STRIBECK['stribeck_velocity']:g})")
+    return "sign" if law == "sign" else f"tanh({_sharpness(law):g} w)"
 
 
 def _desired(trajectories, seconds: float | None) -> tuple[SampledDesired, np.ndarray]:
@@ -58,96 +97,145 @@ def _desired(trajectories, seconds: float | None) -> tuple[SampledDesired, np.nd
     return SampledDesired(t[:keep], positions, [tr.family for tr in trajectories]), positions
 
 
-def _simulate(sim: BatchSimulator, desired: SampledDesired) -> tuple[np.ndarray, float, int]:
-    """True positions (B, N, 3), CPU seconds and sub-steps per tick."""
-    start = time.process_time()
-    result = sim.run(desired, np.random.default_rng(0))
-    return result.truth["position"], time.process_time() - start, result.substeps
+def _rms_ratio(pos: np.ndarray, reference: np.ndarray, desired: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((pos - reference) ** 2))
+                 / np.sqrt(np.mean((reference - desired) ** 2)))
 
 
-def run_shape(shape: str, tmp: Path, seed: int, duration_s: float, accuracy_s: float
-              ) -> dict:
-    cables, rate, law = parse_shape(shape)
-    rig_spec = random_rig(seed, n_cables=cables, rate_hz=rate, coulomb_tanh=law,
+def cable_shape(count: int, rate: float, law: str, tmp: Path, seed: int, duration_s: float,
+                accuracy_s: float) -> dict:
+    rig_spec = random_rig(seed, n_cables=count, rate_hz=rate, coulomb_tanh=_sharpness(law),
                           controller="computed_torque_pd")
-    path = tmp / shape.replace(":", "_")
+    path = tmp / f"{count}_{rate:g}_{law}"
     simulate_dataset(path, rig_spec, [], n_runs=5, duration_s=duration_s, seed=seed,
                      overwrite=True)
     data = load_dataset(path)
     rig = data.rig
-    model = nominal_plant(rig, rig.coulomb_sharpness)
-    dt = 1.0 / rig.controller.rate_hz
+    nominal = nominal_plant(rig, rig.coulomb_sharpness)
+    model = nominal if law != "stribeck" else nominal.with_effects(
+        [EFFECTS["stribeck_friction"](**STRIBECK)])
 
     def sim(integrator: str, substeps: int | None = None) -> BatchSimulator:
-        return BatchSimulator(model, model, rig.controller, EXACT, rig.sample_rate_hz,
+        return BatchSimulator(model, nominal, rig.controller, EXACT, rig.sample_rate_hz,
                               substeps=substeps, integrator=integrator)
+
+    def run(simulator: BatchSimulator, desired: SampledDesired
+            ) -> tuple[np.ndarray, float, int]:
+        start = time.process_time()
+        result = simulator.run(desired, np.random.default_rng(0), truth_keys=("position",
+                                                                              "u_cmd"))
+        return result.truth["position"], time.process_time() - start, result.substeps
 
     full, _ = _desired(data.trajectories, None)
     short, desired_short = _desired(data.trajectories, accuracy_s)
-    implicit = sim("auto")
-    _, seconds, steps = _simulate(implicit, full)
-    pos, _, _ = _simulate(implicit, short)
-    reference, _, _ = _simulate(sim("auto", REFERENCE_FACTOR * steps), short)
-    rk4_steps = auto_substeps(model, dt, implicit=False, max_substeps=10**6)
-    rk4_pos, rk4_seconds, _ = _simulate(sim("rk4", rk4_steps), short)
-    scale = (len(full.t) + implicit.settle_s * rig.sample_rate_hz) / (
-        len(short.t) + implicit.settle_s * rig.sample_rate_hz)
-    tracking = float(np.sqrt(np.mean((reference - desired_short) ** 2)))
-    return {"shape": shape, "cables": cables, "rate": rate,
-            "law": "sign" if law is None else f"tanh({law:g} w)",
-            "implicit_steps": steps, "implicit_s": seconds,
-            "implicit_err": float(np.sqrt(np.mean((pos - reference) ** 2))),
-            "rk4_steps": rk4_steps, "rk4_s": rk4_seconds * scale, "rk4_refused": rk4_steps > 64,
-            "rk4_err": float(np.sqrt(np.mean((rk4_pos - reference) ** 2))),
-            "tracking": tracking, "implicit_mode": implicit.implicit(dt)}
+    out = {"kind": f"{count} cables", "rate": rate, "law": _law_name(law)}
+    _, out["now_s"], out["now_steps"] = run(sim("auto"), full)
+    _, out["before_s"], out["before_steps"] = run(sim("ros2"), full)
+    reference, _, _ = run(sim("auto", REFERENCE_FACTOR * out["now_steps"]), short)
+    out["now_err"] = _rms_ratio(run(sim("auto"), short)[0], reference, desired_short)
+    out["before_err"] = _rms_ratio(run(sim("ros2"), short)[0], reference, desired_short)
+    out["tracking"] = float(np.sqrt(np.mean((reference - desired_short) ** 2)))
+    return out
+
+
+def axes_shape(count: int, rate: float, law: str, duration_s: float, accuracy_s: float
+               ) -> dict:
+    take = slice(AXES.n - count, None)     # the heaviest axes (the EMPS-like one last)
+    axes = WinchParams(**{k: list(np.asarray(getattr(AXES, k))[take])
+                          for k in ("inertia", "viscous", "coulomb", "offset")})
+    nominal = Drives(axes, sign_sharpness=_sharpness(law))
+    model = nominal if law != "stribeck" else nominal.with_effects(
+        [EFFECTS["stribeck_friction"](**STRIBECK)])
+    bandwidth = 2 * np.pi * 5.0
+    inertia = np.asarray(axes.inertia)
+    controller = AxisController.from_dict(
+        {"type": "position_loop", "rate_hz": rate, "kp": (inertia * bandwidth ** 2).tolist(),
+         "kd": (2 * 0.8 * inertia * bandwidth).tolist(), "feedforward": "nominal"}, count)
+
+    def refs(seconds: float) -> tuple[AxesReferences, np.ndarray]:
+        families = AxisReferenceSet(families=["steps", "sine", "sweep", "slow", "sine"],
+                                    duration_s=seconds)
+        _, reference = families.references(["prismatic"] * count, rate)
+        return AxesReferences(reference, reference[0], np.zeros(reference.shape[1:])), \
+            reference
+
+    full, _ = refs(duration_s)
+    short, desired = refs(max(accuracy_s, 2.5))     # the references ramp 1 s each way
+    loop = AxesLoop(model, controller, rate, feedforward=nominal)
+    start = time.process_time()
+    steps = loop.run(full).substeps
+    seconds = time.process_time() - start
+    now = loop.run(short).position
+    reference = AxesLoop(model, controller, rate, feedforward=nominal,
+                         substeps=AXES_REFERENCE_FACTOR * steps).run(short).position
+    return {"kind": f"{count} ax{'is' if count == 1 else 'es'}", "rate": rate,
+            "law": _law_name(law), "now_steps": steps, "now_s": seconds,
+            "now_err": _rms_ratio(now, reference, desired),
+            "tracking": float(np.sqrt(np.mean((reference - desired) ** 2)))}
+
+
+HEADER = ("| shape | rig | rate Hz | law | sub-steps | CPU s per model | error, % of tracking "
+          "| before: sub-steps | before: CPU s | before: error % | tracking error (RMS) |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|")
+
+
+def _row(r: dict) -> str:
+    before = ("| | | " if "before_s" not in r else
+              f"| {r['before_steps']} | {r['before_s']:.2f} | {100 * r['before_err']:.3f} ")
+    return (f"| {r['shape']} | {r['kind']} | {r['rate']:g} | {r['law']} | {r['now_steps']} | "
+            f"{r['now_s']:.2f} | {100 * r['now_err']:.3f} {before}| {r['tracking']:.3g} |")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--shapes", nargs="+",
-                        default=["4:500:tanh500", "4:500:sign", "8:1000:tanh500"])
+    parser.add_argument("--shapes", nargs="+", default=list(DEFAULT_SHAPES))
     parser.add_argument("--seed", type=int, default=3)
     parser.add_argument("--duration", type=float, default=15.0)
-    parser.add_argument("--accuracy-s", type=float, default=4.0,
+    parser.add_argument("--accuracy-s", type=float, default=3.0,
                         help="seconds of each run the accuracy is measured on")
     parser.add_argument("--no-record", action="store_true")
     args = parser.parse_args()
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench_closed_loop_") as tmp:
         for shape in args.shapes:
-            r = run_shape(shape, Path(tmp), args.seed, args.duration, args.accuracy_s)
+            kind, count, rate, law = parse_shape(shape)
+            r = cable_shape(count, rate, law, Path(tmp), args.seed, args.duration,
+                            args.accuracy_s) if kind == "cdpr" else \
+                axes_shape(count, rate, law, args.duration, args.accuracy_s)
+            r["shape"] = shape
             rows.append(r)
-            print(f"{shape}: implicit {r['implicit_steps']} sub-steps "
-                  f"({'ROS2' if r['implicit_mode'] else 'RK4'}) {r['implicit_s']:.2f} s CPU, "
-                  f"error {1e6 * r['implicit_err']:.2f} um = "
-                  f"{100 * r['implicit_err'] / r['tracking']:.2f} % of the tracking error "
-                  f"{1e6 * r['tracking']:.0f} um; RK4 {r['rk4_steps']} sub-steps "
-                  f"{r['rk4_s']:.1f} s CPU (scaled), error {1e6 * r['rk4_err']:.2f} um"
-                  f"{' (over the cap of 64: the command refused it)' if r['rk4_refused'] else ''}",
-                  flush=True)
+            before = "" if "before_s" not in r else (
+                f"; before {r['before_steps']} sub-steps {r['before_s']:.2f} s, "
+                f"{100 * r['before_err']:.2f} %")
+            print(f"{shape}: now {r['now_steps']} sub-steps {r['now_s']:.2f} s CPU, "
+                  f"error {100 * r['now_err']:.3f} % of the tracking error "
+                  f"({1e6 * r['tracking']:.3g} um){before}", flush=True)
     if args.no_record:
         return
-    body = ["| shape | law | implicit sub-steps | implicit CPU s | implicit error (% of "
-            "tracking) | RK4 sub-steps | RK4 CPU s | RK4 error (% of tracking) | tracking "
-            "error um |", "|---|---|---|---|---|---|---|---|---|"]
-    for r in rows:
-        body.append(
-            f"| {r['cables']} cables, {r['rate']:g} Hz | {r['law']} | {r['implicit_steps']}"
-            f"{'' if r['implicit_mode'] else ' (RK4)'} | {r['implicit_s']:.2f} | "
-            f"{100 * r['implicit_err'] / r['tracking']:.3f} | {r['rk4_steps']}"
-            f"{' (refused, > 64)' if r['rk4_refused'] else ''} | {r['rk4_s']:.1f} | "
-            f"{100 * r['rk4_err'] / r['tracking']:.3f} | {1e6 * r['tracking']:.0f} |")
-    body.append("")
-    body.append(f"The nominal model re-simulated along five recorded runs of "
-                f"{args.duration:g} s (independent generator, seed {args.seed}, the "
-                f"format's computed-torque controller, no hidden effect), as the "
-                f"diagnosis's closed loop does for each model. CPU seconds of the full "
-                f"runs (target at most {TARGET_S:g} s per model); errors on the first "
-                f"{args.accuracy_s:g} s of each run against the implicit scheme at "
-                f"{REFERENCE_FACTOR} times its sub-steps (target at most "
-                f"{100 * TARGET_RATIO:g} % of the tracking error). RK4 ran on those "
-                f"seconds only; its time is scaled to the full runs.")
-    record("closed-loop", "Closed-loop re-simulation: implicit friction step vs RK4",
+    rows = {r["shape"]: _row(r) for r in rows}
+    text = DOCUMENT.read_text() if DOCUMENT.exists() else ""
+    found = re.search(r"<!-- begin closed-loop -->(.*?)<!-- end closed-loop -->", text,
+                      re.DOTALL)
+    keep: dict[str, str] = {}
+    for line in (found.group(1) if found else "").splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if line.startswith("| ") and cells[0] not in ("shape", "---") and ":" in cells[0]:
+            keep[cells[0]] = line
+    keep.update(rows)
+    order = [*DEFAULT_SHAPES, *sorted(set(keep) - set(DEFAULT_SHAPES))]
+    body = [HEADER, *(keep[k] for k in order if k in keep)]
+    body += ["", f"Five runs of {args.duration:g} s per shape, re-simulated in closed loop as "
+             f"the diagnosis does for each model. Cable robots: independent generator "
+             f"(seed {args.seed}, the format's computed-torque controller, no hidden "
+             f"effect), the now scheme against the former ROS2 step in the same process. "
+             f"CPU seconds on the full runs (target at most {TARGET_S:g} s per model); "
+             f"errors on the first {args.accuracy_s:g} s of each run (axes 2.5 s at "
+             f"least) against the now scheme at {REFERENCE_FACTOR} (axes "
+             f"{AXES_REFERENCE_FACTOR}) times its sub-steps (target at most "
+             f"{100 * TARGET_RATIO:g} % of the tracking error, in m for cables, the "
+             f"axes' own units for axes). Rows measured by separate invocations "
+             f"(--shapes) keep their own load and commit; this run's are above."]
+    record("closed-loop", "Closed-loop re-simulation across rig shapes and friction laws",
            "\n".join(body), command=invoked_as())
 
 

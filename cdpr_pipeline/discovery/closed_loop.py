@@ -119,7 +119,7 @@ def _resimulate_axes(model: Model, rig: Rig, trajectories: Sequence[Trajectory],
         for b, tr in enumerate(runs):
             out[tr.name] = {"position": result.position[:, b], "torque": result.force[:, b]}
     log.info("closed loop: re-simulated the %s on %d axis run(s) (%d sub-step(s) per "
-             "control tick, friction implicit)", label, len(trajectories), result.substeps)
+             "control tick, a reversal along its path)", label, len(trajectories), result.substeps)
     return out
 
 
@@ -150,7 +150,7 @@ def resimulate(model: Model, nominal: Model, rig: Rig,
     log.info("closed loop: re-simulating the %s on %d runs (%d batch%s, %d sub-step%s per "
              "control tick, %s)", label, len(trajectories), len(groups),
              "" if len(groups) == 1 else "es", substeps, "" if substeps == 1 else "s",
-             "friction implicit (ROS2)" if sim.implicit(dt) else "RK4")
+             "RK4, a steep friction along its path" if sim.implicit(dt) else "RK4")
     out: dict[str, dict[str, np.ndarray]] = {}
     rng = np.random.default_rng(0)           # exact sensors draw nothing
     for runs in groups.values():

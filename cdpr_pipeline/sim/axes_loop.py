@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdpr_pipeline.data.axis_controller import AxisController
+from cdpr_pipeline.sim.friction_path import friction_over_step
 from cdpr_pipeline.sim.plant import Drives
 from cdpr_pipeline.sim.simulator import MAX_SUBSTEPS, SimulationCostError, lag_response
 
@@ -216,8 +217,95 @@ def _advance(model: Drives, q: np.ndarray, v: np.ndarray, drive: np.ndarray | No
             mean = command + (drive - command) * ratio * -np.expm1(-1.0 / ratio)
             force = np.where(tau > 0.0, mean, command)
             drive = lag_response(model, drive, command, h)
-        q, v = implicit_step(model, q, v, force, h, affine)
+        q, v = path_step(model, q, v, force, h, affine)
     return q, v, drive
+
+
+def _affine_reversal(affine: AffineFriction, inertia: np.ndarray, q: np.ndarray,
+                     v: np.ndarray, force: np.ndarray, h: float, q1: np.ndarray,
+                     v1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``q1, v1``, except where an axis reverses within the step: there the exact
+    solution of its affine law, ``I v' = force - a - b v`` on each side, to the reversal
+    at ``t*`` (closed form), then stuck or slipping on the other side for the rest."""
+    side = np.sign(v)
+    a0 = (force - np.where(side > 0, affine.up + affine.slope_up * v,
+                           affine.down + affine.slope_down * v)) / inertia
+    rate = np.where(side > 0, affine.slope_up, affine.slope_down) / inertia
+    with np.errstate(divide="ignore", invalid="ignore"):
+        reach = -v / a0                 # E(t*) = (1 - exp(-rate t*)) / rate
+        reverses = (side != 0.0) & (reach > 0.0) & (rate * reach < 1.0)
+        crossing = np.where(reverses, -np.log1p(-np.where(reverses, rate * reach, 0.0))
+                            / np.where(rate > 0.0, rate, 1.0), np.inf)
+        crossing = np.where(reverses & (rate == 0.0), reach, crossing)
+    reverses &= crossing < h
+    if not reverses.any():
+        return q1, v1
+    t_star = np.where(reverses, crossing, 0.0)
+    q_star = q + v * t_star + a0 * _ramp(rate, t_star)
+    rest = h - t_star
+    # at rest on the other side: slips where its acceleration points that way
+    other = -side
+    a1 = (force - np.where(other > 0, affine.up, affine.down)) / inertia
+    rate1 = np.where(other > 0, affine.slope_up, affine.slope_down) / inertia
+    slips = a1 * other > 0.0
+    v_end = np.where(slips, a1 * rest * _expm1_ratio(-rate1 * rest), 0.0)
+    q_end = q_star + np.where(slips, a1 * _ramp(rate1, rest), 0.0)
+    return np.where(reverses, q_end, q1), np.where(reverses, v_end, v1)
+
+
+def _expm1_ratio(x: np.ndarray) -> np.ndarray:
+    """``expm1(x) / x``, 1 at 0 (``E(t) / t`` at ``x = -rate t``)."""
+    small = np.abs(x) < 1e-8
+    safe = np.where(small, 1.0, x)
+    return np.where(small, 1.0 + 0.5 * x, np.expm1(safe) / safe)
+
+
+def _ramp(rate: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``int_0^t E(s) ds`` with ``E(s) = (1 - exp(-rate s)) / rate``: the position a unit
+    initial acceleration adds under viscous decay ``rate`` (``t^2 / 2`` without)."""
+    x = rate * t
+    small = np.abs(x) < 1e-4
+    safe = np.where(small, 1.0, x)
+    shape = np.where(small, 1.0 - x / 3.0 + x * x / 12.0,
+                     2.0 * (safe + np.expm1(-safe)) / (safe * safe))
+    return 0.5 * t * t * shape
+
+
+def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h: float,
+              affine: AffineFriction | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`implicit_step`, except on the axes whose speed meets the friction law's
+    steep part within the step (it crosses zero, or the slope along its explicit path,
+    times ``h`` over the inertia, exceeds one half): there the speed follows its own
+    scalar path ``I v' = force - R(q, v)`` (:func:`~cdpr_pipeline.sim.friction_path.
+    friction_over_step`, the position held at the step's middle), which places the
+    reversal or the stick where it falls within the step; the position follows from the
+    friction's impulse and first moment."""
+    inertia = model.winch.inertia
+    middle = q + 0.5 * h * v
+    if affine is not None:
+        q1, v1 = implicit_step(model, q, v, force, h, affine)
+        return _affine_reversal(affine, inertia, q, v, force, h, q1, v1)
+    spread = 1e-3 * np.abs(v) + 1e-12
+    start = model.friction_torque(q, np.stack([v, v - spread, v + spread]))
+    end = v + h * (force - start[0]) / inertia
+    rest = model.friction_torque(middle, np.stack([end, np.full_like(v, REST_SPEED),
+                                                   np.full_like(v, -REST_SPEED)]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        secant = np.where(end != v, (rest[0] - start[0]) / (end - v), 0.0)
+    slope = np.maximum(np.abs(secant), np.abs(start[2] - start[1]) / (2.0 * spread))
+    hard = model.sign_sharpness is None or not np.isfinite(model.sign_sharpness)
+    steep = (v * end < 0.0) | ((h * slope / inertia > 0.5) & ((v != 0.0) | (not hard)))
+    q1, v1 = implicit_step(model, q, v, force, h, affine)
+    if not steep.any():
+        return q1, v1
+    beta = 1.0 / inertia * np.ones_like(v)
+    alpha = force * beta
+    reach = 2.0 * np.abs(np.concatenate([start[:1], rest])).max(axis=0)
+    c0, c1 = friction_over_step(lambda w: model.friction_torque(middle, w), v, alpha,
+                                beta, h, reach)
+    v_path = v + h * (alpha - beta * c0)
+    q_path = q + h * v + 0.5 * h * h * alpha - beta * (0.5 * h * h * c0 - h ** 3 * c1 / 12.0)
+    return np.where(steep, q_path, q1), np.where(steep, v_path, v1)
 
 
 @dataclass

@@ -24,7 +24,7 @@ def cable_geometry(anchors: np.ndarray, position: np.ndarray) -> tuple[np.ndarra
     units : (..., n, 3) array, ``k_i = (A_i - p) / |A_i - p|``
     """
     diff = anchors - position[..., None, :]
-    lengths = np.linalg.norm(diff, axis=-1)
+    lengths = np.sqrt(np.einsum("...i,...i->...", diff, diff))
     return lengths, diff / lengths[..., None]
 
 

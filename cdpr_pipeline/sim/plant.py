@@ -375,11 +375,14 @@ class Plant:
         pull = self.dynamic_stiffness * (strain + self.cable_damping_time * strain_rate)
         return np.maximum(pull, 0.0)
 
-    def derivative(self, state: np.ndarray, u_cmd: np.ndarray) -> np.ndarray:
+    def derivative(self, state: np.ndarray, u_cmd: np.ndarray,
+                   friction: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """Time derivative of a ``(B, state_size)`` state under commanded torque ``u_cmd``.
 
         The drum receives ``u_cmd`` directly or, on a drive with an actuator lag, the
-        lagged torque held in the state.
+        lagged torque held in the state. ``friction`` (rigid cables): a mask and values
+        (B, n) that replace the friction law where the mask is set (the integrator's
+        own account of a steep law over its step).
         """
         s = self.split_state(state)
         p, v = s["p"], s["v"]
@@ -397,7 +400,7 @@ class Plant:
             resist = self.friction_torque(s["theta"], s["omega"])
             out[:, 6 + n:6 + 2 * n] = (u - R * tension - resist) / I_m
         else:
-            out[:, 3:6] = self.rigid_acceleration(p, v, u, g, units)
+            out[:, 3:6] = self.rigid_acceleration(p, v, u, g, units, friction)
         if self.lagged:
             tau = self.lags
             # a drive without lag keeps its (unused) state still instead of dividing by 0
@@ -405,15 +408,16 @@ class Plant:
                                         / np.where(tau > 0.0, tau, 1.0), 0.0)
         return out
 
-    def rigid_acceleration(
-        self, p: np.ndarray, v: np.ndarray, u: np.ndarray, g: np.ndarray, units: np.ndarray
-    ) -> np.ndarray:
-        """Platform acceleration of the reduced rigid model (equation (1) of the paper)."""
+    def rigid_acceleration(self, p: np.ndarray, v: np.ndarray, u: np.ndarray, g: np.ndarray,
+                           units: np.ndarray, friction: tuple | None = None) -> np.ndarray:
+        """Platform acceleration of the reduced rigid model (equation (1) of the paper);
+        ``friction`` as in :meth:`derivative`."""
         R = self.drum_radius
         I_m = self.winch.inertia
         omega, _, curvature = winch_rates(units, g, v, None, R)
-        theta = self.winch_angle_from_length(g)
-        resist = self.friction_torque(theta, omega)
+        resist = self.friction_torque(self.winch_angle_from_length(g), omega)
+        if friction is not None:
+            resist = np.where(friction[0], friction[1], resist)
         rhs_t = (u - resist - I_m * curvature / R) / R    # tension part independent of a
         weight = I_m / R**2
         mass_matrix = self.mass * np.eye(3) + np.einsum("bni,n,bnj->bij", units, weight, units)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -24,6 +25,12 @@ from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.errors import UserError
 from cdpr_pipeline.progress import progress
 from cdpr_pipeline.sim.controller import ComputedTorquePD
+from cdpr_pipeline.sim.integrators import (  # noqa: F401  (re-exported: the simulator's steps)
+    friction_path_step,
+    lag_response,
+    rk4_step,
+    rosenbrock_step,
+)
 from cdpr_pipeline.sim.kinematics import cable_geometry, forward_kinematics
 from cdpr_pipeline.sim.plant import Plant
 from cdpr_pipeline.sim.sensors import Sensors
@@ -129,11 +136,19 @@ def integration_plant(plant: Plant, control_dt: float, accuracy: float = 0.5) ->
 MAX_SUBSTEPS = 64
 
 
-#: sub-steps per control tick at least, where :func:`rosenbrock_step` integrates a hard
-#: sign: measured on five 15 s runs of a 250 Hz Stribeck lab against the former 16 RK4
-#: sub-steps, the closed-loop positions differ by 1e-5, 5e-6 and 2e-6 m RMS at 1, 2
-#: and 4 sub-steps (the torques by 0.01-0.02 N m RMS, almost all of it at reversals,
-#: where a hard sign leaves the friction anywhere in [-F_c, F_c])
+#: longest step of :func:`~cdpr_pipeline.sim.integrators.friction_path_step` on a steep
+#: smooth law: on a
+#: 4-cable rig at 500 Hz (independent generator, seed 3, five runs, 2 s each against a
+#: fine-step reference) the positions differ by 1.05 % of the tracking error with a
+#: ``tanh(500 w)`` law at one 2 ms step per tick, 0.35 % at two; 0.03 % and 0.01 % with
+#: the hard sign (the former ROS2 step at two: 23 % and 3.3 %)
+PATH_STEP_S = 1e-3
+#: the same for a hard sign: 0.03 % at one 2 ms step on that rig, 0.04 % at one 4 ms
+#: step on a 3-cable 250 Hz one, but 46 % at one 3.3 ms step on the paper's 3-cable rig
+#: at 300 Hz (0.04 % at two)
+HARD_PATH_STEP_S = 2e-3
+#: sub-steps per control tick of the former scheme (``integrator="ros2"``: the ROS2 step
+#: throughout, kept to compare with)
 IMPLICIT_MIN_SUBSTEPS = 2
 
 
@@ -145,13 +160,13 @@ class SimulationCostError(UserError, ValueError):
 
 def implicit_friction(plant: Plant, control_dt: float | None = None,
                       accuracy: float = 0.5) -> bool:
-    """Whether :func:`rosenbrock_step` integrates ``plant``: a rigid plant whose Coulomb
+    """Whether :func:`friction_path_step` integrates ``plant``: a rigid plant whose Coulomb
     law is stiff, the one stiff term it has. A hard sign (rig.yaml's default) always is;
     a smooth ``tanh(k w)`` (a Stribeck bump on it included) is where its slope alone
     would take RK4 more than one sub-step per control tick of ``control_dt`` (a steep
     law: ``k = 500`` on light winches took 126). A gentle law (the paper's ``k = 20`` at
     300 Hz) stays with RK4, whose one sub-step is then more accurate than two of the
-    second-order scheme; without ``control_dt``, only the hard sign counts."""
+    steep-law scheme; without ``control_dt``, only the hard sign counts."""
     if plant.elastic or not plant.winch.coulomb.max() > 0:
         return False
     if not np.isfinite(plant.sign_sharpness):
@@ -166,11 +181,13 @@ def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5,
     ``max_substeps`` (:data:`MAX_SUBSTEPS` when None), else :class:`SimulationCostError`.
 
     A rigid plant with a stiff Coulomb law (:func:`implicit_friction`) is stepped by
-    :func:`rosenbrock_step`, where the friction's slope sets no rate; ``implicit``
+    :func:`friction_path_step`, where the friction's slope sets no rate (steps of at most
+    :data:`PATH_STEP_S`); ``implicit``
     False counts the sub-steps :func:`rk4_step` needs whatever the law (a caller that
     steps RK4 itself), None decides by :func:`implicit_friction`."""
     if implicit is None:
         implicit = implicit_friction(plant, control_dt, accuracy)
+    smooth_law = np.isfinite(plant.sign_sharpness)
     plant = integration_plant(plant, control_dt, accuracy)
     rates = {"Coulomb friction's smooth sign": 0.0 if implicit else
              _coulomb_rate(plant, plant.sign_sharpness)}
@@ -188,7 +205,8 @@ def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5,
             k * plant.drum_radius.max() ** 2 / plant.winch.inertia.min())
     # an actuator lag sets none: rk4_step advances it by its exact solution
     cause = max(rates, key=rates.get)
-    steps = max(IMPLICIT_MIN_SUBSTEPS if implicit else 1,
+    longest = PATH_STEP_S if smooth_law else HARD_PATH_STEP_S
+    steps = max(math.ceil(control_dt / longest - 1e-9) if implicit else 1,
                 math.ceil(rates[cause] * control_dt / accuracy))
     cap = MAX_SUBSTEPS if max_substeps is None else max_substeps
     if steps > cap:
@@ -199,158 +217,6 @@ def auto_substeps(plant: Plant, control_dt: float, accuracy: float = 0.5,
             f"carries; check the effect that made it (e.g. a cable_elasticity fitted on "
             f"data with too little motion to size it)")
     return steps
-
-
-def lag_response(plant: Plant, u_drum: np.ndarray, u_cmd: np.ndarray,
-                 dt: float | np.ndarray) -> np.ndarray:
-    """The drum torques ``dt`` after ``u_drum`` under a held command ``u_cmd``: the exact
-    solution ``u_cmd + (u_drum - u_cmd) exp(-dt / tau)`` of every lagged drive's
-    ``tau u' = u_cmd - u`` (a drive without lag keeps its unused state)."""
-    tau = plant.lags
-    lagged = tau > 0.0
-    decay = np.exp(-np.asarray(dt, dtype=float) / np.where(lagged, tau, 1.0))
-    return np.where(lagged, u_cmd + (u_drum - u_cmd) * decay, u_drum)
-
-
-def _impulse_shift(plant: Plant, start: np.ndarray, u_cmd: np.ndarray,
-                   dt: float | np.ndarray, quadrature: np.ndarray) -> np.ndarray:
-    """What to add to a lagged drive's stage torques so that the integrator's quadrature
-    of them (``quadrature``, their weighted mean) equals the exact mean drum torque over
-    the step; zero on drives without lag."""
-    lagged = plant.lags > 0.0
-    ratio = np.where(lagged, plant.lags, 1.0) / dt
-    mean = u_cmd + (start - u_cmd) * ratio * -np.expm1(-1.0 / ratio)
-    return np.where(lagged, mean - quadrature, 0.0)
-
-
-def rk4_step(
-    plant: Plant, state: np.ndarray, u: np.ndarray, dt: float | np.ndarray,
-    k1: np.ndarray | None = None
-) -> np.ndarray:
-    """One classical RK4 step under constant ``u``; ``k1`` (the derivative at ``state``)
-    may be passed when the caller already has it (it is recomputed on a lagged plant).
-
-    An actuator lag's state is linear in the held command and is advanced by its exact
-    solution (:func:`lag_response`), so a short lag sets no step size (it did: a 0.5 ms
-    lag at 300 Hz took 14 sub-steps). The mechanics see it at every stage time, shifted
-    by one constant so that RK4's Simpson weights integrate the drum torque's exact
-    impulse over the step: a lag far shorter than the step rises between the stages,
-    where the stage values alone would miss part of it."""
-    if not plant.lagged:
-        if k1 is None:
-            k1 = plant.derivative(state, u)
-        k2 = plant.derivative(state + 0.5 * dt * k1, u)
-        k3 = plant.derivative(state + 0.5 * dt * k2, u)
-        k4 = plant.derivative(state + dt * k3, u)
-        return state + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
-    lag = slice(state.shape[1] - plant.n, None)
-    start = state[:, lag]
-    half = lag_response(plant, start, u, 0.5 * np.asarray(dt))
-    full = lag_response(plant, start, u, dt)
-    shift = _impulse_shift(plant, start, u, dt, (start + 4.0 * half + full) / 6.0)
-    stage = state.copy()
-    stage[:, lag] = start + shift
-    k1 = plant.derivative(stage, u)
-    stage = state + 0.5 * dt * k1
-    stage[:, lag] = half + shift
-    k2 = plant.derivative(stage, u)
-    stage = state + 0.5 * dt * k2
-    stage[:, lag] = half + shift
-    k3 = plant.derivative(stage, u)
-    stage = state + dt * k3
-    stage[:, lag] = full + shift
-    k4 = plant.derivative(stage, u)
-    out = state + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
-    out[:, lag] = full
-    return out
-
-
-#: ``gamma`` of the ROS2 Rosenbrock-W step (L-stable: ``1 + 1/sqrt(2)``)
-ROS2_GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
-
-
-def friction_slope(plant: Plant, theta: np.ndarray, omega: np.ndarray,
-                   omega_end: np.ndarray | None = None) -> np.ndarray:
-    """``d(resisting torque)/d(omega)`` of every winch (B, n), by central differences
-    across a hundredth of the smooth sign's transition band; negative slopes (a friction
-    that falls with speed, as Stribeck's beside its peak) count as zero.
-
-    With ``omega_end`` (the speeds an explicit step would reach), the secant slope from
-    ``omega`` to it wherever the two lie further apart than that: a step that crosses
-    the transition band sees the friction's whole jump there, where the slope at its
-    start (flat, outside the band) would let the step cross with the friction still
-    pushing the old way (on a 4-cable rig with ``tanh(500 w)`` at 500 Hz, two steps per
-    tick: 21 um RMS from a fine-step reference with the local slope, 3 um with the
-    secant)."""
-    delta = 1e-2 / plant.sign_sharpness if np.isfinite(plant.sign_sharpness) else 1e-6
-    slope = (plant.friction_torque(theta, omega + delta)
-             - plant.friction_torque(theta, omega - delta)) / (2.0 * delta)
-    if omega_end is not None:
-        change = omega_end - omega
-        far = np.abs(change) > delta
-        if far.any():
-            secant = (plant.friction_torque(theta, omega_end)
-                      - plant.friction_torque(theta, omega)) / np.where(far, change, 1.0)
-            slope = np.where(far, secant, slope)
-    return np.maximum(slope, 0.0)
-
-
-def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
-                    k1: np.ndarray | None = None) -> np.ndarray:
-    """One ROS2 Rosenbrock-W step (Verwer et al. 1999: L-stable, second order for any
-    approximate Jacobian) of a *rigid* plant, with the Jacobian of its friction only.
-
-    A (nearly) hard Coulomb sign is a damper of slope ``k F_c`` inside its transition
-    band; explicitly that slope dictates the step (it took 16 RK4 sub-steps per tick).
-    Here the friction's slope ``D = sum_i c_i / R_i^2 k_i k_i^T`` (``c_i`` its
-    :func:`friction_slope`: the secant to the speeds an explicit step would reach,
-    where the step crosses the transition band) is treated implicitly,
-    ``W = M + gamma dt D`` on the platform velocity (``M`` the reduced mass matrix), so
-    the band costs no sub-steps: sticking is damped out, not resolved. Everything else
-    is as explicit as Heun's method. An actuator lag's state follows its exact solution,
-    as in :func:`rk4_step`.
-    """
-    if plant.elastic:
-        raise ValueError("rosenbrock_step integrates rigid plants only")
-    p, v = state[:, 0:3], state[:, 3:6]
-    g, units = cable_geometry(plant.anchors, p)
-    R = plant.drum_radius
-    omega = np.einsum("bnk,bk->bn", units, v) / R
-    lag = slice(state.shape[1] - plant.n, None)
-    if plant.lagged:
-        start = state[:, lag]
-        full = lag_response(plant, start, u, dt)
-        shift = _impulse_shift(plant, start, u, dt, (start + full) / 2.0)
-        stage = state.copy()
-        stage[:, lag] = start + shift
-        k1 = plant.derivative(stage, u)
-    elif k1 is None:
-        k1 = plant.derivative(state, u)
-    # the speeds an explicit step would reach: the friction's secant slope up to them
-    omega_end = omega + dt * np.einsum("bnk,bk->bn", units, k1[:, 3:6]) / R
-    c = friction_slope(plant, plant.winch_angle_from_length(g), omega, omega_end)
-    mass = plant.mass * np.eye(3) + np.einsum("bni,n,bnj->bij", units,
-                                              plant.winch.inertia / R ** 2, units)
-    w = mass + ROS2_GAMMA * dt * np.einsum("bni,bn,bnj->bij", units, c / R ** 2, units)
-
-    def solve(f: np.ndarray) -> np.ndarray:
-        # W^-1 f with W = I - gamma dt J, J nonzero only in dv'/dv = -M^-1 D
-        out = f.copy()
-        out[:, 3:6] = np.linalg.solve(w, np.einsum("bij,bj->bi", mass, f[:, 3:6])[..., None]
-                                      )[..., 0]
-        return out
-
-    if not plant.lagged:
-        k1 = solve(k1)
-        k2 = solve(plant.derivative(state + dt * k1, u) - 2.0 * k1)
-        return state + dt * (1.5 * k1 + 0.5 * k2)
-    k1 = solve(k1)
-    stage = state + dt * k1
-    stage[:, lag] = full + shift
-    k2 = solve(plant.derivative(stage, u) - 2.0 * k1)
-    out = state + dt * (1.5 * k1 + 0.5 * k2)
-    out[:, lag] = full
-    return out
 
 
 @dataclass
@@ -369,11 +235,12 @@ class BatchSimulator:
         Recording rate; the controller rate must be an integer multiple of it.
     substeps : int or None
         Integrator steps per control tick; None picks them from the plant's time scales.
-    integrator : {"auto", "rk4"}
-        ``auto``: :func:`rosenbrock_step` where the Coulomb law is stiff
+    integrator : {"auto", "rk4", "ros2"}
+        ``auto``: :func:`friction_path_step` where the Coulomb law is steep
         (:func:`implicit_friction`), :func:`rk4_step` elsewhere; ``rk4``: RK4 whatever
-        the law (a hard sign as :func:`integration_plant`'s ``tanh``), the reference the
-        implicit scheme is measured against.
+        the law (a hard sign as :func:`integration_plant`'s ``tanh``); ``ros2``: the
+        former scheme, :func:`rosenbrock_step` where the law is steep, at
+        :data:`IMPLICIT_MIN_SUBSTEPS` at least (both kept to measure against).
     feedback : {"encoders", "mocap"}
         Where the controller's state estimate comes from. ``encoders`` (default, as on a
         real CDPR at control rate): position by forward kinematics of the encoder lengths
@@ -399,17 +266,33 @@ class BatchSimulator:
     def __post_init__(self) -> None:
         if self.feedback not in ("encoders", "mocap"):
             raise ValueError(f"feedback must be 'encoders' or 'mocap', not {self.feedback!r}")
-        if self.integrator not in ("auto", "rk4"):
-            raise ValueError(f"integrator must be 'auto' or 'rk4', not {self.integrator!r}")
+        if self.integrator not in ("auto", "rk4", "ros2"):
+            raise ValueError(f"integrator must be 'auto', 'rk4' or 'ros2', not "
+                             f"{self.integrator!r}")
+
+    @cached_property
+    def _encoders_exact(self) -> bool:
+        """Whether the encoders' estimate is the true state itself: rigid cables on the
+        nominal geometry, read without quantisation (forward kinematics of exact lengths
+        gives the position back, to rounding; the re-simulation's exact sensors)."""
+        plant, nominal = self.plant, self.nominal
+        return (not plant.elastic and self.sensors.encoder_counts_per_rev == 0
+                and all(np.array_equal(getattr(plant, k), getattr(nominal, k))
+                        for k in ("anchors", "drum_radius", "home")))
 
     def implicit(self, control_dt: float) -> bool:
-        """Whether :meth:`run` steps the plant with :func:`rosenbrock_step`."""
-        return self.integrator == "auto" and implicit_friction(self.plant, control_dt)
+        """Whether :meth:`run` steps the plant with a steep-law step
+        (:func:`friction_path_step`, or :func:`rosenbrock_step` under ``ros2``)."""
+        return self.integrator != "rk4" and implicit_friction(self.plant, control_dt)
 
     def substeps_for(self, control_dt: float) -> int:
         """Integrator steps per control tick (:attr:`substeps`, or from the plant)."""
-        return self.substeps or auto_substeps(self.plant, control_dt,
-                                              implicit=self.implicit(control_dt))
+        if self.substeps:
+            return self.substeps
+        if self.integrator == "ros2" and self.implicit(control_dt):
+            # a rigid plant: the former scheme's floor (its mechanics asked for one)
+            return IMPLICIT_MIN_SUBSTEPS
+        return auto_substeps(self.plant, control_dt, implicit=self.implicit(control_dt))
 
     def tick_grid(self, desired: DesiredTrajectories) -> TickGrid:
         """Control-tick grid and desired motion (B, ticks, 3) of a batch."""
@@ -435,6 +318,8 @@ class BatchSimulator:
         """The controller's estimate of platform position and velocity."""
         if self.feedback == "mocap":
             return pos_meas, self.plant.split_state(state)["v"]
+        if self._encoders_exact:
+            return state[:, 0:3], state[:, 3:6]
         theta, omega = self.plant.winch_state(state)
         lengths = self.sensors.encoder_lengths(theta, self.nominal)
         position = forward_kinematics(self.nominal.anchors, lengths, guess)
@@ -460,7 +345,8 @@ class BatchSimulator:
         grid = self.tick_grid(desired)
         internal = bool(set(truth_keys) - {"position", "velocity", "u_cmd"})
         plant = integration_plant(self.plant, grid.dt)
-        step = rosenbrock_step if self.implicit(grid.dt) else rk4_step
+        step = rk4_step if not self.implicit(grid.dt) else (
+            rosenbrock_step if self.integrator == "ros2" else friction_path_step)
         substeps = self.substeps_for(grid.dt)
         dt = grid.dt / substeps
         law = ComputedTorquePD(self.nominal, self.controller)

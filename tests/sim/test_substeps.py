@@ -11,7 +11,6 @@ from cdpr_pipeline.sim.plant import Plant
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import (
     HARD_SIGN_SUBSTEPS,
-    IMPLICIT_MIN_SUBSTEPS,
     MAX_SUBSTEPS,
     BatchSimulator,
     SimulationCostError,
@@ -51,7 +50,8 @@ def test_hard_sign_is_stepped_implicitly_close_to_the_resolved_explicit_steps(pa
     dt = 1.0 / hard.controller.rate_hz
     assert implicit_friction(plant)
     steps = auto_substeps(plant, dt)
-    assert steps == IMPLICIT_MIN_SUBSTEPS < HARD_SIGN_SUBSTEPS
+    # steps of at most HARD_PATH_STEP_S (2 ms): two per 300 Hz tick
+    assert steps == 2 < HARD_SIGN_SUBSTEPS
     desired = draw_trajectories(["oblique_eight", "flat_circle"], np.random.default_rng(7),
                                 plant.home, 4.0)
     nominal = Plant.from_rig(hard)
@@ -63,7 +63,7 @@ def test_hard_sign_is_stepped_implicitly_close_to_the_resolved_explicit_steps(pa
                               substeps=HARD_SIGN_SUBSTEPS, integrator="rk4")
     a = implicit.run(desired, np.random.default_rng(0))
     b = explicit.run(desired, np.random.default_rng(0))
-    assert a.substeps == IMPLICIT_MIN_SUBSTEPS and b.substeps == HARD_SIGN_SUBSTEPS
+    assert a.substeps == 2 and b.substeps == HARD_SIGN_SUBSTEPS
     gap = a.truth["position"] - b.truth["position"]
     # at rest a hard sign leaves the static friction anywhere in [-F_c, F_c]: where the
     # platform settles before the run differs by a fraction of a millimetre between any
