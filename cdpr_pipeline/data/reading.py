@@ -36,6 +36,13 @@ RIG = "rig"
 #: velocity's power that defines that bandwidth (see :func:`motion_bandwidth_hz`)
 CUTOFF_PER_BANDWIDTH = 25.0
 BANDWIDTH_POWER_SHARE = 0.99
+#: a periodogram bin counts as motion only with at least the power of a sinusoid half a
+#: sensor count high, ``(q/2)^2 / 2``: an encoder's rounding error (``|e| <= q/2``, power
+#: ``q^2/12`` in all) cannot fill one, while a slow run's staircase of counts, a
+#: sawtooth at the counting rate, otherwise reads as motion up to Nyquist (an 8-cable
+#: rig at 1 kHz, winches at 0.1 rad/s: 340 Hz for 0.4 Hz, a 400 Hz cut-off, and a
+#: stated model 577 % off)
+COUNT_POWER_SHARE = 0.125
 #: highest cut-off as a fraction of the sample rate (0.4 fs: 80 % of Nyquist)
 MAX_CUTOFF_FRACTION = 0.4
 #: the speed's cut-off per derivative cut-off under a smooth Coulomb law
@@ -266,16 +273,22 @@ def motion_bandwidth_hz(trajectories: Sequence[Trajectory]) -> float:
     ``(2 pi f)^2``, after subtracting the white measurement-noise floor read off the top
     quarter of the band (motion has no power there; differentiated noise would otherwise
     dominate). Positions are the encoder lengths of a cable robot (cleaner than motion
-    capture) and the axis positions of drive axes.
+    capture) and the axis positions of drive axes. A sensor's counts are not white noise
+    where a channel moves by about a count per sample: only bins above
+    :data:`COUNT_POWER_SHARE` of its count squared (its smallest recorded step) count.
     """
     found = []
     for tr in trajectories:
         q = recorded_position(tr)
         fs = 1.0 / float(np.median(np.diff(tr.t)))
         f, p = periodogram(q, fs=fs, window="hann", detrend="linear", axis=0)
-        p = p.sum(axis=1)
-        floor = float(np.median(p[f > 0.75 * fs / 2])) if len(f) > 8 else 0.0
-        power = np.clip(p - floor, 0.0, None) * (2 * np.pi * f) ** 2
+        step = np.abs(np.diff(q, axis=0))
+        count = np.array([col[col > 0].min() if (col > 0).any() else 0.0
+                          for col in step.T])
+        seen = p * (f[1] - f[0] if len(f) > 1 else 0.0) >= COUNT_POWER_SHARE * count ** 2
+        floor = np.median(p[f > 0.75 * fs / 2], axis=0) if len(f) > 8 else 0.0
+        p = np.where(seen, np.clip(p - floor, 0.0, None), 0.0).sum(axis=1)
+        power = p * (2 * np.pi * f) ** 2
         if not power.sum() > 0:
             continue
         share = np.cumsum(power) / power.sum()

@@ -51,6 +51,20 @@ def test_motion_bandwidth_is_the_highest_moving_frequency(fs):
     assert motion_bandwidth_hz([run]) == pytest.approx(top, rel=0.1)
 
 
+def test_an_encoders_counts_are_not_motion():
+    """A slow run read by an encoder that moves about half a count per sample: its
+    staircase of counts is a sawtooth at the counting rate, not white noise, and read as
+    motion up to Nyquist it set a 400 Hz cut-off on an 8-cable rig at 1 kHz."""
+    fs, top, count = 1000.0, 0.2, 1e-4
+    t = np.arange(int(30 * fs)) / fs
+    # peak speed 0.5 counts per sample
+    amplitude = 0.5 * count * fs / (2 * np.pi * top)
+    q = count * np.round(amplitude * np.sin(2 * np.pi * top * t) / count)
+    run = Trajectory("000_test", t, q[:, None], np.zeros((t.size, 1)))
+    # within two bins of the 30 s periodogram (the Hann window's main lobe)
+    assert motion_bandwidth_hz([run]) == pytest.approx(top, abs=2 / 30)
+
+
 def test_resolved_settings_follow_the_rate_and_the_motion(caplog):
     run = _axis_run(1000.0, [0.5, 2.0])
     rig = AxesRig(1000.0, ("q1",), WinchParams([1.0], [1.0], [1.0], [0.0]),
