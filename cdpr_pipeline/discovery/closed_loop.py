@@ -140,29 +140,48 @@ def resimulate(model: Model, nominal: Model, rig: Rig,
     if not model.cables:
         return _resimulate_axes(model, rig, trajectories,
                                 nominal if feedforward is None else feedforward, label)
+    return _resimulate_cables(model, nominal, rig, trajectories, (), settle_s, label)[0]
+
+
+def _resimulate_cables(model: Model, nominal: Model, rig: Rig,
+                       trajectories: Sequence[Trajectory],
+                       believing_model: Sequence[Trajectory], settle_s: float, label: str
+                       ) -> tuple[dict[str, dict[str, np.ndarray]],
+                                  dict[str, dict[str, np.ndarray]]]:
+    """A cable robot's :func:`resimulate`, and the runs of ``believing_model`` again with
+    a controller that believes ``model`` itself (``model`` sharing ``nominal``'s
+    geometry, so that the encoders read alike), in the same batches: a batch of a few
+    runs costs what one run costs."""
     sim = BatchSimulator(model, nominal, rig.controller, _EXACT, rig.sample_rate_hz,
                          settle_s=settle_s)
     dt = 1.0 / rig.controller.rate_hz
     substeps = sim.substeps_for(dt)
-    groups: dict[int, list[Trajectory]] = {}
-    for tr in trajectories:
-        groups.setdefault(tr.n_samples, []).append(tr)
-    log.info("closed loop: re-simulating the %s on %d runs (%d batch%s, %d sub-step%s per "
-             "control tick, %s)", label, len(trajectories), len(groups),
-             "" if len(groups) == 1 else "es", substeps, "" if substeps == 1 else "s",
+    jobs = [(tr, nominal, 0) for tr in trajectories] + \
+        [(tr, model, 1) for tr in believing_model]
+    groups: dict[int, list[tuple[Trajectory, Model, int]]] = {}
+    for job in jobs:
+        groups.setdefault(job[0].n_samples, []).append(job)
+    log.info("closed loop: re-simulating the %s on %d runs%s (%d batch%s, %d sub-step%s per "
+             "control tick, %s)", label, len(trajectories),
+             f" (and {len(believing_model)} with its own feedforward)" if believing_model
+             else "", len(groups), "" if len(groups) == 1 else "es", substeps,
+             "" if substeps == 1 else "s",
              "RK4, a steep friction along its path" if sim.implicit(dt) else "RK4")
-    out: dict[str, dict[str, np.ndarray]] = {}
+    out: tuple[dict[str, dict[str, np.ndarray]], dict[str, dict[str, np.ndarray]]] = ({}, {})
     rng = np.random.default_rng(0)           # exact sensors draw nothing
-    for runs in groups.values():
+    for group in groups.values():
+        runs = [tr for tr, _, _ in group]
         t = runs[0].t - runs[0].t[0]
         desired = SampledDesired(t, np.stack([tr.desired for tr in runs]),
                                  [tr.family for tr in runs])
-        result = sim.run(desired, rng, truth_keys=("position", "u_cmd"))
+        result = sim.run(desired, rng, truth_keys=("position", "u_cmd"),
+                         believed=None if not believing_model else [m for _, m, _ in group])
         n = min(len(t), result.t.size)
-        for b, tr in enumerate(runs):
-            out[tr.name] = {"position": result.truth["position"][b, :n],
-                            "torque": result.truth["u_cmd"][b, :n],
-                            "lengths": result.measured["lengths"][b, :n]}
+        for b, (tr, _, slot) in enumerate(group):
+            out[slot][tr.name] = {
+                "position": result.truth["position"][b, :n],
+                "torque": result.truth["u_cmd"][b, :n],
+                "lengths": result.measured["lengths"][b, :n]}
     return out
 
 
@@ -272,24 +291,46 @@ def _run_errors(tr: Trajectory, before: dict[str, np.ndarray], after: dict[str, 
                            torque_rms, relative, crosstest)
 
 
-def _feedforward(extended: Model, nominal: Model, rig: Rig,
-                 trajectories: Sequence[Trajectory]) -> FeedforwardTracking:
-    """Tracking errors on the extended model with the nominal and the extended model as
-    the controller's feedforward (:class:`~cdpr_pipeline.discovery.results.
+def _same_geometry(a: Model, b: Model) -> bool:
+    """Whether two cable-robot models share anchors, drums and encoder zero (their
+    encoders then read a motion alike)."""
+    return all(np.array_equal(getattr(a, k), getattr(b, k))
+               for k in ("anchors", "drum_radius", "home"))
+
+
+def _feedforward(sims: dict[str, dict[str, np.ndarray]],
+                 trajectories: Sequence[Trajectory],
+                 extended_feedforward: dict[str, dict[str, np.ndarray]]
+                 ) -> FeedforwardTracking:
+    """Tracking errors on the extended model with the nominal (``sims``: the extended
+    model's re-simulation under the stated controller) and the extended model as the
+    controller's feedforward (:class:`~cdpr_pipeline.discovery.results.
     FeedforwardTracking`)."""
     rms, peak = {}, {}
-    sims = [resimulate(extended, nominal, rig, trajectories, label="extended model with "
-                       "the nominal feedforward", feedforward=nominal),
-            resimulate(extended, extended, rig, trajectories, label="extended model with "
-                       "the extended feedforward", feedforward=extended)]
     for tr in trajectories:
         errors = [tr.desired[:len(s[tr.name]["position"])] - s[tr.name]["position"]
-                  for s in sims]
+                  for s in (sims, extended_feedforward)]
         rms[tr.name] = tuple(tuple(float(v) for v in np.sqrt(np.mean(e ** 2, axis=0)))
                              for e in errors)
         peak[tr.name] = tuple(tuple(float(v) for v in np.max(np.abs(e), axis=0))
                               for e in errors)
     return FeedforwardTracking(rms, peak)
+
+
+def _extended_sims(extended: Model, nominal: Model, rig: Rig,
+                   trajectories: Sequence[Trajectory], ff_runs: Sequence[Trajectory]
+                   ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, dict[str, np.ndarray]]]:
+    """The extended model re-simulated under the stated controller on every run, and
+    on ``ff_runs`` with the extended model as the controller's feedforward: a cable
+    robot's in the same batches where both controllers' encoders read alike."""
+    if extended.cables and _same_geometry(extended, nominal):
+        return _resimulate_cables(extended, nominal, rig, trajectories, ff_runs, 1.0,
+                                  "extended model")
+    sims = resimulate(extended, nominal, rig, trajectories, label="extended model")
+    own = {} if not ff_runs else resimulate(
+        extended, extended, rig, ff_runs, feedforward=extended,
+        label="extended model with the extended feedforward")
+    return sims, own
 
 
 def _feedforward_reason(rig: Rig, extended_differs: bool) -> str | None:
@@ -322,9 +363,14 @@ def compare_motion(nominal: Model, extended: Model, rig: Rig,
         mode = "closed_loop"
         err_nom = closed_loop_errors(trajectories, resimulate(
             nominal, nominal, rig, trajectories, label="nominal model"))
+        # the extended model under the stated controller serves both its own errors and
+        # the feedforward comparison's nominal feedforward (one simulation)
+        ff_runs = [tr for tr in trajectories if tr.name in set(held_names) | aside] \
+            if _feedforward_reason(rig, extended_differs) is None else []
+        sim_ext, sim_ff = _extended_sims(extended, nominal, rig, trajectories, ff_runs) \
+            if extended_differs else ({}, {})
         err_ext = err_nom if not extended_differs else closed_loop_errors(
-            trajectories, resimulate(extended, nominal, rig, trajectories,
-                                     label="extended model"))
+            trajectories, sim_ext)
     elif rig.kind == "axes":
         mode = "n_step"
         horizon = motion_horizon(trajectories, rig.sample_rate_hz)
@@ -359,8 +405,7 @@ def compare_motion(nominal: Model, extended: Model, rig: Rig,
     if mode == "closed_loop":
         reason = _feedforward_reason(rig, extended_differs)
         if reason is None:
-            held_runs = [tr for tr in trajectories if tr.name in held or tr.name in aside]
-            feedforward = _feedforward(extended, nominal, rig, held_runs)
+            feedforward = _feedforward(sim_ext, ff_runs, sim_ff)
     # the figure shows the untouched cross-test run when there is one
     first = next(tr for tr in trajectories if tr.name == ([*aside] or held_names)[0])
     plot = ClosedLoopPlot(first.name, err_nom[first.name]["position"],
