@@ -114,7 +114,7 @@ class PerRunComputedTorque:
                  ) -> np.ndarray:
         """Motor torques (B, n), every run's from its own law."""
         out = np.empty((position.shape[0], self.laws[0].nominal.n))
-        for law, rows in zip(self.laws, self.rows):
+        for law, rows in zip(self.laws, self.rows, strict=True):
             out[rows] = law(position[rows], velocity[rows], desired[rows],
                             desired_velocity[rows], desired_acceleration[rows])
         return out
