@@ -1,6 +1,6 @@
 """Several models of one rig's mechanics in one simulated batch (the closed-loop
 comparison's nominal and extended models, and the extended model under its own
-feedforward): every run moves exactly as it does simulated alone."""
+feedforward): every run moves as it does simulated alone."""
 
 from __future__ import annotations
 
@@ -51,9 +51,12 @@ def test_rows_move_as_their_models_do_alone(paper_rig, sharpness):
                              settle_s=0.3)
         return sim.run(desired, np.random.default_rng(0)).truth["position"]
 
-    assert np.abs(joint[:2] - alone(nominal, nominal)).max() < 1e-12
-    assert np.abs(joint[2:4] - alone(extended, nominal)).max() < 1e-12
-    assert np.abs(joint[4] - alone(extended, extended)[1]).max() < 1e-12
+    # to far below the scheme's own error (a tick takes its sub-steps where any row of
+    # the batch meets the steep law, so a row's steps depend on its batch-mates: 2e-11 m
+    # here, against 5e-8 m from a fine-step reference)
+    assert np.abs(joint[:2] - alone(nominal, nominal)).max() < 1e-9
+    assert np.abs(joint[2:4] - alone(extended, nominal)).max() < 1e-9
+    assert np.abs(joint[4] - alone(extended, extended)[1]).max() < 1e-9
     # the rows differ: the extended model moves otherwise, under either feedforward
     assert np.abs(joint[2:4] - joint[:2]).max() > 1e-6
     assert np.abs(joint[4] - joint[3]).max() > 1e-6
