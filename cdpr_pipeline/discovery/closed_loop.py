@@ -152,8 +152,8 @@ Job = tuple[Trajectory, Model, Model, int]
 
 def _resimulate_cables(nominal: Model, rig: Rig, jobs: Sequence[Job], label: str,
                        settle_s: float = 1.0) -> list[dict[str, dict[str, np.ndarray]]]:
-    """Every job's re-simulation, the results by slot (0, 1, 2) and run name. Jobs of runs of
-    equal length advance as one batch (a batch of a few runs costs about what one run
+    """Every job's re-simulation, the results by slot (0, 1, 2) and run name. Jobs of
+    runs of equal length advance as one batch (a batch of a few runs costs about what one run
     costs): their moving models must be one model plus drive torques
     (:func:`~cdpr_pipeline.sim.model_rows.plant_of_rows`), their believed models
     share ``nominal``'s geometry (the encoders read alike)."""
@@ -164,7 +164,9 @@ def _resimulate_cables(nominal: Model, rig: Rig, jobs: Sequence[Job], label: str
     out: list[dict[str, dict[str, np.ndarray]]] = [{}, {}, {}]
     rng = np.random.default_rng(0)           # exact sensors draw nothing
     for group in groups.values():
-        plant = plant_of_rows(group[0][1], [job[1] for job in group])
+        moving = [job[1] for job in group]
+        plant = plant_of_rows(nominal if any(m is nominal for m in moving) else moving[0],
+                              moving)
         sim = BatchSimulator(plant, nominal, rig.controller, _EXACT, rig.sample_rate_hz,
                              settle_s=settle_s)
         substeps = sim.substeps_for(dt)
