@@ -12,8 +12,8 @@ import logging
 import math
 import os
 import time
-from dataclasses import replace
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
