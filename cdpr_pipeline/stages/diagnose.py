@@ -34,24 +34,12 @@ from cdpr_pipeline.discovery.diagnosis import (
 from cdpr_pipeline.discovery.fitting import one_blas_thread
 from cdpr_pipeline.discovery.report import render
 from cdpr_pipeline.discovery.summary import GAIN_KEY, gain_text
-from cdpr_pipeline.models.blackbox import NetworkBlackBox
+from cdpr_pipeline.models.blackbox import LazyNet, NetworkBlackBox, apart
 from cdpr_pipeline.sim.model_file import write_model
 from cdpr_pipeline.tracking import flatten_params, run_name
 from cdpr_pipeline.tracking.writer import RunWriter
 
 log = logging.getLogger(__name__)
-
-
-class LazyNet:
-    """A network partial (``conf/model/*.yaml`` ``net``) instantiated only when called:
-    building it imports torch (seconds of start-up), which only the black-box phase
-    needs, and only when it runs."""
-
-    def __init__(self, config: DictConfig) -> None:
-        self.config = config
-
-    def __call__(self, *args: Any, **kwargs: Any) -> Any:
-        return instantiate(self.config)(*args, **kwargs)
 
 
 def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
@@ -63,8 +51,10 @@ def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
     blackbox = None
     if cfg.blackbox.enabled:
         bb = cfg.blackbox
-        blackbox = NetworkBlackBox(LazyNet(bb.model.net), int(bb.window), int(bb.epochs),
-                                   int(bb.max_windows), int(bb.seed))
+        # the network's config as plain data: a helper process fits it (apart)
+        net = LazyNet(OmegaConf.to_container(bb.model.net, resolve=True))
+        blackbox = NetworkBlackBox(net, int(bb.window), int(bb.epochs), int(bb.max_windows),
+                                   int(bb.seed))
     heldout = cfg.split.heldout
     crosstest = cfg.split.get("crosstest")
     # a partial: objects passed to instantiate itself would be read as configs
@@ -182,12 +172,15 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
     age = process_age_s()
     startup = age if age is not None else startup_cpu
     begun = time.perf_counter() - startup
+    # MLflow and torch (the black box) load in helper processes meanwhile
+    settings = settings_from_config(cfg)
     with RunWriter(cfg.tracking.experiment, run_name("diagnose", cfg.data.path),
-                   cfg.tracking.uri) as tracking:
+                   cfg.tracking.uri) as tracking, \
+            apart(settings.blackbox) as blackbox:
         t0 = time.perf_counter()
+        settings = replace(settings, blackbox=blackbox)
         data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
                             min_samples=cfg.data.min_samples)
-        settings = settings_from_config(cfg)
         # how the runs are read, chosen from the data once for the command (the diagnosis
         # and its split then read them the same way, and the choices are logged once)
         settings = replace(settings, regression=resolve_settings(settings.regression,

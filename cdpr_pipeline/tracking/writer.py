@@ -1,35 +1,27 @@
-"""A command's MLflow run written by a child process started before the work it records.
+"""A command's MLflow run written by a helper process started before the work it records.
 
 Importing MLflow and opening its store cost a short command 2-2.5 s of CPU (``mlflow``
 itself about 1.1 s, its SQL store with the schema-migration machinery 0.8 s), several
 times what writing a run takes. :class:`RunWriter`, started at the beginning of a command
-(``cdpr diagnose``), pays them in a child process, on the other core while the command
-works; the command then hands over what it logs (one JSON line) and waits only for it to
-be stored. A thread would not help: imports hold the interpreter lock, so a thread's
-import slows the command's own work by as much as it overlaps it (measured).
+(``cdpr diagnose``), pays them in a helper process
+(:class:`~cdpr_pipeline.helper_process.HelperProcess`), on the other core while the
+command works; the command then hands over what it logs and waits only for it to be
+stored.
 
 Where MLflow is already loaded in the process (a pipeline stage that opened its run, a
 test session, a notebook) there is nothing to overlap, and the run is written in the
 process itself, by the same function (:func:`~cdpr_pipeline.tracking.mlflow.write_run`).
-
-The child (``python -m cdpr_pipeline.tracking.writer``) reads a header line (store, experiment,
-run name, the stage run to write into), opens the store, then one JSON message per line
-(:func:`~cdpr_pipeline.tracking.mlflow.write_run`'s keywords), answering each with the
-run's id or the error. It runs in a session of its own, so a Ctrl-C at the terminal
-reaches the command only; at the end of its input (the command finished, failed or was
-interrupted) it exits, having created no run if it was sent nothing.
+The helper creates no run if it is sent nothing (a command stopped before it logged).
 """
 
 from __future__ import annotations
 
-import json
-import subprocess
 import sys
-import tempfile
 from collections.abc import Mapping, Sequence
 from types import TracebackType
 from typing import Any
 
+from cdpr_pipeline.helper_process import HelperProcess, serve
 from cdpr_pipeline.tracking.mlflow import (
     claim_stage_run,
     mlflow_client,
@@ -56,21 +48,16 @@ class RunWriter:
         self.uri = tracking_uri(uri)
         self.run_id = claim_stage_run()
         self._client = None
-        self._child: subprocess.Popen | None = None
-        self._stderr = None
+        self._helper: HelperProcess | None = None
         if "mlflow" not in sys.modules:
-            self._stderr = tempfile.TemporaryFile(mode="w+")
-            self._child = subprocess.Popen(
-                [sys.executable, "-m", __name__], stdin=subprocess.PIPE,
-                stdout=subprocess.PIPE, stderr=self._stderr, text=True,
-                start_new_session=True)
-            self._send({"uri": self.uri, "experiment": experiment, "run_name": run_name,
-                        "run_id": self.run_id})
+            self._helper = HelperProcess(__name__, "MLflow logging")
+            self._helper.send({"uri": self.uri, "experiment": experiment,
+                               "run_name": run_name, "run_id": self.run_id})
 
     @property
     def in_child(self) -> bool:
-        """Whether a child process writes the run."""
-        return self._child is not None
+        """Whether a helper process writes the run."""
+        return self._helper is not None
 
     def log(self, tags: Mapping[str, str] | None = None,
             params: Mapping[str, Any] | None = None,
@@ -82,43 +69,30 @@ class RunWriter:
         Raises
         ------
         RuntimeError
-            MLflow refused or failed (its message), or the child ended.
+            MLflow refused or failed (its message), or the helper ended.
         """
         message = {"tags": dict(tags or {}), "params": {k: str(v) for k, v in
                                                          (params or {}).items()},
                    "metrics": {k: float(v) for k, v in (metrics or {}).items()
                                if v is not None},
                    "artifacts": [str(a) for a in artifacts], "status": status}
-        if self._child is None:
+        if self._helper is None:
             if self._client is None:
                 self._client = mlflow_client(self.uri)
             self.run_id = write_run(self._client, self.run_id, self.experiment,
                                     self.run_name, **message)
         else:
-            self._send(message)
-            reply = self._child.stdout.readline()
-            if not reply:
-                raise RuntimeError(f"MLflow logging ended without a reply: {self._tail()}")
-            answer = json.loads(reply)
-            if "error" in answer:
-                raise RuntimeError(f"MLflow logging failed: {answer['error']}")
-            self.run_id = answer["run_id"]
+            self.run_id = self._helper.request(message)
         if status is not None:
             self.close()
         return self.run_id
 
     def close(self) -> None:
-        """End the child's input: it exits (waited for once it has written a run;
-        left to finish opening the store otherwise, which a kill could leave
-        half-migrated)."""
-        child, self._child = self._child, None
-        if child is None:
-            return
-        child.stdin.close()
-        if self.run_id is not None:
-            child.wait()
-        child.stdout.close()
-        self._stderr.close()
+        """End the helper's input: it exits (waited for once it has written a run; left
+        to finish opening the store otherwise, which a kill could leave half-migrated)."""
+        helper, self._helper = self._helper, None
+        if helper is not None:
+            helper.close(wait=self.run_id is not None)
 
     def __enter__(self) -> RunWriter:
         return self
@@ -126,48 +100,32 @@ class RunWriter:
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
                  trace: TracebackType | None) -> None:
         if kind is not None and self.run_id is not None and (
-                self._child is not None or self._client is not None):
+                self._helper is not None or self._client is not None):
             try:
                 self.log(status="FAILED")
             except RuntimeError:
                 pass                    # the command's own error is the one to report
         self.close()
 
-    def _send(self, message: Mapping[str, Any]) -> None:
-        try:
-            self._child.stdin.write(json.dumps(message) + "\n")
-            self._child.stdin.flush()
-        except (BrokenPipeError, OSError) as exc:
-            raise RuntimeError(f"MLflow logging ended: {self._tail()}") from exc
 
-    def _tail(self) -> str:
-        """The end of the child's error output."""
-        self._child.wait()
-        self._stderr.seek(0)
-        lines = self._stderr.read().strip().splitlines()
-        return lines[-1] if lines else f"exit status {self._child.returncode}"
+class _Writing:
+    """The helper's side: the first request names the store and the run, and opens the
+    store (while the command works); each later one is written (:func:`write_run`)."""
 
+    def __init__(self) -> None:
+        self.client = None
+        self.header: dict[str, Any] = {}
 
-def main() -> None:
-    """The child: the header, the store opened, then one message per line until the end
-    of the input, each answered on stdout (MLflow's own output goes to stderr)."""
-    replies, sys.stdout = sys.stdout, sys.stderr
-    header = sys.stdin.readline()
-    if not header:
-        return
-    header = json.loads(header)
-    client = mlflow_client(header["uri"])
-    run_id = header["run_id"]
-    for line in sys.stdin:
-        try:
-            run_id = write_run(client, run_id, header["experiment"], header["run_name"],
-                               **json.loads(line))
-            answer: dict[str, str] = {"run_id": run_id}
-        except Exception as exc:     # noqa: BLE001 - reported to the command, which raises
-            answer = {"error": f"{type(exc).__name__}: {exc}"}
-        replies.write(json.dumps(answer) + "\n")
-        replies.flush()
+    def __call__(self, request: dict[str, Any]) -> str | None:
+        if self.client is None:
+            self.header = dict(request)
+            self.client = mlflow_client(request["uri"])
+            return None
+        self.header["run_id"] = write_run(self.client, self.header["run_id"],
+                                          self.header["experiment"],
+                                          self.header["run_name"], **request)
+        return self.header["run_id"]
 
 
 if __name__ == "__main__":
-    main()
+    serve(_Writing())
