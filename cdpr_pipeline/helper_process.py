@@ -12,6 +12,7 @@ file, read back when it ends unexpectedly.
 
 from __future__ import annotations
 
+import gc
 import pickle
 import subprocess
 import sys
@@ -82,13 +83,17 @@ class HelperProcess:
 def serve(handle: Callable[[Any], Any]) -> None:
     """The helper's loop: ``handle`` each request until the end of the input, replying
     ``(True, result)`` or ``(False, "Error: message")``. Anything the code prints goes
-    to the error output, the replies alone to stdout."""
+    to the error output, the replies alone to stdout. The command waits for the helper's
+    exit (its CPU seconds then count in the command's), so the exit is kept short."""
     replies, sys.stdout = sys.stdout.buffer, sys.stderr
     requests = sys.stdin.buffer
     while True:
         try:
             request = pickle.load(requests)
         except EOFError:
+            # as the command does at its exit (cdpr_pipeline.cli): the interpreter's
+            # teardown then skips collecting torch's or MLflow's objects (about 1 s)
+            gc.freeze()
             return
         try:
             reply: tuple[bool, Any] = (True, handle(request))
