@@ -10,7 +10,7 @@ import textwrap
 
 import pytest
 
-from cdpr_pipeline.tracking import mlflow_client
+from cdpr_pipeline.tracking import mlflow_client, stage_run
 from cdpr_pipeline.tracking.writer import RunWriter
 
 #: a command's use of the writer, in a fresh interpreter; argv: store URI, artifact,
@@ -104,3 +104,17 @@ def test_in_a_process_that_loaded_mlflow_no_child_is_started(tmp_path):
     writer = RunWriter("exp", "x", f"sqlite:///{tmp_path / 'mlflow.db'}")
     assert not writer.in_child
     writer.close()
+
+
+def test_inside_a_pipeline_stage_the_command_writes_into_the_stage_run(tmp_path):
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    with stage_run("diagnose", "exp", uri) as (client, stage_run_id):
+        with RunWriter("exp", "diagnose:lab", uri) as writer:
+            writer.log(tags={"verdict": "none"}, metrics={"gain/after": 2.0})
+            assert writer.log(status="FINISHED") == stage_run_id
+        # claimed once: a second writer in the stage gets a run of its own
+        with RunWriter("exp", "other", uri) as other:
+            assert other.log(status="FINISHED") != stage_run_id
+    run = client.get_run(stage_run_id)
+    assert run.info.status == "FINISHED" and run.data.tags["verdict"] == "none"
+    assert run.data.metrics == {"gain/after": 2.0}
