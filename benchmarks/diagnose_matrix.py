@@ -46,7 +46,7 @@ STEEP = 500.0
 SEED = 11
 RUNS, DURATION_S = 5, 15.0
 #: the phases in the order the table lists them
-PHASES = ("startup", "loading", "signals", "candidates", "free_form", "selection",
+PHASES = ("startup", "loading", "admission", "signals", "candidates", "free_form", "selection",
           "never_worse", "validity", "second_look", "closed_loop", "black_box", "sizes",
           "writing", "mlflow", "other")
 
