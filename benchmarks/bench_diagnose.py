@@ -135,7 +135,7 @@ def run_matrix(names: list[str] | None, no_record: bool, datasets: Path | None =
             f"{walls[len(walls) // 2]:.1f} s, slowest {walls[-1]:.1f} s (target: median at "
             f"most {TARGET_S:.0f} s, slowest at most 30 s); peak memory at most "
             f"{max(peaks):.0f} MB (target 1024 MB; the command with its helper processes, "
-            f"proportional set sizes summed, sampled every 0.1 s, for rows measured since "
+            f"proportional set sizes summed, sampled every 0.5 s, for rows measured since "
             f"the helpers: the largest process's resident memory before). Five runs of "
             f"15 s per shape from the "
             f"independent generator (seed {diagnose_matrix.SEED}, one hidden Stribeck "

@@ -12,7 +12,7 @@ inertia 95, viscous 200, Coulomb 20, as the EMPS rig.yaml states).
 Per shape: the wall time of the ``cdpr diagnose`` process (start-up included), its CPU
 seconds (user + system of the child and the helper processes it waits for), its peak
 memory: the largest sum of the proportional set sizes of the command and its helper
-processes, sampled every 0.1 s (where ``/proc`` says; else the largest process's
+processes, sampled every 0.5 s (where ``/proc`` says; else the largest process's
 resident memory, from ``/usr/bin/time -v`` or ``ru_maxrss``), every phase of its
 ``metrics.json``, the load average over the run, and a reference: a fixed workload
 (:func:`benchmarks.bench_foreign_diagnose.reference_seconds`) measured in the
@@ -122,7 +122,8 @@ def _tree_pss_mb(root: int) -> float | None:
 
 
 class TreeMemory(threading.Thread):
-    """The peak of :func:`_tree_pss_mb` over a process's life, sampled every 0.1 s: the
+    """The peak of :func:`_tree_pss_mb` over a process's life, sampled every 0.5 s (a
+    sample costs 5-30 ms of CPU, which the command would wait for on 2 busy cores): the
     command's memory with its helper processes (MLflow's writer, the black box), which
     the largest single process's ``ru_maxrss`` would not count."""
 
@@ -135,7 +136,7 @@ class TreeMemory(threading.Thread):
             now = _tree_pss_mb(self.proc.pid)
             if now is not None:
                 self.peak_mb = max(self.peak_mb or 0.0, now)
-            time.sleep(0.1)
+            time.sleep(0.5)
 
 
 def run_shape(shape: Shape, tmp: Path, datasets: Path | None = None) -> dict:
