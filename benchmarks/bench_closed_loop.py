@@ -14,7 +14,11 @@ the recorded desired paths, as the diagnosis's closed-loop phase does, by
   target: at most 2 s per model for five 15 s runs);
 - ``before``: the former scheme, the ROS2 step at two sub-steps per tick
   (``integrator=ros2``), in the same process;
-- ``reference``: ``now`` at 16 times its sub-steps, on the accuracy runs.
+- ``reference``: ``now`` at 16 times its sub-steps, on the accuracy runs;
+- ``phase``: the diagnosis's closed-loop phase itself
+  (:func:`~cdpr_pipeline.discovery.closed_loop.compare_motion`: the nominal model, an
+  extended one, the model plus a Stribeck bump, and the extended model under its own
+  feedforward on a held-out run), its CPU seconds per model (halved).
 
 A drive axes' shape is ``AXESax:RATE:LAW``: the axes of :mod:`benchmarks.bench_axes_loop`
 (the first ``AXES`` of them) along its default references under a PD controller with
@@ -44,6 +48,7 @@ from benchmarks.measurements import DOCUMENT, invoked_as, record
 from cdpr_pipeline.data.axis_controller import AxisController
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.rig import WinchParams
+from cdpr_pipeline.discovery.closed_loop import compare_motion
 from cdpr_pipeline.sim.axes_loop import AxesLoop, AxesReferences
 from cdpr_pipeline.sim.axis_references import AxisReferenceSet
 from cdpr_pipeline.sim.effects import EFFECTS
@@ -135,6 +140,12 @@ def cable_shape(count: int, rate: float, law: str, tmp: Path, seed: int, duratio
     out["now_err"] = _rms_ratio(run(sim("auto"), short)[0], reference, desired_short)
     out["before_err"] = _rms_ratio(run(sim("ros2"), short)[0], reference, desired_short)
     out["tracking"] = float(np.sqrt(np.mean((reference - desired_short) ** 2)))
+    extended = model if law == "stribeck" else nominal.with_effects(
+        [EFFECTS["stribeck_friction"](**STRIBECK)])
+    start = time.process_time()
+    compare_motion(nominal, extended, rig, data.trajectories,
+                   [data.trajectories[-1].name], True)
+    out["phase_s"] = (time.process_time() - start) / 2
     return out
 
 
@@ -175,15 +186,17 @@ def axes_shape(count: int, rate: float, law: str, duration_s: float, accuracy_s:
 
 
 HEADER = ("| shape | rig | rate Hz | law | sub-steps | CPU s per model | error, % of tracking "
-          "| before: sub-steps | before: CPU s | before: error % | tracking error (RMS) |\n"
-          "|---|---|---|---|---|---|---|---|---|---|---|")
+          "| before: sub-steps | before: CPU s | before: error % | tracking error (RMS) "
+          "| diagnose phase: CPU s per model |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def _row(r: dict) -> str:
     before = ("| | | " if "before_s" not in r else
               f"| {r['before_steps']} | {r['before_s']:.2f} | {100 * r['before_err']:.3f} ")
     return (f"| {r['shape']} | {r['kind']} | {r['rate']:g} | {r['law']} | {r['now_steps']} | "
-            f"{r['now_s']:.2f} | {100 * r['now_err']:.3f} {before}| {r['tracking']:.3g} |")
+            f"{r['now_s']:.2f} | {100 * r['now_err']:.3f} {before}| {r['tracking']:.3g} | "
+            f"{'' if 'phase_s' not in r else format(r['phase_s'], '.2f')} |")
 
 
 def main() -> None:
@@ -207,9 +220,11 @@ def main() -> None:
             before = "" if "before_s" not in r else (
                 f"; before {r['before_steps']} sub-steps {r['before_s']:.2f} s, "
                 f"{100 * r['before_err']:.2f} %")
+            phase = "" if "phase_s" not in r else \
+                f"; diagnose phase {r['phase_s']:.2f} s CPU per model"
             print(f"{shape}: now {r['now_steps']} sub-steps {r['now_s']:.2f} s CPU, "
                   f"error {100 * r['now_err']:.3f} % of the tracking error "
-                  f"({1e6 * r['tracking']:.3g} um){before}", flush=True)
+                  f"({1e6 * r['tracking']:.3g} um){before}{phase}", flush=True)
     if args.no_record:
         return
     rows = {r["shape"]: _row(r) for r in rows}
@@ -233,7 +248,12 @@ def main() -> None:
              f"least) against the now scheme at {REFERENCE_FACTOR} (axes "
              f"{AXES_REFERENCE_FACTOR}) times its sub-steps (target at most "
              f"{100 * TARGET_RATIO:g} % of the tracking error, in m for cables, the "
-             f"axes' own units for axes). Rows measured by separate invocations "
+             f"axes' own units for axes). The diagnose phase: `cdpr diagnose`'s closed "
+             f"loop on the full runs, the nominal model and the model with a Stribeck "
+             f"bump (F_s = {STRIBECK['static_ratio']:g} F_c, w_s = "
+             f"{STRIBECK['stribeck_velocity']:g}) in one batch, with the extended "
+             f"feedforward's held-out run, CPU seconds halved. Rows measured by separate "
+             f"invocations "
              f"(--shapes) keep their own load and commit; this run's are above."]
     record("closed-loop", "Closed-loop re-simulation across rig shapes and friction laws",
            "\n".join(body), command=invoked_as())

@@ -12,7 +12,9 @@ with :data:`EXIT_INTERNAL_ERROR`. The traceback is printed only with a debug fla
 from __future__ import annotations
 
 import os
+import signal
 import sys
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -54,6 +56,29 @@ class CommandExit(SystemExit):
 def debug_enabled() -> bool:
     """Whether a debug flag asks for tracebacks (see :data:`DEBUG_ENV`)."""
     return any(os.environ.get(name, "") not in ("", "0") for name in DEBUG_ENV)
+
+
+@contextmanager
+def interrupt_deferred() -> Iterator[None]:
+    """Hold a Ctrl-C (SIGINT) until the block ends, then deliver it as usual.
+
+    For library code that swallows an interrupt: pandas' C reader turns a
+    ``KeyboardInterrupt`` raised during its read into ``ParserError: Calling read(nbytes)
+    on source failed``, which reads as a malformed file (2 of 40 Ctrl-C's during ``cdpr
+    diagnose`` on the foreign rig exited 2 with "malformed CSV"). Outside the main thread,
+    which no signal reaches, the block runs as it is.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if caught:      # the handler that was in place decides, as if it came now
+            signal.raise_signal(signal.SIGINT)
 
 
 def _user_error_types() -> tuple[type[BaseException], ...]:

@@ -39,6 +39,7 @@ from cdpr_pipeline.sim.axes_loop import (
     forced_response,
     substeps_for,
 )
+from cdpr_pipeline.sim.model_rows import extra_torques, plant_of_rows
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import BatchSimulator
 from cdpr_pipeline.sim.trajectories import SampledDesired
@@ -140,30 +141,83 @@ def resimulate(model: Model, nominal: Model, rig: Rig,
     if not model.cables:
         return _resimulate_axes(model, rig, trajectories,
                                 nominal if feedforward is None else feedforward, label)
-    sim = BatchSimulator(model, nominal, rig.controller, _EXACT, rig.sample_rate_hz,
-                         settle_s=settle_s)
+    return _resimulate_cables(nominal, rig, [(tr, model, nominal, 0) for tr in trajectories],
+                              label, settle_s)[0]
+
+
+#: one cable-robot run to re-simulate: the run, the model that moves, the model its
+#: controller believes, and which of the results (0, 1, 2) it belongs to
+Job = tuple[Trajectory, Model, Model, int]
+
+
+def _resimulate_cables(nominal: Model, rig: Rig, jobs: Sequence[Job], label: str,
+                       settle_s: float = 1.0) -> list[dict[str, dict[str, np.ndarray]]]:
+    """Every job's re-simulation, the results by slot (0, 1, 2) and run name. Jobs of
+    runs of equal length advance as one batch (a batch of a few runs costs about what one run
+    costs): their moving models must be one model plus drive torques
+    (:func:`~cdpr_pipeline.sim.model_rows.plant_of_rows`), their believed models
+    share ``nominal``'s geometry (the encoders read alike)."""
     dt = 1.0 / rig.controller.rate_hz
-    substeps = sim.substeps_for(dt)
-    groups: dict[int, list[Trajectory]] = {}
-    for tr in trajectories:
-        groups.setdefault(tr.n_samples, []).append(tr)
-    log.info("closed loop: re-simulating the %s on %d runs (%d batch%s, %d sub-step%s per "
-             "control tick, %s)", label, len(trajectories), len(groups),
-             "" if len(groups) == 1 else "es", substeps, "" if substeps == 1 else "s",
-             "RK4, a steep friction along its path" if sim.implicit(dt) else "RK4")
-    out: dict[str, dict[str, np.ndarray]] = {}
+    groups: dict[int, list[Job]] = {}
+    for job in jobs:
+        groups.setdefault(job[0].n_samples, []).append(job)
+    out: list[dict[str, dict[str, np.ndarray]]] = [{}, {}, {}]
     rng = np.random.default_rng(0)           # exact sensors draw nothing
-    for runs in groups.values():
+    for group in groups.values():
+        moving = [job[1] for job in group]
+        plant = plant_of_rows(nominal if any(m is nominal for m in moving) else moving[0],
+                              moving)
+        sim = BatchSimulator(plant, nominal, rig.controller, _EXACT, rig.sample_rate_hz,
+                             settle_s=settle_s)
+        substeps = sim.substeps_for(dt)
+        log.info("closed loop: re-simulating the %s on %d runs (%d sub-step%s per control "
+                 "tick, %s)", label, len(group), substeps, "" if substeps == 1 else "s",
+                 "RK4, a steep friction along its path" if sim.implicit(dt) else "RK4")
+        runs = [job[0] for job in group]
         t = runs[0].t - runs[0].t[0]
         desired = SampledDesired(t, np.stack([tr.desired for tr in runs]),
                                  [tr.family for tr in runs])
-        result = sim.run(desired, rng, truth_keys=("position", "u_cmd"))
+        believed = [job[2] for job in group]
+        result = sim.run(desired, rng, truth_keys=("position", "u_cmd"),
+                         believed=None if all(m is nominal for m in believed) else believed)
         n = min(len(t), result.t.size)
-        for b, tr in enumerate(runs):
-            out[tr.name] = {"position": result.truth["position"][b, :n],
-                            "torque": result.truth["u_cmd"][b, :n],
-                            "lengths": result.measured["lengths"][b, :n]}
+        for b, (tr, _, _, slot) in enumerate(group):
+            out[slot][tr.name] = {"position": result.truth["position"][b, :n],
+                                  "torque": result.truth["u_cmd"][b, :n],
+                                  "lengths": result.measured["lengths"][b, :n]}
     return out
+
+
+def _closed_loop_sims(nominal: Model, extended: Model, rig: Rig,
+                      trajectories: Sequence[Trajectory], ff_runs: Sequence[Trajectory],
+                      extended_differs: bool) -> list[dict[str, dict[str, np.ndarray]]]:
+    """The nominal model's re-simulation, the extended model's (both under the stated
+    controller) and the extended model's on ``ff_runs`` with itself as the
+    controller's feedforward, by run name. A cable robot's runs share batches where
+    they can: every model, where the extended one is the nominal plus drive torques;
+    the extended model's two controllers, where its geometry is the nominal one."""
+    if not extended_differs:
+        return [resimulate(nominal, nominal, rig, trajectories, label="nominal model"),
+                {}, {}]
+    if not nominal.cables:
+        return [resimulate(nominal, nominal, rig, trajectories, label="nominal model"),
+                resimulate(extended, nominal, rig, trajectories, label="extended model"),
+                {} if not ff_runs else resimulate(
+                    extended, extended, rig, ff_runs, feedforward=extended,
+                    label="extended model with the extended feedforward")]
+    nominal_jobs = [(tr, nominal, nominal, 0) for tr in trajectories]
+    extended_jobs = [(tr, extended, nominal, 1) for tr in trajectories]
+    own = [(tr, extended, extended, 2) for tr in ff_runs]
+    if extra_torques(nominal, extended) is not None:
+        return _resimulate_cables(nominal, rig, [*nominal_jobs, *extended_jobs, *own],
+                                  "nominal and extended models")
+    sims = [_resimulate_cables(nominal, rig, nominal_jobs, "nominal model")[0]]
+    if _same_geometry(extended, nominal):
+        return [*sims, *_resimulate_cables(nominal, rig, [*extended_jobs, *own],
+                                           "extended model")[1:]]
+    return [*sims, _resimulate_cables(nominal, rig, extended_jobs, "extended model")[1],
+            _resimulate_cables(extended, rig, [(tr, m, b, 0) for tr, m, b, _ in own],
+                               "extended model with the extended feedforward")[0]]
 
 
 def closed_loop_errors(measured: Sequence[Trajectory],
@@ -272,19 +326,25 @@ def _run_errors(tr: Trajectory, before: dict[str, np.ndarray], after: dict[str, 
                            torque_rms, relative, crosstest)
 
 
-def _feedforward(extended: Model, nominal: Model, rig: Rig,
-                 trajectories: Sequence[Trajectory]) -> FeedforwardTracking:
-    """Tracking errors on the extended model with the nominal and the extended model as
-    the controller's feedforward (:class:`~cdpr_pipeline.discovery.results.
+def _same_geometry(a: Model, b: Model) -> bool:
+    """Whether two cable-robot models share anchors, drums and encoder zero (their
+    encoders then read a motion alike)."""
+    return all(np.array_equal(getattr(a, k), getattr(b, k))
+               for k in ("anchors", "drum_radius", "home"))
+
+
+def _feedforward(sims: dict[str, dict[str, np.ndarray]],
+                 trajectories: Sequence[Trajectory],
+                 extended_feedforward: dict[str, dict[str, np.ndarray]]
+                 ) -> FeedforwardTracking:
+    """Tracking errors on the extended model with the nominal (``sims``: the extended
+    model's re-simulation under the stated controller) and the extended model as the
+    controller's feedforward (:class:`~cdpr_pipeline.discovery.results.
     FeedforwardTracking`)."""
     rms, peak = {}, {}
-    sims = [resimulate(extended, nominal, rig, trajectories, label="extended model with "
-                       "the nominal feedforward", feedforward=nominal),
-            resimulate(extended, extended, rig, trajectories, label="extended model with "
-                       "the extended feedforward", feedforward=extended)]
     for tr in trajectories:
         errors = [tr.desired[:len(s[tr.name]["position"])] - s[tr.name]["position"]
-                  for s in sims]
+                  for s in (sims, extended_feedforward)]
         rms[tr.name] = tuple(tuple(float(v) for v in np.sqrt(np.mean(e ** 2, axis=0)))
                              for e in errors)
         peak[tr.name] = tuple(tuple(float(v) for v in np.max(np.abs(e), axis=0))
@@ -320,11 +380,15 @@ def compare_motion(nominal: Model, extended: Model, rig: Rig,
     horizon = None
     if why_not is None:
         mode = "closed_loop"
-        err_nom = closed_loop_errors(trajectories, resimulate(
-            nominal, nominal, rig, trajectories, label="nominal model"))
+        # the extended model under the stated controller serves both its own errors and
+        # the feedforward comparison's nominal feedforward (one simulation)
+        ff_runs = [tr for tr in trajectories if tr.name in set(held_names) | aside] \
+            if _feedforward_reason(rig, extended_differs) is None else []
+        sim_nom, sim_ext, sim_ff = _closed_loop_sims(nominal, extended, rig, trajectories,
+                                                     ff_runs, extended_differs)
+        err_nom = closed_loop_errors(trajectories, sim_nom)
         err_ext = err_nom if not extended_differs else closed_loop_errors(
-            trajectories, resimulate(extended, nominal, rig, trajectories,
-                                     label="extended model"))
+            trajectories, sim_ext)
     elif rig.kind == "axes":
         mode = "n_step"
         horizon = motion_horizon(trajectories, rig.sample_rate_hz)
@@ -359,8 +423,7 @@ def compare_motion(nominal: Model, extended: Model, rig: Rig,
     if mode == "closed_loop":
         reason = _feedforward_reason(rig, extended_differs)
         if reason is None:
-            held_runs = [tr for tr in trajectories if tr.name in held or tr.name in aside]
-            feedforward = _feedforward(extended, nominal, rig, held_runs)
+            feedforward = _feedforward(sim_ext, ff_runs, sim_ff)
     # the figure shows the untouched cross-test run when there is one
     first = next(tr for tr in trajectories if tr.name == ([*aside] or held_names)[0])
     plot = ClosedLoopPlot(first.name, err_nom[first.name]["position"],

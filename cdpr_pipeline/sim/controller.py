@@ -83,3 +83,38 @@ class ComputedTorquePD:
         omega, alpha, _ = winch_rates(units, g, velocity, a_cmd, R)
         theta = plant.winch_angle_from_length(g)
         return R * tension + plant.winch.inertia * alpha + plant.friction_torque(theta, omega)
+
+
+@dataclass
+class PerRunComputedTorque:
+    """:class:`ComputedTorquePD` where each run of a batch believes its own model: one
+    law per distinct model (by identity), each on its own runs' rows (a batch of a few
+    runs costs what one run costs, so two controllers share one simulation)."""
+
+    laws: tuple[ComputedTorquePD, ...]
+    rows: tuple[np.ndarray, ...]
+
+    @classmethod
+    def of(cls, believed: list[Plant], spec: ControllerSpec
+           ) -> ComputedTorquePD | PerRunComputedTorque:
+        """The law of runs believing ``believed`` (one model per run): a plain
+        :class:`ComputedTorquePD` where they all believe one."""
+        models: list[Plant] = []
+        for model in believed:
+            if not any(model is known for known in models):
+                models.append(model)
+        if len(models) == 1:
+            return ComputedTorquePD(models[0], spec)
+        rows = tuple(np.array([b for b, m in enumerate(believed) if m is model])
+                     for model in models)
+        return cls(tuple(ComputedTorquePD(m, spec) for m in models), rows)
+
+    def __call__(self, position: np.ndarray, velocity: np.ndarray, desired: np.ndarray,
+                 desired_velocity: np.ndarray, desired_acceleration: np.ndarray
+                 ) -> np.ndarray:
+        """Motor torques (B, n), every run's from its own law."""
+        out = np.empty((position.shape[0], self.laws[0].nominal.n))
+        for law, rows in zip(self.laws, self.rows, strict=True):
+            out[rows] = law(position[rows], velocity[rows], desired[rows],
+                            desired_velocity[rows], desired_acceleration[rows])
+        return out

@@ -58,6 +58,44 @@ def _parse(expression: str) -> ast.expr:
         raise ValueError(f"expression {expression!r} is not valid: {err.msg}") from err
 
 
+@lru_cache(maxsize=4096)
+def _compiled(expression: str) -> Callable[[Mapping[str, np.ndarray]], np.ndarray | float]:
+    """``expression`` as a function of the variables: its tree walked once (a
+    simulation evaluates one expression at every step)."""
+
+    def build(node: ast.expr) -> Callable[[Mapping[str, np.ndarray]], np.ndarray | float]:
+        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)):
+            constant = float(node.value)
+            return lambda _: constant
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+            operand = build(node.operand)
+            return lambda v: -operand(v)
+        if isinstance(node, ast.Name):
+            name = node.id
+
+            def read(v: Mapping[str, np.ndarray]) -> np.ndarray:
+                if name not in v:
+                    raise ValueError(f"expression {expression!r}: unknown variable {name!r}")
+                return np.asarray(v[name], dtype=float)
+
+            return read
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
+                and node.func.id in FUNCTIONS and not node.keywords:
+            fn = FUNCTIONS[node.func.id].fn
+            args = [build(a) for a in node.args]
+            if len(args) == 1:
+                (first,) = args
+                return lambda v: fn(first(v))
+            if len(args) == 2:
+                first, second = args
+                return lambda v: fn(first(v), second(v))
+            return lambda v: fn(*(a(v) for a in args))
+        raise ValueError(f"expression {expression!r}: {ast.unparse(node)!r} is not allowed "
+                         f"(functions: {sorted(FUNCTIONS)}; variables: {list(VARIABLES)})")
+
+    return build(_parse(expression))
+
+
 def evaluate(expression: str, variables: Mapping[str, np.ndarray]) -> np.ndarray:
     """Value of ``expression`` for arrays ``variables`` (``omega``, ``theta``).
 
@@ -67,24 +105,12 @@ def evaluate(expression: str, variables: Mapping[str, np.ndarray]) -> np.ndarray
     >>> evaluate("mul(abs_(omega), omega)", {"omega": np.array([-2.0, 3.0])})
     array([-4.,  9.])
     """
-
-    def walk(node: ast.expr):
-        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)):
-            return float(node.value)
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
-            return -walk(node.operand)
-        if isinstance(node, ast.Name):
-            if node.id not in variables:
-                raise ValueError(f"expression {expression!r}: unknown variable {node.id!r}")
-            return np.asarray(variables[node.id], dtype=float)
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
-                and node.func.id in FUNCTIONS and not node.keywords:
-            return FUNCTIONS[node.func.id].fn(*(walk(a) for a in node.args))
-        raise ValueError(f"expression {expression!r}: {ast.unparse(node)!r} is not allowed "
-                         f"(functions: {sorted(FUNCTIONS)}; variables: {list(variables)})")
-
-    value = walk(_parse(expression))
+    value = _compiled(expression)(variables)
     reference = next(iter(variables.values()))
+    if isinstance(value, np.ndarray) and value.dtype == float \
+            and value.shape == np.shape(reference) \
+            and not any(value is x for x in variables.values()):
+        return value          # a new array already (a step's term: no copy to pay for)
     return np.broadcast_to(value, np.shape(reference)).astype(float)
 
 

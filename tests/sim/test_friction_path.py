@@ -10,6 +10,7 @@ import pytest
 
 from cdpr_pipeline.data.axis_controller import AxisController
 from cdpr_pipeline.data.rig import WinchParams
+from cdpr_pipeline.sim import integrators
 from cdpr_pipeline.sim.axes_loop import AxesLoop, AxesReferences
 from cdpr_pipeline.sim.axis_references import AxisReferenceSet
 from cdpr_pipeline.sim.effects import EFFECTS
@@ -86,6 +87,24 @@ def test_cable_robot_closed_loop_within_one_percent_of_tracking(paper_rig, law):
     # steps of at most 1 ms (a smooth law) or 2 ms (a hard sign) at 300 Hz
     assert now.substeps == (4 if law == "tanh500" else 2)
     assert gap < 0.01 * tracking
+
+
+def test_sub_steps_only_where_a_winch_meets_the_steep_law(paper_rig, monkeypatch):
+    """A tick takes its sub-steps only where a winch meets the law's steep part: rare
+    (reversals), the rest of the tick one step, as the mechanics alone ask."""
+    rig, nominal, model, desired = _cable_runs(paper_rig, "tanh500")
+    steps = []
+    path_step = integrators.friction_path_step
+    monkeypatch.setattr(integrators, "friction_path_step",
+                        lambda *a, **k: steps.append(1) or path_step(*a, **k))
+    sim = BatchSimulator(model, nominal, rig.controller, EXACT, rig.sample_rate_hz,
+                         settle_s=0.2)
+    result = sim.run(desired.take([0]), np.random.default_rng(0), truth_keys=("position",))
+    ticks = sim.tick_grid(desired.take([0])).n_ticks - 1
+    print(f"{len(steps)} sub-steps in {ticks} ticks of {result.substeps}")
+    assert result.substeps == 4
+    # some ticks are split (the run reverses), most are not
+    assert 0 < len(steps) < 0.5 * result.substeps * ticks
 
 
 def test_the_fine_reference_is_rk4_resolving_a_steep_tanh(paper_rig):

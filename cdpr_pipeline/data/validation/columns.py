@@ -17,6 +17,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from cdpr_pipeline.errors import interrupt_deferred
+
 from ..errors import Problem, Severity
 from ..rig import Rig
 from .report import ValidationReport
@@ -205,9 +207,10 @@ def _read(run: RunFile, names: list[str]) -> pd.DataFrame | None:
         # the writer put there on purpose and is reported as such. Blank lines are kept
         # (as empty rows) so that row index + 2 is always the file line.
         unique, run.repeats = _unique(names)
-        return pd.read_csv(run.path, header=0, names=unique, encoding="utf-8-sig",
-                           skipinitialspace=True, keep_default_na=False, na_values=[""],
-                           skip_blank_lines=False, index_col=False)
+        with interrupt_deferred():
+            return pd.read_csv(run.path, header=0, names=unique, encoding="utf-8-sig",
+                               skipinitialspace=True, keep_default_na=False,
+                               na_values=[""], skip_blank_lines=False, index_col=False)
     except pd.errors.ParserError as exc:
         match = re.search(r"line (\d+)", str(exc))
         reason = str(exc).strip().removeprefix("Error tokenizing data. C error: ")

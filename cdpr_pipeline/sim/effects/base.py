@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, ClassVar
 
 import numpy as np
@@ -62,6 +63,24 @@ def per_winch(value: float | Sequence[float], cables: Sequence[int] | None, n: i
     >>> per_winch([0.3, 0.5], [3, 1], 3).tolist()
     [0.5, 0.0, 0.3]
     """
+    # an effect's law reads its per-winch parameters at every simulated step: plain
+    # values (what an effect holds) are looked up, a copy handed out
+    try:
+        key = (value if np.ndim(value) == 0 else tuple(value),
+               None if cables is None else tuple(cables), n, fill)
+        hash(key)
+    except TypeError:
+        return _per_winch(value, cables, n, fill)
+    return _per_winch_of(*key).copy()
+
+
+@lru_cache(maxsize=1024)
+def _per_winch_of(value: Any, cables: tuple[int, ...] | None, n: int, fill: float
+                  ) -> np.ndarray:
+    return _per_winch(value, cables, n, fill)
+
+
+def _per_winch(value: Any, cables: Sequence[int] | None, n: int, fill: float) -> np.ndarray:
     _cable_mask(cables, n)     # validates the cable numbers
     idx = np.arange(n) if cables is None else np.asarray([int(c) - 1 for c in cables], int)
     out = np.full(n, float(fill))

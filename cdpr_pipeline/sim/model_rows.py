@@ -1,0 +1,74 @@
+"""Models that share a rig's mechanics, simulated in one batch.
+
+A model extended by drive torques alone (a friction law's extension: a Stribeck bump, a
+free-form term) moves with the nominal model's mechanics; only the torque resisting its
+drives differs. A simulated batch of a few runs costs about what one run costs (each
+step's work is Python's, not the arithmetic's), so the closed-loop comparison advances
+both models' runs as one batch: one plant whose extra effects act on their own rows
+(:func:`plant_of_rows`), the rows of the nominal model untouched by them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cdpr_pipeline.sim.plant import Plant
+
+
+@dataclass(frozen=True)
+class OnRows:
+    """An effect's drive torque on some runs of a batch only: ``rows`` (B, 1), True on
+    the runs it acts on (the batch is the second-last axis of every friction call)."""
+
+    effect: Any
+    rows: np.ndarray
+
+    def winch_torque(self, theta: np.ndarray, omega: np.ndarray, plant: Plant
+                     ) -> np.ndarray | None:
+        extra = self.effect.winch_torque(theta, omega, plant)
+        if extra is None:
+            return None
+        # where, not a product: the effect may overflow on the other rows' speeds
+        return np.where(self.rows, extra, 0.0)
+
+
+def _same(a: Any, b: Any) -> bool:
+    if a is b:
+        return True
+    if dataclasses.is_dataclass(a) and type(a) is type(b):
+        return all(_same(getattr(a, f.name), getattr(b, f.name))
+                   for f in dataclasses.fields(a))
+    if isinstance(a, np.ndarray | list) or isinstance(b, np.ndarray | list):
+        return np.array_equal(np.asarray(a), np.asarray(b))
+    return bool(a == b)
+
+
+def extra_torques(base: Plant, model: Plant) -> tuple | None:
+    """The effects ``model`` adds to ``base`` when it is ``base`` plus drive torques
+    alone (the same mechanics, friction law and earlier effects), else None."""
+    if type(model) is not type(base) or len(model.effects) < len(base.effects) \
+            or any(a is not b for a, b in zip(base.effects, model.effects[:len(base.effects)],
+                                             strict=True)):
+        return None
+    if not all(_same(getattr(base, f.name), getattr(model, f.name))
+               for f in dataclasses.fields(base) if f.name != "effects"):
+        return None
+    return tuple(model.effects[len(base.effects):])
+
+
+def plant_of_rows(base: Plant, rows: Sequence[Plant]) -> Plant:
+    """One plant for a batch whose run ``b`` follows ``rows[b]``: ``base``, or ``base``
+    with extra drive torques (:func:`extra_torques`), each acting on its own runs."""
+    added = []
+    for model in {id(m): m for m in rows}.values():
+        extra = extra_torques(base, model)
+        if extra is None:
+            raise ValueError("a row's model is not the base model plus drive torques")
+        mask = np.array([m is model for m in rows])[:, None]
+        added += [OnRows(effect, mask) for effect in extra]
+    return base if not added else base.replace(effects=(*base.effects, *added))
