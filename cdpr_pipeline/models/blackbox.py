@@ -1,16 +1,35 @@
 """The diagnosis's black box: a network fitted to the nominal model's residual from the
 regressors alone, the strategy the diagnose stage passes to discovery (which never imports
-torch). Building it loads nothing heavy; torch is loaded when it trains.
+torch). Building it loads nothing heavy; torch is loaded when it trains, in the process
+or, started before the diagnosis, in a helper process (:class:`BlackBoxApart`).
 """
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
+from types import TracebackType
 from typing import Any
 
 import numpy as np
+from hydra.utils import instantiate
 
+from cdpr_pipeline.helper_process import HelperProcess, serve
 from cdpr_pipeline.identification.regressors import WinchRegression
+
+
+class LazyNet:
+    """A network partial (``conf/model/*.yaml``'s ``net``, as a plain mapping)
+    instantiated only when called: building it imports torch (seconds of start-up),
+    which only the black-box phase needs, and only when it runs."""
+
+    def __init__(self, config: Any) -> None:
+        self.config = config
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        return instantiate(self.config)(*args, **kwargs)
 
 
 @dataclass
@@ -55,3 +74,72 @@ class NetworkBlackBox:
             return model.predict(held)
         finally:
             torch.set_num_threads(threads)
+
+
+class BlackBoxApart:
+    """A :class:`NetworkBlackBox` fitted in a helper process started now
+    (:class:`~cdpr_pipeline.helper_process.HelperProcess`), which imports torch (1-1.5 s
+    of CPU) on the other core while the diagnosis runs up to its black-box phase; the
+    fit itself is the same, on the same rows, so its figures are the same. Where torch
+    is already loaded in the process, :func:`apart` fits in the process instead.
+
+    Used as a context manager (the helper ends with the block).
+    """
+
+    def __init__(self, blackbox: NetworkBlackBox) -> None:
+        self.blackbox = blackbox
+        self.window, self.epochs = blackbox.window, blackbox.epochs
+        self._helper = HelperProcess(__name__, "the black box")
+        self._fitted = False
+
+    def fit_predict(self, train: WinchRegression, held: WinchRegression) -> np.ndarray:
+        """:meth:`NetworkBlackBox.fit_predict`, in the helper."""
+        self._fitted = True
+        return self._helper.request((self.blackbox, train, held))
+
+    def close(self) -> None:
+        """The helper ends: at once if it has not fitted (a diagnosis that ended before
+        its black-box phase, or without one), else when it has exited (its CPU seconds
+        then count in the command's)."""
+        self._helper.close(stop=not self._fitted)
+
+    def __enter__(self) -> BlackBoxApart:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 trace: TracebackType | None) -> None:
+        self.close()
+
+
+@contextmanager
+def apart(blackbox: NetworkBlackBox | None
+          ) -> Iterator[NetworkBlackBox | BlackBoxApart | None]:
+    """``blackbox`` fitted in a helper process started now (:class:`BlackBoxApart`), for
+    the block; itself where there is none or torch is already loaded here (nothing to
+    overlap)."""
+    if blackbox is None or "torch" in sys.modules:
+        yield blackbox
+        return
+    with BlackBoxApart(blackbox) as helper:
+        yield helper
+
+
+def _fit_predict(request: tuple[NetworkBlackBox, WinchRegression, WinchRegression]
+                 ) -> np.ndarray:
+    """The helper's side of :class:`BlackBoxApart`."""
+    blackbox, train, held = request
+    return blackbox.fit_predict(train, held)
+
+
+def _serve() -> None:
+    """The helper: torch and the network's code loaded first, while the command works,
+    then the fits it is sent."""
+    import torch  # noqa: F401
+
+    from cdpr_pipeline.models.reconstruction import HighFrequencyModel  # noqa: F401
+
+    serve(_fit_predict)
+
+
+if __name__ == "__main__":
+    _serve()

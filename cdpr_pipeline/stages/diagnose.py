@@ -12,6 +12,7 @@ import logging
 import math
 import os
 import time
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -33,29 +34,12 @@ from cdpr_pipeline.discovery.diagnosis import (
 from cdpr_pipeline.discovery.fitting import one_blas_thread
 from cdpr_pipeline.discovery.report import render
 from cdpr_pipeline.discovery.summary import GAIN_KEY, gain_text
-from cdpr_pipeline.models.blackbox import NetworkBlackBox
+from cdpr_pipeline.models.blackbox import LazyNet, NetworkBlackBox, apart
 from cdpr_pipeline.sim.model_file import write_model
-from cdpr_pipeline.tracking import (
-    finished_or_failed,
-    flatten_params,
-    log_run,
-    make_logger,
-    run_name,
-)
+from cdpr_pipeline.tracking import flatten_params, run_name
+from cdpr_pipeline.tracking.writer import RunWriter
 
 log = logging.getLogger(__name__)
-
-
-class LazyNet:
-    """A network partial (``conf/model/*.yaml`` ``net``) instantiated only when called:
-    building it imports torch (seconds of start-up), which only the black-box phase
-    needs, and only when it runs."""
-
-    def __init__(self, config: DictConfig) -> None:
-        self.config = config
-
-    def __call__(self, *args: Any, **kwargs: Any) -> Any:
-        return instantiate(self.config)(*args, **kwargs)
 
 
 def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
@@ -67,8 +51,10 @@ def settings_from_config(cfg: DictConfig) -> DiagnosisSettings:
     blackbox = None
     if cfg.blackbox.enabled:
         bb = cfg.blackbox
-        blackbox = NetworkBlackBox(LazyNet(bb.model.net), int(bb.window), int(bb.epochs),
-                                   int(bb.max_windows), int(bb.seed))
+        # the network's config as plain data: a helper process fits it (apart)
+        net = LazyNet(OmegaConf.to_container(bb.model.net, resolve=True))
+        blackbox = NetworkBlackBox(net, int(bb.window), int(bb.epochs), int(bb.max_windows),
+                                   int(bb.seed))
     heldout = cfg.split.heldout
     crosstest = cfg.split.get("crosstest")
     # a partial: objects passed to instantiate itself would be read as configs
@@ -176,73 +162,85 @@ def run_diagnosis(cfg: DictConfig) -> Diagnosis:
     ``metrics.json`` names every second of the command's wall time: ``time_startup_s``
     (interpreter, imports, Hydra, until here), ``time_loading_s``, the diagnosis's
     phases (``time_total_s`` their sum with what lies between them), ``time_writing_s``
-    (diagnosis.json, report.html, the model file), ``time_mlflow_s``, and
-    ``time_other_s`` whatever is left of ``time_wall_s`` (up to writing metrics.json)."""
+    (diagnosis.json, report.html, the model file), ``time_mlflow_s`` (waiting for the
+    run to be stored: the MLflow writer, started first, has opened the store meanwhile),
+    and ``time_other_s`` whatever is left of ``time_wall_s`` (up to writing
+    metrics.json)."""
     # the process's start-up (interpreter, imports, Hydra): its wall seconds where the OS
     # says, and its CPU seconds
     startup_cpu = time.process_time()
     age = process_age_s()
     startup = age if age is not None else startup_cpu
     begun = time.perf_counter() - startup
-    t0 = time.perf_counter()
-    data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
-                        min_samples=cfg.data.min_samples)
+    # MLflow and torch (the black box) load in helper processes meanwhile
     settings = settings_from_config(cfg)
-    # how the runs are read, chosen from the data once for the command (the diagnosis and
-    # its split then read them the same way, and the choices are logged once)
-    settings = replace(settings, regression=resolve_settings(settings.regression,
-                                                             data.trajectories, data.rig))
-    loading = time.perf_counter() - t0
-    log.info("diagnose %s: %d runs loaded in %.1f s (start-up %.1f s, %.1f s CPU)",
-             cfg.data.path, len(data.trajectories), loading, startup, startup_cpu)
-    # one BLAS thread throughout, not only in the fits: the diagnosis's linear algebra is
-    # small (SVDs of a few thousand rows, the internal-force directions per sample), and
-    # a second thread waits on a busy core (a 2400 x 16 SVD took 25 ms with two)
-    with one_blas_thread():
-        d = diagnose(data, settings)
-    d.timings.update({"startup cpu": startup_cpu, "loading": loading})
-    t0 = time.perf_counter()
-    paths = write_outputs(d, Path(cfg.out_dir), cfg.data.path, diagnosis_split(data, settings))
-    command = {"startup": startup, "writing": time.perf_counter() - t0}
-    log.info("verdict: %s; %s", d.verdict, gain_text(d.gain))
-    log.info("%s", d.sentence)
-    t0 = time.perf_counter()
-    logger = make_logger(cfg.tracking.experiment, run_name=run_name("diagnose", cfg.data.path),
-                         uri=cfg.tracking.uri, tags={"cdpr_task": "diagnose",
-                                                     "verdict": d.verdict})
-    with finished_or_failed(logger):
-        # the one gain figure, named as everywhere else (GAIN_NAME: the held-out RMSE drop)
-        metrics = {"gain/before": d.gain.before, "gain/after": d.gain.after,
-                   f"gain/{GAIN_KEY}": 100 * d.gain.relative,
-                   f"gain/{GAIN_KEY}_ci95_lo": 100 * d.gain.ci95[0],
-                   f"gain/{GAIN_KEY}_ci95_hi": 100 * d.gain.ci95[1],
-                   "causes/count": len(d.causes)}
-        metrics.update({f"time/{phase.replace(' ', '_')}_s": v
-                        for phase, v in {**d.timings, **command}.items()})
-        for part in ("train", "heldout"):
-            for sig, m in d.nominal_metrics.by_signal.items():
-                metrics[f"nominal/{part}/{sig}/rmse"] = m[part].rmse
-                metrics[f"extended/{part}/{sig}/rmse"] = \
-                    d.extended_metrics.by_signal[sig][part].rmse
-            metrics[f"nominal/{part}/relative_error_pct"] = \
-                getattr(d.nominal_metrics, part).relative_error_pct
-            metrics[f"extended/{part}/relative_error_pct"] = \
-                getattr(d.extended_metrics, part).relative_error_pct
-        # params and metrics in one request (each is a transaction on the store)
-        log_run(logger.experiment, logger.run_id, metrics=metrics,
-                params=flatten_params(OmegaConf.to_container(cfg, resolve=True)))
-        for key, p in paths.items():
-            if key != "metrics":
-                logger.experiment.log_artifact(logger.run_id, str(p))
+    with RunWriter(cfg.tracking.experiment, run_name("diagnose", cfg.data.path),
+                   cfg.tracking.uri) as tracking, \
+            apart(settings.blackbox) as blackbox:
+        t0 = time.perf_counter()
+        settings = replace(settings, blackbox=blackbox)
+        data = load_dataset(cfg.data.path, allow_gaps=cfg.data.allow_gaps,
+                            min_samples=cfg.data.min_samples)
+        # how the runs are read, chosen from the data once for the command (the diagnosis
+        # and its split then read them the same way, and the choices are logged once)
+        settings = replace(settings, regression=resolve_settings(settings.regression,
+                                                                 data.trajectories, data.rig))
+        loading = time.perf_counter() - t0
+        log.info("diagnose %s: %d runs loaded in %.1f s (start-up %.1f s, %.1f s CPU)",
+                 cfg.data.path, len(data.trajectories), loading, startup, startup_cpu)
+        # one BLAS thread throughout, not only in the fits: the diagnosis's linear algebra
+        # is small (SVDs of a few thousand rows, the internal-force directions per
+        # sample), and a second thread waits on a busy core (a 2400 x 16 SVD took 25 ms
+        # with two)
+        with one_blas_thread():
+            d = diagnose(data, settings)
+        d.timings.update({"startup cpu": startup_cpu, "loading": loading})
+        t0 = time.perf_counter()
+        paths = write_outputs(d, Path(cfg.out_dir), cfg.data.path,
+                              diagnosis_split(data, settings))
+        command = {"startup": startup, "writing": time.perf_counter() - t0}
+        log.info("verdict: %s; %s", d.verdict, gain_text(d.gain))
+        log.info("%s", d.sentence)
+        t0 = time.perf_counter()
+        # params, metrics and the outputs in one message (one request for the params and
+        # metrics: each is a transaction on the store)
+        tracking.log(tags={"cdpr_task": "diagnose", "verdict": d.verdict},
+                     params=flatten_params(OmegaConf.to_container(cfg, resolve=True)),
+                     metrics=mlflow_metrics(d, command),
+                     artifacts=[str(p) for key, p in paths.items() if key != "metrics"])
         command["mlflow"] = time.perf_counter() - t0
         # metrics.json last, with the MLflow seconds and what no phase names
         command["wall"] = time.perf_counter() - begun
         command["other"] = command["wall"] - sum(
             command[k] for k in ("startup", "writing", "mlflow")) - loading - d.timings["total"]
         write_metrics(paths["metrics"], d, command)
-        logger.experiment.log_artifact(logger.run_id, str(paths["metrics"]))
+        tracking.log(artifacts=[str(paths["metrics"])], status="FINISHED")
     log.info("logged to MLflow in %.1f s", command["mlflow"])
     return d
+
+
+def mlflow_metrics(d: Diagnosis, command: Mapping[str, float]) -> dict[str, float]:
+    """The figures a diagnosis logs to MLflow: the gain (named as everywhere else:
+    :data:`~cdpr_pipeline.discovery.summary.GAIN_KEY`, the held-out RMSE drop), the
+    causes' count, every phase's seconds (``command``: the command's own, as
+    :func:`run_diagnosis` measures them) and the RMSE per signal, before and after."""
+    metrics = {"gain/before": d.gain.before, "gain/after": d.gain.after,
+               f"gain/{GAIN_KEY}": 100 * d.gain.relative,
+               f"gain/{GAIN_KEY}_ci95_lo": 100 * d.gain.ci95[0],
+               f"gain/{GAIN_KEY}_ci95_hi": 100 * d.gain.ci95[1],
+               "causes/count": len(d.causes)}
+    metrics.update({f"time/{phase.replace(' ', '_')}_s": v
+                    for phase, v in {**d.timings, **command}.items()})
+    for part in ("train", "heldout"):
+        for sig, m in d.nominal_metrics.by_signal.items():
+            metrics[f"nominal/{part}/{sig}/rmse"] = m[part].rmse
+            metrics[f"extended/{part}/{sig}/rmse"] = \
+                d.extended_metrics.by_signal[sig][part].rmse
+        metrics[f"nominal/{part}/relative_error_pct"] = \
+            getattr(d.nominal_metrics, part).relative_error_pct
+        metrics[f"extended/{part}/relative_error_pct"] = \
+            getattr(d.extended_metrics, part).relative_error_pct
+    return metrics
 
 
 @hydra_command("diagnose")

@@ -16,7 +16,7 @@ import functools
 import logging
 import os
 import re
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
 from pathlib import Path
@@ -142,12 +142,11 @@ def make_logger(experiment: str, run_name: str, uri: str | None = None,
     ``lightning=True``: Lightning's ``MLFlowLogger`` (what a ``Trainer`` takes; the new
     run starts on first use); else a :class:`RunLogger`, which does not import Lightning.
     """
-    stage_run_id = _STAGE_RUN.get()
+    stage_run_id = claim_stage_run()
     resolved = tracking_uri(uri)
     client = mlflow_client(resolved)
     if not lightning:
         if stage_run_id is not None:
-            _STAGE_RUN.set(None)
             run_id = stage_run_id
             for key, value in (tags or {}).items():
                 client.set_tag(run_id, key, value)
@@ -159,7 +158,6 @@ def make_logger(experiment: str, run_name: str, uri: str | None = None,
 
     if stage_run_id is not None:
         # inside a pipeline stage: write into its run (once; a nested call gets its own)
-        _STAGE_RUN.set(None)
         logger = MLFlowLogger(tracking_uri=resolved, run_id=stage_run_id, log_model=False)
         for key, value in (tags or {}).items():
             logger.experiment.set_tag(stage_run_id, key, value)
@@ -169,6 +167,39 @@ def make_logger(experiment: str, run_name: str, uri: str | None = None,
     return MLFlowLogger(experiment_name=experiment, run_name=run_name,
                         tracking_uri=resolved, tags=dict(tags or {}), log_model=False,
                         artifact_location=artifact_location(resolved))
+
+
+def claim_stage_run() -> str | None:
+    """The open pipeline stage's run (:func:`stage_run`) for the caller to write into,
+    claimed once (a nested caller gets a run of its own); None outside a stage."""
+    run_id = _STAGE_RUN.get()
+    if run_id is not None:
+        _STAGE_RUN.set(None)
+    return run_id
+
+
+def write_run(client, run_id: str | None, experiment: str, run_name: str,
+              tags: Mapping[str, str] | None = None, params: Mapping[str, Any] | None = None,
+              metrics: Mapping[str, float] | None = None, artifacts: Sequence[str] = (),
+              status: str | None = None) -> str:
+    """One step of writing a command's run: created (``run_name`` in ``experiment``,
+    with ``tags``) when ``run_id`` is None, else tagged; params and metrics in batches
+    (:func:`log_run`), files as artifacts, and ended with ``status`` when given.
+    Returns the run's id. :class:`~cdpr_pipeline.tracking.writer.RunWriter` calls it in
+    this process or in its child."""
+    if run_id is None:
+        run_id = client.create_run(experiment_id(client, experiment), run_name=run_name,
+                                   tags=dict(tags or {})).info.run_id
+    else:
+        for key, value in (tags or {}).items():
+            client.set_tag(run_id, key, value)
+    if params or metrics:
+        log_run(client, run_id, params=params, metrics=metrics)
+    for path in artifacts:
+        client.log_artifact(run_id, str(path))
+    if status is not None:
+        client.set_terminated(run_id, status)
+    return run_id
 
 
 def experiment_id(client, name: str) -> str:
