@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 from collections.abc import Callable
 from pathlib import Path
 
@@ -162,3 +163,14 @@ def kind_cases(tmp_path_factory, seed_of, request):
     from cdpr_pipeline.testing.kind_cases import kind_cases as make
 
     return make(tmp_path_factory.mktemp("kind_cases"), seed_of(request.node))
+
+
+@pytest.fixture
+def default_sigint():
+    """Ctrl-C handled as in a fresh interpreter (``KeyboardInterrupt``) during the test,
+    and so in the processes it starts: a test process may have been left ignoring SIGINT
+    by a library (a child inherits an ignored signal; Lightning ignores it after an
+    interrupted fit), which made a test's Ctrl-C reach no one."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)

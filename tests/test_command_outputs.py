@@ -268,7 +268,8 @@ def test_diagnose_killed_after_writing_diagnosis_json_leaves_the_previous_output
 
 @pytest.mark.slow
 @pytest.mark.e2e
-def test_ctrl_c_during_diagnose_exits_130_in_one_line_with_the_outputs_as_they_were(tmp_path):
+def test_ctrl_c_during_diagnose_exits_130_in_one_line_with_the_outputs_as_they_were(
+        tmp_path, default_sigint):
     out = tmp_path / "diag"
     _previous(out)
     env = dict(os.environ, MLFLOW_TRACKING_URI=f"sqlite:///{tmp_path / 'mlflow.db'}")

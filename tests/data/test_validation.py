@@ -365,7 +365,7 @@ def test_unnamed_trailing_column_is_a_warning(cdpr_dir: Path) -> None:
 
 
 def test_a_ctrl_c_while_a_file_is_parsed_is_an_interrupt_not_a_malformed_csv(
-        cdpr_dir: Path, monkeypatch) -> None:
+        cdpr_dir: Path, monkeypatch, default_sigint) -> None:
     """pandas' C reader turns an interrupt during its read into a ParserError ("Calling
     read(nbytes) on source failed"): 2 of 40 Ctrl-C's during `cdpr diagnose` on the
     foreign rig were reported as a malformed CSV (exit 2), not as interrupted (130)."""
