@@ -168,9 +168,10 @@ def kind_cases(tmp_path_factory, seed_of, request):
 @pytest.fixture
 def default_sigint():
     """Ctrl-C handled as in a fresh interpreter (``KeyboardInterrupt``) during the test,
-    and so in the processes it starts: a test process may have been left ignoring SIGINT
-    by a library (a child inherits an ignored signal; Lightning ignores it after an
-    interrupted fit), which made a test's Ctrl-C reach no one."""
+    and so in the processes it starts. A suite started as a background job of a
+    non-interactive shell (``cmd &`` in a script, as a benchmark or CI wrapper may) runs
+    with SIGINT ignored, every child inherits that, and a test's Ctrl-C reached no one:
+    the diagnose ran to the end (exit 0)."""
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     yield
     signal.signal(signal.SIGINT, previous)
