@@ -85,7 +85,10 @@ def table(seconds: dict[tuple[str, str], float]) -> str:
             s = seconds.get((row, name))
             cell = "" if s is None else f"{s:.0f} s"
             if s is not None and row == "`cdpr diagnose`":
-                cell += f" (the black box {seconds[('black box', name)]:.0f} s of it)"
+                # the black box is fitted in a helper process beside the diagnosis: what
+                # the command waits for it is what is left of the fit at the end
+                cell += (f" ({seconds[('black box', name)]:.1f} s of it waiting for the "
+                         "black box)")
             cells.append(cell)
         lines.append(f"| {row} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
