@@ -20,7 +20,13 @@ def distribute_tensions(units: np.ndarray, force: np.ndarray, min_tension: float
 
     For ``n = 3`` the solution is unique (then clipped at ``min_tension``). For redundant
     rigs the least-norm solution is shifted along the null-space direction closest to
-    "all cables equally" until the slackest cable reaches ``min_tension``.
+    "all cables equally" until the slackest cable reaches ``min_tension``. Where that
+    one direction leaves a cable below the bound (more than four cables, or a bound the
+    pose cannot give every cable), the tensions move on within the whole null space to
+    the point nearest the bound (:func:`_nearest_to_bound`): ``K^T t = force`` always
+    holds, so the platform gets the force the law asks for. (Clipped instead, an
+    8-cable rig whose eight cables cannot all hold the bound against its weight got
+    39 N of its 56 N weight wrong at every tick, and its closed loop diverged.)
 
     Parameters
     ----------
@@ -35,13 +41,68 @@ def distribute_tensions(units: np.ndarray, force: np.ndarray, min_tension: float
     rhs = np.stack([force, np.einsum("bni,bn->bi", units, ones)], axis=-1)    # (B, 3, 2)
     sol = np.einsum("bni,bik->bnk", units, np.linalg.solve(gram, rhs))
     t0 = sol[..., 0]
+    if units.shape[1] == 3:
+        return np.maximum(t0, min_tension)
     null_dir = ones - sol[..., 1]
     pushing = null_dir > 1e-9
     with np.errstate(divide="ignore", invalid="ignore"):
         need = np.where(pushing, (min_tension - t0) / np.where(pushing, null_dir, 1.0), -np.inf)
     shift = np.maximum(need.max(axis=1), 0.0)
     shift = np.where(np.isfinite(shift), shift, 0.0)
-    return np.maximum(t0 + shift[:, None] * null_dir, min_tension)
+    t = t0 + shift[:, None] * null_dir
+    short = (t < min_tension - TENSION_SLACK_N).any(axis=1)
+    if short.any():
+        t[short] = _nearest_to_bound(units[short], gram[short], t[short], min_tension)
+    return t
+
+
+#: how far below the bound a tension may stay (N): rounding, not a choice
+TENSION_SLACK_N = 1e-9
+
+
+def _nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
+                      min_tension: float) -> np.ndarray:
+    """From tensions ``t`` (B, n) that give the force, the tensions giving the same force
+    whose shortfall below ``min_tension`` is least (sum of squares, a convex piecewise
+    quadratic of the null-space step): Newton steps on the cables below the bound,
+    each halved until it lowers the shortfall (a full step can swap which cables are
+    short and cycle; near the optimum cables at the bound leave and rejoin the short
+    set, and the steps converge linearly: 60 steps reached 1e-8 N on the worst of 200
+    poses). Feasible poses end at the bound; others as near it as the force allows."""
+    n, t_force = units.shape[1], t
+    # the projector onto the null space of K^T: steps that leave the force alone
+    null = np.eye(n) - np.einsum("bni,bij,bmj->bnm", units, np.linalg.inv(gram), units)
+    fractions = 0.5 ** np.arange(_HALVINGS + 1)
+
+    def shortfall(x: np.ndarray) -> np.ndarray:
+        return 0.5 * np.sum(np.maximum(min_tension - x, 0.0) ** 2, axis=-1)
+
+    for _ in range(_NEWTON_STEPS):
+        short = np.maximum(min_tension - t, 0.0)
+        active = short > TENSION_SLACK_N
+        if not active.any():
+            break
+        weighted = null * active[:, None, :]
+        gradient = -np.einsum("bij,bj->bi", null, short)
+        step = -np.einsum("bij,bj->bi", null, np.einsum(
+            "bij,bj->bi", np.linalg.pinv(np.einsum("bij,bjk->bik", weighted, null),
+                                         hermitian=True), gradient))
+        now = shortfall(t)
+        trial = shortfall(t[None] + fractions[:, None, None] * step[None])     # (k, B)
+        slope = np.einsum("bi,bi->b", gradient, step)
+        good = trial <= now + 1e-4 * fractions[:, None] * slope
+        first = np.where(good.any(axis=0), good.argmax(axis=0), -1)
+        alpha = np.where(first >= 0, fractions[np.maximum(first, 0)], 0.0)
+        if not np.any(alpha * np.abs(step).max(axis=1) > 1e-12 * min_tension):
+            break
+        t = t + alpha[:, None] * step
+    # the steps' rounding off the force (the projector is one to ~1e-16): taken back
+    return t - np.einsum("bni,bi->bn", units, np.linalg.solve(
+        gram, np.einsum("bni,bn->bi", units, t - t_force)[..., None])[..., 0])
+
+
+#: Newton steps of :func:`_nearest_to_bound` at most, and halvings of a step
+_NEWTON_STEPS, _HALVINGS = 100, 30
 
 
 @dataclass

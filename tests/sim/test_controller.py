@@ -63,3 +63,40 @@ def test_four_cable_rig_tracks_with_positive_tensions():
     err = np.linalg.norm(res.truth["position"] - res.measured["desired"], axis=-1)
     assert err.max() < 1e-3
     assert res.t[1] == pytest.approx(1 / 250.0)          # recorded at the rig's rate
+
+
+def octagon_units(rng, size):
+    """Cable unit vectors of an 8-cable rig with every anchor overhead (the cables can
+    only pull up), at random poses under it."""
+    angle = np.arange(8) * np.pi / 4
+    anchors = np.stack([1.5 + 1.5 * np.cos(angle), 1.5 + 1.5 * np.sin(angle),
+                        np.full(8, 2.5)], axis=1)
+    p = np.array([1.5, 1.5, 1.0]) + rng.uniform(-0.4, 0.4, (size, 3))
+    return cable_geometry(anchors, p)[1]
+
+
+@pytest.mark.parametrize("min_tension", [2.0, 12.0])
+def test_eight_cables_give_the_force_and_come_nearest_the_bound(min_tension):
+    """Eight cables, a 3 kg platform: a 2 N bound every pose meets; 12 N, which no pose
+    gives all eight cables (their upward pulls would exceed the weight). Either way the
+    tensions give the force exactly (clipped, the platform got the wrong force and the
+    closed loop diverged), meet the bound where they can, and otherwise fall short of it
+    least: the shortfall is orthogonal to every tension change that leaves the force
+    alone (the optimum of the sum of squared shortfalls)."""
+    rng = np.random.default_rng(4)
+    units = octagon_units(rng, 40)
+    force = np.array([0, 0, 29.43]) + rng.normal(0, 2, (40, 3))
+    t = distribute_tensions(units, force, min_tension)
+    np.testing.assert_allclose(np.einsum("bnk,bn->bk", units, t), force, atol=1e-9)
+    vertical = units[..., 2].sum(axis=1)
+    feasible = min_tension * vertical < force[:, 2]      # all at the bound pull less
+    if min_tension == 2.0:
+        assert feasible.all() and t.min() >= min_tension - 1e-9
+    else:
+        assert not feasible.any()
+        shortfall = np.maximum(min_tension - t, 0.0)
+        gram = np.einsum("bni,bnj->bij", units, units)
+        null = np.eye(8) - np.einsum("bni,bij,bmj->bnm", units, np.linalg.inv(gram), units)
+        np.testing.assert_allclose(np.einsum("bij,bj->bi", null, shortfall), 0.0,
+                                   atol=1e-9 * min_tension)
+        assert shortfall.max() > 0.0
