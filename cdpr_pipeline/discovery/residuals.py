@@ -376,40 +376,60 @@ def _length_rows(model: Plant, nominal: Plant, sig: RunSignals) -> np.ndarray:
 
 #: model structures whose rows :func:`_linear_rows` has matched with :func:`_direct_rows`
 _CHECKED: dict[tuple, bool] = {}
-#: how far the rows by linearity may stray from the direct ones, relative to the larger
-#: of the residual and of the model's change from the nominal (:func:`fast_path_strays`):
-#: measured at most 4.7e-13 over the lab's candidate effects (the length side;
-#: tests/discovery/test_fast_residuals.py), 5e-12 on 8 cables at 1 kHz (decimation by
-#: 100); an absolute 1e-9 m let through a length side filtered as two full signals,
-#: 1e-8 of its residual, which moved fits by rounding
+#: how far the rows by linearity may stray from the direct ones, relative to the largest
+#: full-rate residual either model leaves (:func:`fast_path_strays`): measured at most
+#: 4.7e-13 of the filtered residual over the lab's candidate effects (the length side;
+#: tests/discovery/test_fast_residuals.py), 5e-12 of the full-rate one on 8 cables at
+#: 1 kHz (decimation by 100); an absolute 1e-9 m let through a length side filtered as
+#: two full signals, 1e-8 of its residual, which moved fits by rounding
 FAST_PATH_TOLERANCE = 1e-11
+
+
+def _filtered_sizes(model: Model, nominal: Model, sig: RunSignals,
+                    channels: frozenset[str] | None) -> dict[str, float]:
+    """Per channel, the size of what the two computations filter: the largest full-rate
+    residual of the model or the nominal one (the torque through its weights and
+    projection: what :func:`_direct_rows` filters) and the largest change of the
+    prediction from the nominal's before the projection (what the fast rows filter in
+    parts: per winch where a factor or a lag acts before the projection)."""
+    pred = predict(model, nominal, sig, channels)
+    pred0 = predict(nominal, nominal, sig, channels)
+    measured = {"torque": sig.torque, "length": sig.lengths}
+    out = {}
+    for c in pred:
+        res, res0 = measured[c] - pred[c], measured[c] - pred0[c]
+        if c == "torque":
+            res, res0 = sig.torque_weighted(res), sig.torque_weighted(res0)
+        out[c] = max(float(np.max(np.abs(res))), float(np.max(np.abs(res0))),
+                     float(np.max(np.abs(pred[c] - pred0[c]))))
+    return out
 
 
 def fast_path_strays(model: Model, nominal: Model, sig: RunSignals,
                      channels: frozenset[str] | None = None) -> dict[str, float]:
     """Per channel, how far :func:`_linear_rows` strays from :func:`_direct_rows` on
     ``sig`` (inf where they disagree on the channels): the largest difference relative
-    to the larger of the model's residual and of its change from the nominal's
-    residual.
+    to the largest full-rate residual of the model or the nominal one.
 
-    The change is the yardstick as well as the residual because the fast rows filter
-    it block by block (an effect's extra torque, a geometry's length change), and the
-    decimation's sections round relative to what they filter: ~2e-12 of it by 100
-    (order-8 Chebyshev poles close to 1), where a fitted effect can be 25 times the
-    residual it leaves (a Stribeck bump on 8 cables at 1 kHz: 2.4e-11 of the residual,
-    2e-12 of the change). A fit's finite-difference steps move the residual in
-    proportion to the change, so rounding small beside the change does not move the
-    fit; a wrong decomposition strays by the order of the change itself."""
+    The yardstick is what the filter is given, not what it returns: the decimation's
+    sections round relative to the size of their input (~2e-12 of it by 100: order-8
+    Chebyshev poles close to 1), and both computations filter signals that large (the
+    direct one the full-rate residual; the fast one its parts: the model's change
+    from the nominal, an effect's extra torque, a lag's derivative of a steep friction
+    law). Relative to the filtered residual, a Stribeck bump fitted on 8 cables at
+    1 kHz strayed 2.4e-11 (the bump 25 times what it leaves) and a lag's derivative
+    of a tanh(500 w) law 4.6e-11, and every model of those structures was computed
+    directly; relative to the full-rate residual, 1e-12. A wrong decomposition strays
+    by the order of the model's change itself."""
     direct = _direct_rows(model, nominal, sig, channels)
     fast = _linear_rows(model, nominal, sig, channels, _effect_keys(model),
                         _reference_key(nominal))
     if direct.keys() != fast.keys():
         return {c: float("inf") for c in direct.keys() | fast.keys()}
-    about = _direct_rows(nominal, nominal, sig, channels)
+    sizes = _filtered_sizes(model, nominal, sig, channels)
     out = {}
     for c in direct:
-        scale = max(float(np.max(np.abs(direct[c]))),
-                    float(np.max(np.abs(direct[c] - about[c]))))
+        scale = sizes[c]
         stray = float(np.max(np.abs(fast[c] - direct[c])))
         out[c] = stray / scale if scale > 0 else (0.0 if stray == 0 else float("inf"))
     return out
@@ -446,8 +466,8 @@ def runs_rows(model: Model, nominal: Model, signals: Sequence[RunSignals],
         _CHECKED[structure] = all(v <= FAST_PATH_TOLERANCE for v in strays.values())
         if not _CHECKED[structure]:
             log.warning("residual rows by linearity do not match the direct computation "
-                        "for %s (largest difference, relative to the residual or the "
-                        "model's change: %s; allowed %.0e); computed directly", structure,
+                        "for %s (largest difference, relative to the full-rate "
+                        "residual: %s; allowed %.0e); computed directly", structure,
                         ", ".join(f"{c} {v:.1e}" for c, v in strays.items()),
                         FAST_PATH_TOLERANCE)
     if _CHECKED.get(structure):

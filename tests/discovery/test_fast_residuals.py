@@ -144,3 +144,20 @@ def test_grouped_jacobian_is_scipys():
     sol = least_squares(jac.fun, x0, jac=jac, bounds=bounds, method="trf")
     assert np.array_equal(sol.x, ref.x) and sol.cost == ref.cost
     assert jac._groups is not None and len(set(jac._groups)) == 2
+
+
+def test_the_check_passes_rounding_and_catches_a_wrong_decomposition(lab, monkeypatch):
+    """The strays the diagnosis checks (relative to what the filter is given) stay
+    within the tolerance for every candidate effect, and rows by linearity that leave
+    an effect's extra torque out stray by the order of the change it makes."""
+    from cdpr_pipeline.sim.effects.friction import StribeckFriction
+
+    data, sigs = lab
+    nominal = R.nominal_model(data.rig, sigs[0].settings.sign_sharpness)
+    for effects in candidate_effects(data.rig, sigs, 2):
+        strays = R.fast_path_strays(nominal.with_effects(effects), nominal, sigs[0])
+        assert max(strays.values()) <= R.FAST_PATH_TOLERANCE, (
+            [type(e).__name__ for e in effects], strays)
+    bump = nominal.with_effects([StribeckFriction(static_ratio=2.0, stribeck_velocity=1.0)])
+    monkeypatch.setattr(R, "_extra_rows", lambda *args: None)
+    assert R.fast_path_strays(bump, nominal, sigs[0])["torque"] > 1e-3
