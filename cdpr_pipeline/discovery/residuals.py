@@ -376,8 +376,8 @@ def _length_rows(model: Plant, nominal: Plant, sig: RunSignals) -> np.ndarray:
 
 #: model structures whose rows :func:`_linear_rows` has matched with :func:`_direct_rows`
 _CHECKED: dict[tuple, bool] = {}
-#: how far the rows by linearity may stray from the direct ones, relative to the largest
-#: full-rate residual either model leaves (:func:`fast_path_strays`): measured at most
+#: how far the rows by linearity may stray from the direct ones, relative to the size of
+#: what the filter is given (:func:`fast_path_strays`): measured at most
 #: 4.7e-13 of the filtered residual over the lab's candidate effects (the length side;
 #: tests/discovery/test_fast_residuals.py), 5e-12 of the full-rate one on 8 cables at
 #: 1 kHz (decimation by 100); an absolute 1e-9 m let through a length side filtered as
@@ -409,7 +409,8 @@ def fast_path_strays(model: Model, nominal: Model, sig: RunSignals,
                      channels: frozenset[str] | None = None) -> dict[str, float]:
     """Per channel, how far :func:`_linear_rows` strays from :func:`_direct_rows` on
     ``sig`` (inf where they disagree on the channels): the largest difference relative
-    to the largest full-rate residual of the model or the nominal one.
+    to :func:`_filtered_sizes` (the largest full-rate residual of the model or the
+    nominal one, or change of the prediction).
 
     The yardstick is what the filter is given, not what it returns: the decimation's
     sections round relative to the size of their input (~2e-12 of it by 100: order-8
