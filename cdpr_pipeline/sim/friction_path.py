@@ -37,6 +37,9 @@ EVEN_NODES = 17
 _GRADING = 2.0 ** -(np.arange(NODES_PER_OCTAVE * GRADED_OCTAVES) / NODES_PER_OCTAVE)
 #: where a hard sign's two sides are read, as a share of the path's length
 _SIDE = 1e-13
+#: the nodes about zero speed (shares of the path's length from it) and the even ones
+_OFFSETS = np.concatenate([-_GRADING, _GRADING, [-_SIDE, _SIDE]])
+_EVEN = np.linspace(0.0, 1.0, EVEN_NODES)
 
 
 def _log1p_over(x: np.ndarray) -> np.ndarray:
@@ -94,11 +97,9 @@ def friction_over_step(friction: Callable[[np.ndarray], np.ndarray], omega: np.n
     span = np.where(span == 0.0, direction * 1e-300, span)
     # where zero speed lies along the path (share of its length); nodes graded towards it
     zero = -omega / span
-    cluster = np.concatenate([zero[None] - _GRADING[:, None, None],
-                              zero[None] + _GRADING[:, None, None],
-                              zero[None] + np.array([-_SIDE, _SIDE])[:, None, None]])
-    share = np.concatenate([np.broadcast_to(np.linspace(0.0, 1.0, EVEN_NODES)[:, None, None],
-                                            (EVEN_NODES, *omega.shape)),
+    along = (-1,) + (1,) * omega.ndim       # a node axis before the drives' shape
+    cluster = zero[None] + _OFFSETS.reshape(along)
+    share = np.concatenate([np.broadcast_to(_EVEN.reshape(along), (EVEN_NODES, *omega.shape)),
                             np.clip(cluster, 0.0, 1.0)])
     share.sort(axis=0)
     w = omega[None] + span[None] * share
