@@ -40,7 +40,7 @@ from cdpr_pipeline.sim.axes_loop import (
     forced_response,
     substeps_for,
 )
-from cdpr_pipeline.sim.model_rows import extra_torques, plant_of_rows
+from cdpr_pipeline.sim.model_rows import DrivesOfRows, extra_torques, plant_of_rows
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import BatchSimulator
 from cdpr_pipeline.sim.trajectories import SampledDesired
@@ -106,19 +106,20 @@ def _start_state(tr: Trajectory) -> tuple[np.ndarray, np.ndarray]:
 Job = tuple[Trajectory, Model, Model, int]
 
 
-def _batch_plant(moving: Sequence[Model]) -> Model | None:
+def _batch_plant(moving: Sequence[Model]) -> Model | DrivesOfRows | None:
     """One plant for a batch of axis runs whose run ``b`` follows ``moving[b]``
-    (:func:`~cdpr_pipeline.sim.model_rows.plant_of_rows`), or None where they are not
-    one model plus drive torques or differ in scheme (the closed form of an affine
-    friction, or the path of a general one: a model stepped alone keeps its own)."""
-    if len({affine_friction(m) for m in moving}) > 1:
+    (:class:`~cdpr_pipeline.sim.model_rows.DrivesOfRows`), or None where the models
+    cannot share one: an affine friction is stepped in closed form, one model at a
+    time (the others keep the path of a general friction)."""
+    models = list({id(m): m for m in moving}.values())
+    if len(models) == 1:
+        return models[0]
+    if any(affine_friction(m) for m in models):
         return None
-    for base in {id(m): m for m in moving}.values():
-        try:
-            return plant_of_rows(base, moving)
-        except ValueError:
-            continue
-    return None
+    try:
+        return DrivesOfRows.of(moving)
+    except ValueError:
+        return None
 
 
 def _axes_batches(jobs: Sequence[Job]) -> list[tuple[Model, list[Job]]]:

@@ -76,9 +76,21 @@ def _theta(inertia: np.ndarray, slope: np.ndarray, v: np.ndarray, h: float) -> n
     return np.where(v == 0.0, 1.0, theta)
 
 
+def _newton_speeds(v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where :func:`implicit_step` first reads the friction: the speeds (4, B, n) just
+    above and below rest, at ``v`` (or beside rest, at rest) and a step ``dv`` on,
+    with ``at`` and ``dv``."""
+    at = v + (v == 0.0) * REST_SPEED
+    dv = (1e-6 * np.abs(at) + 1e-9) * np.sign(at)
+    speeds = np.empty((4, *v.shape))
+    speeds[0], speeds[1], speeds[2] = REST_SPEED, -REST_SPEED, at
+    np.add(at, dv, out=speeds[3])
+    return speeds, at, dv
+
+
 def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray,
-                  h: float, affine: AffineFriction | None = None
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  h: float, affine: AffineFriction | None = None,
+                  first: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """One sub-step of ``h`` seconds of every axis under a held ``force`` (B, n).
 
     Solves ``I (v1 - v) / h = force - (1 - th) R(q, v) - th R(q, v1)`` per axis, ``th``
@@ -91,7 +103,8 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
     direction (a linearly implicit step, as accurate as the scheme it solves), iterated
     to convergence from rest after a reversal or a start. With ``affine``
     (:func:`affine_friction`) the solution is in closed form. Position:
-    ``q1 = q + h (v + v1) / 2``.
+    ``q1 = q + h (v + v1) / 2``. ``first``: the friction at ``q`` and the speeds of
+    :func:`_newton_speeds`, where the caller has it.
     """
     inertia = model.winch.inertia
     if affine is not None:
@@ -116,13 +129,9 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
                 v1 = np.where(event, solved, v1)
         return q + 0.5 * h * (v + v1), v1
     qs = q[None]
-    at = v + (v == 0.0) * REST_SPEED
+    speeds, at, dv = _newton_speeds(v)
     direction = np.sign(at)
-    dv = (1e-6 * np.abs(at) + 1e-9) * direction
-    speeds = np.empty((4, *v.shape))
-    speeds[0], speeds[1], speeds[2] = REST_SPEED, -REST_SPEED, at
-    np.add(at, dv, out=speeds[3])
-    up, down, r_v, r_dv = model.friction_torque(qs, speeds)
+    up, down, r_v, r_dv = model.friction_torque(qs, speeds) if first is None else first
     theta = _theta(inertia, (r_dv - r_v) / dv, v, h)
     y = inertia * v + h * force - h * (1.0 - theta) * r_v
     ht = h * theta
@@ -290,16 +299,18 @@ def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h:
         q1, v1 = implicit_step(model, q, v, force, h, affine)
         return _affine_reversal(affine, inertia, q, v, force, h, q1, v1)
     spread = 1e-3 * np.abs(v) + 1e-12
-    start = model.friction_torque(q, np.stack([v, v - spread, v + spread]))
+    newton = _newton_speeds(v)[0]
+    # the friction at the step's start, for this test and the implicit step, in one call
+    start = model.friction_torque(q, np.concatenate([[v, v - spread, v + spread], newton]))
     end = v + h * (force - start[0]) / inertia
     rest = model.friction_torque(middle, np.stack([end, np.full_like(v, REST_SPEED),
-                                                   np.full_like(v, -REST_SPEED)]))
+                                                   np.full_like(v, -REST_SPEED), v]))
     with np.errstate(divide="ignore", invalid="ignore"):
         secant = np.where(end != v, (rest[0] - start[0]) / (end - v), 0.0)
     slope = np.maximum(np.abs(secant), np.abs(start[2] - start[1]) / (2.0 * spread))
     hard = model.sign_sharpness is None or not np.isfinite(model.sign_sharpness)
     steep = (v * end < 0.0) | ((h * slope / inertia > 0.5) & ((v != 0.0) | (not hard)))
-    q1, v1 = implicit_step(model, q, v, force, h, affine)
+    q1, v1 = implicit_step(model, q, v, force, h, affine, first=start[3:])
     if not steep.any():
         return q1, v1
     # the path only for the steep entries, gathered (most entries of a batch are far
@@ -307,7 +318,7 @@ def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h:
     at = np.nonzero(steep)
     beta = 1.0 / np.broadcast_to(inertia, v.shape)[at]
     alpha = force[at] * beta
-    reach = 2.0 * np.abs(np.concatenate([start[:1], rest])).max(axis=0)[at]
+    reach = 2.0 * np.abs(np.concatenate([start[:1], rest[:3]])).max(axis=0)[at]
 
     def friction(w: np.ndarray) -> np.ndarray:
         # the law at the gathered entries' speeds: every entry of the batch at its start
@@ -317,7 +328,7 @@ def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h:
         return model.friction_torque(middle, full)[(slice(None), *at)]
 
     v0 = v[at]
-    c0, c1 = friction_over_step(friction, v0, alpha, beta, h, reach)
+    c0, c1 = friction_over_step(friction, v0, alpha, beta, h, reach, at_start=rest[3][at])
     q1[at] = q[at] + h * v0 + 0.5 * h * h * alpha \
         - beta * (0.5 * h * h * c0 - h ** 3 * c1 / 12.0)
     v1[at] = v0 + h * (alpha - beta * c0)

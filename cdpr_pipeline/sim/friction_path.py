@@ -68,7 +68,8 @@ def _time_weight(x: np.ndarray) -> np.ndarray:
 
 def friction_over_step(friction: Callable[[np.ndarray], np.ndarray], omega: np.ndarray,
                        alpha: np.ndarray, beta: np.ndarray, h: float | np.ndarray,
-                       reach: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                       reach: np.ndarray, at_start: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """The friction of every drive over a step of ``h``, linear in time:
     ``c0 + c1 (t - h / 2)``, with the impulse and first moment of the scalar path
     ``w' = alpha - beta friction(w)`` from ``omega`` (each array (B, n)).
@@ -85,13 +86,15 @@ def friction_over_step(friction: Callable[[np.ndarray], np.ndarray], omega: np.n
     reach : (B, n) array
         A bound on ``|friction|`` along the path: the path's nodes span
         ``h (|alpha| + beta reach)``; beyond them the speed goes on at the last slope.
+    at_start : (B, n) array, optional
+        ``friction(omega)``, where the caller has it.
 
     Returns
     -------
     c0, c1 : (B, n) arrays
     """
     h = np.asarray(h, dtype=float)
-    g0 = alpha - beta * friction(omega[None])[0]
+    g0 = alpha - beta * (friction(omega[None])[0] if at_start is None else at_start)
     direction = np.where(g0 >= 0.0, 1.0, -1.0)
     span = h * (np.abs(alpha) + beta * reach) * direction
     span = np.where(span == 0.0, direction * 1e-300, span)
