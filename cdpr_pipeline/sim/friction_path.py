@@ -123,11 +123,18 @@ def friction_over_step(friction: Callable[[np.ndarray], np.ndarray], omega: np.n
     # last node reached by time h, and the stretch after it: towards the next node, or,
     # at a root, towards where g vanishes (g linear there), or on at its slope at the end
     last = np.maximum(np.sum(t <= h, axis=0) - 1, 0)
-    take = last[None]
-    w_a, g_a, t_a = (np.take_along_axis(a, take, 0)[0] for a in (w, g, t))
-    nxt = np.minimum(last + 1, w.shape[0] - 1)[None]
-    w_n, g_n = (np.take_along_axis(a, nxt, 0)[0] for a in (w, g))
-    at_root = np.take_along_axis(blocked, nxt, 0)[0] & (last + 1 < w.shape[0])
+    # node ``last`` (and the next) of every drive: flat indices into the (nodes, drives)
+    # arrays, taken several times
+    drives = np.arange(last.size)
+    take = (last.reshape(-1), drives)
+    nxt = (np.minimum(last + 1, w.shape[0] - 1).reshape(-1), drives)
+
+    def at(a: np.ndarray, index: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        return a.reshape(len(a), -1)[index].reshape(omega.shape)
+
+    w_a, g_a, t_a = (at(a, take) for a in (w, g, t))
+    w_n, g_n = (at(a, nxt) for a in (w, g))
+    at_root = at(blocked, nxt) & (last + 1 < w.shape[0])
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # where the root lies between the last open node and the next
         root = w_a + (w_n - w_a) * g_a / (g_a - g_n)
@@ -146,7 +153,7 @@ def friction_over_step(friction: Callable[[np.ndarray], np.ndarray], omega: np.n
     with np.errstate(invalid="ignore"):
         whole = np.where(open_, t[:-1] * stretch + moment, 0.0)
     full = np.concatenate([np.zeros((1, *omega.shape)), np.cumsum(whole, axis=0)])
-    time_integral = np.take_along_axis(full, take, 0)[0] + partial
+    time_integral = at(full, take) + partial
     # a drive already at a root of g stays there
     still = g0 == 0.0
     w1 = np.where(still, omega, w1)
