@@ -246,7 +246,9 @@ def _closed_loop_sims(nominal: Model, extended: Model, rig: Rig,
     controller) and the extended model's on ``ff_runs`` with itself as the
     controller's feedforward, by run name. A cable robot's runs share batches where
     they can: every model, where the extended one is the nominal plus drive torques;
-    the extended model's two controllers, where its geometry is the nominal one."""
+    the extended model's two controllers, where its geometry is the nominal one. Drive
+    axes share one batch (:func:`_axes_batches`), but for a nominal model stepped in
+    closed form."""
     if not extended_differs:
         return [resimulate(nominal, nominal, rig, trajectories, label="nominal model"),
                 {}, {}]
