@@ -94,7 +94,9 @@ class DrivesOfRows:
     axes_loop.AxesLoop`) reads of a model, per run: the inertia and lags (B, n), and the
     resisting force, each model's on its own runs (the batch is the second-last axis of
     every friction call). The closed form of an affine friction takes one model: such a
-    model is refused here.
+    model is refused here. The sub-steps are chosen per model
+    (:func:`~cdpr_pipeline.sim.axes_loop.substeps_for` reads one model) and passed to
+    the loop.
     """
 
     models: tuple[Any, ...]
