@@ -36,10 +36,11 @@ from cdpr_pipeline.discovery.results import (
 from cdpr_pipeline.sim.axes_loop import (
     AxesLoop,
     AxesReferences,
+    affine_friction,
     forced_response,
     substeps_for,
 )
-from cdpr_pipeline.sim.model_rows import extra_torques, plant_of_rows
+from cdpr_pipeline.sim.model_rows import DrivesOfRows, extra_torques, plant_of_rows
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import BatchSimulator
 from cdpr_pipeline.sim.trajectories import SampledDesired
@@ -100,28 +101,82 @@ def _start_state(tr: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     return q[0].copy(), v
 
 
-def _resimulate_axes(model: Model, rig: Rig, trajectories: Sequence[Trajectory],
-                     feedforward: Model, label: str) -> dict[str, dict[str, np.ndarray]]:
-    groups: dict[int, list[Trajectory]] = {}
-    for tr in trajectories:
-        groups.setdefault(tr.n_samples, []).append(tr)
-    out: dict[str, dict[str, np.ndarray]] = {}
-    loop = AxesLoop(model, rig.controller, rig.sample_rate_hz, feedforward=feedforward)
-    for runs in groups.values():
-        start = [_start_state(tr) for tr in runs]
-        external = None
-        if any(tr.external is not None for tr in runs):
-            external = np.stack([np.zeros_like(tr.torques) if tr.external is None
-                                 else tr.external for tr in runs], axis=1)
-        refs = AxesReferences(np.stack([tr.desired for tr in runs], axis=1),
-                              np.stack([s[0] for s in start]),
-                              np.stack([s[1] for s in start]), external)
+#: one run to re-simulate: the run, the model that moves, the model its controller
+#: believes, and which of the results (0, 1, 2) it belongs to
+Job = tuple[Trajectory, Model, Model, int]
+
+
+def _batch_plant(moving: Sequence[Model]) -> Model | DrivesOfRows | None:
+    """One plant for a batch of axis runs whose run ``b`` follows ``moving[b]``
+    (:class:`~cdpr_pipeline.sim.model_rows.DrivesOfRows`), or None where the models
+    cannot share one: an affine friction is stepped in closed form, one model at a
+    time (the others keep the path of a general friction)."""
+    models = list({id(m): m for m in moving}.values())
+    if len(models) == 1:
+        return models[0]
+    if any(affine_friction(m) for m in models):
+        return None
+    try:
+        return DrivesOfRows.of(moving)
+    except ValueError:
+        return None
+
+
+def _axes_batches(jobs: Sequence[Job]) -> list[tuple[Model, list[Job]]]:
+    """The jobs in batches that advance together (runs of equal length,
+    :func:`_batch_plant`), each with its plant."""
+    batches: list[tuple[Model, list[Job]]] = []
+    for job in jobs:
+        for i, (_, group) in enumerate(batches):
+            plant = None if group[0][0].n_samples != job[0].n_samples else \
+                _batch_plant([*(j[1] for j in group), job[1]])
+            if plant is not None:
+                batches[i] = (plant, [*group, job])
+                break
+        else:
+            batches.append((job[1], [job]))
+    return batches
+
+
+def _resimulate_axes(rig: Rig, jobs: Sequence[Job], label: str
+                     ) -> list[dict[str, dict[str, np.ndarray]]]:
+    """Every job's re-simulation of drive axes, the results by slot (0, 1, 2) and run
+    name. Jobs advance in batches (:func:`_axes_batches`; a batch of a few runs costs
+    about what one run costs), each run under its own controller's feedforward, at the
+    most sub-steps any of its models needs on its own runs."""
+    out: list[dict[str, dict[str, np.ndarray]]] = [{}, {}, {}]
+    for plant, group in _axes_batches(jobs):
+        refs = _axes_references([job[0] for job in group])
+        # each model (and feedforward) at least as finely stepped as alone on its runs
+        alone: dict[tuple[int, int], list[int]] = {}
+        for b, (_, model, believed, _) in enumerate(group):
+            alone.setdefault((id(model), id(believed)), []).append(b)
+        substeps = max(AxesLoop(group[rows[0]][1], rig.controller, rig.sample_rate_hz,
+                                feedforward=group[rows[0]][2]).substeps_needed(
+                                    _axes_references([group[b][0] for b in rows]))
+                       for rows in alone.values())
+        loop = AxesLoop(plant, rig.controller, rig.sample_rate_hz,
+                        feedforward=[job[2] for job in group], substeps=substeps)
         result = loop.run(refs)
-        for b, tr in enumerate(runs):
-            out[tr.name] = {"position": result.position[:, b], "torque": result.force[:, b]}
-    log.info("closed loop: re-simulated the %s on %d axis run(s) (%d sub-step(s) per "
-             "control tick, a reversal along its path)", label, len(trajectories), result.substeps)
+        for b, (tr, _, _, slot) in enumerate(group):
+            out[slot][tr.name] = {"position": result.position[:, b],
+                                  "torque": result.force[:, b]}
+        log.info("closed loop: re-simulated the %s on %d axis run(s) (%d sub-step(s) per "
+                 "control tick, a reversal along its path)", label, len(group), substeps)
     return out
+
+
+def _axes_references(runs: Sequence[Trajectory]) -> AxesReferences:
+    """The recorded references, external forces and start states of axis runs of equal
+    length, as one batch."""
+    start = [_start_state(tr) for tr in runs]
+    external = None
+    if any(tr.external is not None for tr in runs):
+        external = np.stack([np.zeros_like(tr.torques) if tr.external is None
+                             else tr.external for tr in runs], axis=1)
+    return AxesReferences(np.stack([tr.desired for tr in runs], axis=1),
+                          np.stack([s[0] for s in start]), np.stack([s[1] for s in start]),
+                          external)
 
 
 def resimulate(model: Model, nominal: Model, rig: Rig,
@@ -139,15 +194,11 @@ def resimulate(model: Model, nominal: Model, rig: Rig,
     :class:`~cdpr_pipeline.sim.simulator.SimulationCostError` before simulating.
     """
     if not model.cables:
-        return _resimulate_axes(model, rig, trajectories,
-                                nominal if feedforward is None else feedforward, label)
+        believed = nominal if feedforward is None else feedforward
+        return _resimulate_axes(rig, [(tr, model, believed, 0) for tr in trajectories],
+                                label)[0]
     return _resimulate_cables(nominal, rig, [(tr, model, nominal, 0) for tr in trajectories],
                               label, settle_s)[0]
-
-
-#: one cable-robot run to re-simulate: the run, the model that moves, the model its
-#: controller believes, and which of the results (0, 1, 2) it belongs to
-Job = tuple[Trajectory, Model, Model, int]
 
 
 def _resimulate_cables(nominal: Model, rig: Rig, jobs: Sequence[Job], label: str,
@@ -195,19 +246,18 @@ def _closed_loop_sims(nominal: Model, extended: Model, rig: Rig,
     controller) and the extended model's on ``ff_runs`` with itself as the
     controller's feedforward, by run name. A cable robot's runs share batches where
     they can: every model, where the extended one is the nominal plus drive torques;
-    the extended model's two controllers, where its geometry is the nominal one."""
+    the extended model's two controllers, where its geometry is the nominal one. Drive
+    axes share one batch (:func:`_axes_batches`), but for a nominal model stepped in
+    closed form."""
     if not extended_differs:
         return [resimulate(nominal, nominal, rig, trajectories, label="nominal model"),
                 {}, {}]
-    if not nominal.cables:
-        return [resimulate(nominal, nominal, rig, trajectories, label="nominal model"),
-                resimulate(extended, nominal, rig, trajectories, label="extended model"),
-                {} if not ff_runs else resimulate(
-                    extended, extended, rig, ff_runs, feedforward=extended,
-                    label="extended model with the extended feedforward")]
     nominal_jobs = [(tr, nominal, nominal, 0) for tr in trajectories]
     extended_jobs = [(tr, extended, nominal, 1) for tr in trajectories]
     own = [(tr, extended, extended, 2) for tr in ff_runs]
+    if not nominal.cables:
+        return _resimulate_axes(rig, [*nominal_jobs, *extended_jobs, *own],
+                                "nominal and extended models")
     if extra_torques(nominal, extended) is not None:
         return _resimulate_cables(nominal, rig, [*nominal_jobs, *extended_jobs, *own],
                                   "nominal and extended models")

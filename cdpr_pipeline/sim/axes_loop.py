@@ -20,6 +20,7 @@ n-step-ahead simulation of :mod:`cdpr_pipeline.discovery.closed_loop`).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,9 +76,21 @@ def _theta(inertia: np.ndarray, slope: np.ndarray, v: np.ndarray, h: float) -> n
     return np.where(v == 0.0, 1.0, theta)
 
 
+def _newton_speeds(v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where :func:`implicit_step` first reads the friction: the speeds (4, B, n) just
+    above and below rest, at ``v`` (or beside rest, at rest) and a step ``dv`` on,
+    with ``at`` and ``dv``."""
+    at = v + (v == 0.0) * REST_SPEED
+    dv = (1e-6 * np.abs(at) + 1e-9) * np.sign(at)
+    speeds = np.empty((4, *v.shape))
+    speeds[0], speeds[1], speeds[2] = REST_SPEED, -REST_SPEED, at
+    np.add(at, dv, out=speeds[3])
+    return speeds, at, dv
+
+
 def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray,
-                  h: float, affine: AffineFriction | None = None
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  h: float, affine: AffineFriction | None = None,
+                  first: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """One sub-step of ``h`` seconds of every axis under a held ``force`` (B, n).
 
     Solves ``I (v1 - v) / h = force - (1 - th) R(q, v) - th R(q, v1)`` per axis, ``th``
@@ -90,7 +103,8 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
     direction (a linearly implicit step, as accurate as the scheme it solves), iterated
     to convergence from rest after a reversal or a start. With ``affine``
     (:func:`affine_friction`) the solution is in closed form. Position:
-    ``q1 = q + h (v + v1) / 2``.
+    ``q1 = q + h (v + v1) / 2``. ``first``: the friction at ``q`` and the speeds of
+    :func:`_newton_speeds`, where the caller has it.
     """
     inertia = model.winch.inertia
     if affine is not None:
@@ -115,13 +129,9 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
                 v1 = np.where(event, solved, v1)
         return q + 0.5 * h * (v + v1), v1
     qs = q[None]
-    at = v + (v == 0.0) * REST_SPEED
+    speeds, at, dv = _newton_speeds(v)
     direction = np.sign(at)
-    dv = (1e-6 * np.abs(at) + 1e-9) * direction
-    speeds = np.empty((4, *v.shape))
-    speeds[0], speeds[1], speeds[2] = REST_SPEED, -REST_SPEED, at
-    np.add(at, dv, out=speeds[3])
-    up, down, r_v, r_dv = model.friction_torque(qs, speeds)
+    up, down, r_v, r_dv = model.friction_torque(qs, speeds) if first is None else first
     theta = _theta(inertia, (r_dv - r_v) / dv, v, h)
     y = inertia * v + h * force - h * (1.0 - theta) * r_v
     ht = h * theta
@@ -140,6 +150,9 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
     here = direction == side
     v1 = np.where(here, at, side * REST_SPEED)
     r_v = np.where(here, r_v, np.where(positive, up, down))
+    # an entry settled keeps its speed while others iterate: each entry's step is its
+    # own, whatever else its batch holds
+    done = np.zeros(v1.shape, bool)
     for _ in range(MAX_NEWTON):
         slope = np.maximum(inertia + ht * (r_dv - r_v) / dv, 0.5 * inertia)
         nxt = np.maximum((v1 - (inertia * v1 + ht * r_v - y) / slope) * side,
@@ -148,12 +161,12 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
         # iterates to convergence
         settled = here | stuck | (np.abs(nxt - v1)
                                   <= NEWTON_TOLERANCE * np.abs(v1) + REST_SPEED)
-        v1 = nxt
-        if settled.all():
+        v1 = np.where(done, v1, nxt)
+        done = done | settled
+        if done.all():
             break
         dv = (1e-6 * np.abs(v1) + 1e-9) * side
         r_v, r_dv = model.friction_torque(qs, np.stack([v1, v1 + dv]))
-        here = here | settled
     v1 = v1 * ~stuck
     return q + 0.5 * h * (v + v1), v1
 
@@ -286,26 +299,40 @@ def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h:
         q1, v1 = implicit_step(model, q, v, force, h, affine)
         return _affine_reversal(affine, inertia, q, v, force, h, q1, v1)
     spread = 1e-3 * np.abs(v) + 1e-12
-    start = model.friction_torque(q, np.stack([v, v - spread, v + spread]))
+    newton = _newton_speeds(v)[0]
+    # the friction at the step's start, for this test and the implicit step, in one call
+    start = model.friction_torque(q, np.concatenate([[v, v - spread, v + spread], newton]))
     end = v + h * (force - start[0]) / inertia
     rest = model.friction_torque(middle, np.stack([end, np.full_like(v, REST_SPEED),
-                                                   np.full_like(v, -REST_SPEED)]))
+                                                   np.full_like(v, -REST_SPEED), v]))
     with np.errstate(divide="ignore", invalid="ignore"):
         secant = np.where(end != v, (rest[0] - start[0]) / (end - v), 0.0)
     slope = np.maximum(np.abs(secant), np.abs(start[2] - start[1]) / (2.0 * spread))
     hard = model.sign_sharpness is None or not np.isfinite(model.sign_sharpness)
     steep = (v * end < 0.0) | ((h * slope / inertia > 0.5) & ((v != 0.0) | (not hard)))
-    q1, v1 = implicit_step(model, q, v, force, h, affine)
+    q1, v1 = implicit_step(model, q, v, force, h, affine, first=start[3:])
     if not steep.any():
         return q1, v1
-    beta = 1.0 / inertia * np.ones_like(v)
-    alpha = force * beta
-    reach = 2.0 * np.abs(np.concatenate([start[:1], rest])).max(axis=0)
-    c0, c1 = friction_over_step(lambda w: model.friction_torque(middle, w), v, alpha,
-                                beta, h, reach)
-    v_path = v + h * (alpha - beta * c0)
-    q_path = q + h * v + 0.5 * h * h * alpha - beta * (0.5 * h * h * c0 - h ** 3 * c1 / 12.0)
-    return np.where(steep, q_path, q1), np.where(steep, v_path, v1)
+    # the path only for the steep entries, gathered (most entries of a batch are far
+    # from rest at any one step: the path's hundred-odd nodes cost per entry)
+    at = np.nonzero(steep)
+    beta = 1.0 / np.broadcast_to(inertia, v.shape)[at]
+    alpha = force[at] * beta
+    reach = 2.0 * np.abs(np.concatenate([start[:1], rest[:3]])).max(axis=0)[at]
+
+    def friction(w: np.ndarray) -> np.ndarray:
+        # the law at the gathered entries' speeds: every entry of the batch at its start
+        # speed, the steep ones at ``w`` (the law is the model's, per run and axis)
+        full = np.repeat(v[None], len(w), axis=0)
+        full[(slice(None), *at)] = w
+        return model.friction_torque(middle, full)[(slice(None), *at)]
+
+    v0 = v[at]
+    c0, c1 = friction_over_step(friction, v0, alpha, beta, h, reach, at_start=rest[3][at])
+    q1[at] = q[at] + h * v0 + 0.5 * h * h * alpha \
+        - beta * (0.5 * h * h * c0 - h ** 3 * c1 / 12.0)
+    v1[at] = v0 + h * (alpha - beta * c0)
+    return q1, v1
 
 
 @dataclass
@@ -363,10 +390,11 @@ class AxesLoop:
         rig.yaml's ``position_loop`` controller.
     sample_rate_hz : float
         Recording rate; the controller rate must be an integer multiple of it.
-    feedforward : Drives or None
+    feedforward : Drives, sequence of Drives, or None
         The model the controller's feedforward inverts, required when the controller
         states one (``feedforward: nominal``: rig.yaml's nominal model; another model
-        shows what a better feedforward would buy).
+        shows what a better feedforward would buy); one per run of the batch where the
+        runs' controllers believe different models.
     substeps : int or None
         Sub-steps per control tick; None: :func:`substeps_for`.
     """
@@ -374,7 +402,7 @@ class AxesLoop:
     model: Drives
     controller: AxisController
     sample_rate_hz: float
-    feedforward: Drives | None = None
+    feedforward: Drives | Sequence[Drives] | None = None
     substeps: int | None = None
 
     def __post_init__(self) -> None:
@@ -392,25 +420,43 @@ class AxesLoop:
                              f"integer multiple of the sample rate {self.sample_rate_hz:g} Hz")
         return int(round(ratio))
 
+    def _ticks(self, refs: AxesReferences) -> tuple[np.ndarray, np.ndarray]:
+        """The reference and its speed on the control ticks (K, B, n)."""
+        dt = 1.0 / self.controller.rate_hz
+        ref = _on_ticks(refs.reference, self.decimation, hold=False)
+        return ref, np.gradient(ref, dt, axis=0) if len(ref) > 1 else np.zeros_like(ref)
+
+    def substeps_needed(self, refs: AxesReferences) -> int:
+        """The sub-steps per control tick :meth:`run` takes on ``refs`` (``substeps``,
+        else :func:`substeps_for` at the references' speed and span)."""
+        if self.substeps:
+            return self.substeps
+        ref, ref_speed = self._ticks(refs)
+        return substeps_for(self.model, 1.0 / self.controller.rate_hz,
+                            np.sqrt(np.mean(ref_speed ** 2, axis=(0, 1))),
+                            np.max(np.abs(ref - ref[:1]), axis=(0, 1)))
+
     def run(self, refs: AxesReferences) -> AxesResult:
         """Every run of ``refs`` in closed loop, from its start state."""
         c, model, n = self.controller, self.model, self.model.n
         dec = self.decimation
         dt = 1.0 / c.rate_hz
-        ref = _on_ticks(refs.reference, dec, hold=False)              # (K, B, n)
-        ref_speed = np.gradient(ref, dt, axis=0) if len(ref) > 1 else np.zeros_like(ref)
+        ref, ref_speed = self._ticks(refs)                            # (K, B, n)
         base = np.zeros_like(ref)
         if c.feedforward != "none":
             acc = np.gradient(ref_speed, dt, axis=0) if len(ref) > 1 else np.zeros_like(ref)
             times = np.arange(len(ref)) * dt
-            for b in range(ref.shape[1]):
-                base[:, b] = self.feedforward.inverse_dynamics(
+            believed = self.feedforward if isinstance(self.feedforward, Sequence) \
+                else [self.feedforward] * ref.shape[1]
+            if len(believed) != ref.shape[1]:
+                raise ValueError(f"{len(believed)} feedforward models for "
+                                 f"{ref.shape[1]} runs")
+            for b, ff in enumerate(believed):
+                base[:, b] = ff.inverse_dynamics(
                     ref[:, b], ref_speed[:, b], acc[:, b], times)["torque"]
         if refs.external is not None:
             base = base + _on_ticks(refs.external, dec, hold=True)
-        substeps = self.substeps or substeps_for(
-            model, dt, np.sqrt(np.mean(ref_speed ** 2, axis=(0, 1))),
-            np.max(np.abs(ref - ref[:1]), axis=(0, 1)))
+        substeps = self.substeps_needed(refs)
         affine = AffineFriction.of(model) if affine_friction(model) else None
         kp, kd, gain = (c.per_axis(k, n) for k in ("kp", "kd", "drive_gain"))
         kv = c.per_axis("kv", n) if c.velocity_loop else None

@@ -37,6 +37,9 @@ EVEN_NODES = 17
 _GRADING = 2.0 ** -(np.arange(NODES_PER_OCTAVE * GRADED_OCTAVES) / NODES_PER_OCTAVE)
 #: where a hard sign's two sides are read, as a share of the path's length
 _SIDE = 1e-13
+#: the nodes about zero speed (shares of the path's length from it) and the even ones
+_OFFSETS = np.concatenate([-_GRADING, _GRADING, [-_SIDE, _SIDE]])
+_EVEN = np.linspace(0.0, 1.0, EVEN_NODES)
 
 
 def _log1p_over(x: np.ndarray) -> np.ndarray:
@@ -65,7 +68,8 @@ def _time_weight(x: np.ndarray) -> np.ndarray:
 
 def friction_over_step(friction: Callable[[np.ndarray], np.ndarray], omega: np.ndarray,
                        alpha: np.ndarray, beta: np.ndarray, h: float | np.ndarray,
-                       reach: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                       reach: np.ndarray, at_start: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """The friction of every drive over a step of ``h``, linear in time:
     ``c0 + c1 (t - h / 2)``, with the impulse and first moment of the scalar path
     ``w' = alpha - beta friction(w)`` from ``omega`` (each array (B, n)).
@@ -82,23 +86,23 @@ def friction_over_step(friction: Callable[[np.ndarray], np.ndarray], omega: np.n
     reach : (B, n) array
         A bound on ``|friction|`` along the path: the path's nodes span
         ``h (|alpha| + beta reach)``; beyond them the speed goes on at the last slope.
+    at_start : (B, n) array, optional
+        ``friction(omega)``, where the caller has it.
 
     Returns
     -------
     c0, c1 : (B, n) arrays
     """
     h = np.asarray(h, dtype=float)
-    g0 = alpha - beta * friction(omega[None])[0]
+    g0 = alpha - beta * (friction(omega[None])[0] if at_start is None else at_start)
     direction = np.where(g0 >= 0.0, 1.0, -1.0)
     span = h * (np.abs(alpha) + beta * reach) * direction
     span = np.where(span == 0.0, direction * 1e-300, span)
     # where zero speed lies along the path (share of its length); nodes graded towards it
     zero = -omega / span
-    cluster = np.concatenate([zero[None] - _GRADING[:, None, None],
-                              zero[None] + _GRADING[:, None, None],
-                              zero[None] + np.array([-_SIDE, _SIDE])[:, None, None]])
-    share = np.concatenate([np.broadcast_to(np.linspace(0.0, 1.0, EVEN_NODES)[:, None, None],
-                                            (EVEN_NODES, *omega.shape)),
+    along = (-1,) + (1,) * omega.ndim       # a node axis before the drives' shape
+    cluster = zero[None] + _OFFSETS.reshape(along)
+    share = np.concatenate([np.broadcast_to(_EVEN.reshape(along), (EVEN_NODES, *omega.shape)),
                             np.clip(cluster, 0.0, 1.0)])
     share.sort(axis=0)
     w = omega[None] + span[None] * share
@@ -119,11 +123,18 @@ def friction_over_step(friction: Callable[[np.ndarray], np.ndarray], omega: np.n
     # last node reached by time h, and the stretch after it: towards the next node, or,
     # at a root, towards where g vanishes (g linear there), or on at its slope at the end
     last = np.maximum(np.sum(t <= h, axis=0) - 1, 0)
-    take = last[None]
-    w_a, g_a, t_a = (np.take_along_axis(a, take, 0)[0] for a in (w, g, t))
-    nxt = np.minimum(last + 1, w.shape[0] - 1)[None]
-    w_n, g_n = (np.take_along_axis(a, nxt, 0)[0] for a in (w, g))
-    at_root = np.take_along_axis(blocked, nxt, 0)[0] & (last + 1 < w.shape[0])
+    # node ``last`` (and the next) of every drive: flat indices into the (nodes, drives)
+    # arrays, taken several times
+    drives = np.arange(last.size)
+    take = (last.reshape(-1), drives)
+    nxt = (np.minimum(last + 1, w.shape[0] - 1).reshape(-1), drives)
+
+    def at(a: np.ndarray, index: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        return a.reshape(len(a), -1)[index].reshape(omega.shape)
+
+    w_a, g_a, t_a = (at(a, take) for a in (w, g, t))
+    w_n, g_n = (at(a, nxt) for a in (w, g))
+    at_root = at(blocked, nxt) & (last + 1 < w.shape[0])
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # where the root lies between the last open node and the next
         root = w_a + (w_n - w_a) * g_a / (g_a - g_n)
@@ -142,7 +153,7 @@ def friction_over_step(friction: Callable[[np.ndarray], np.ndarray], omega: np.n
     with np.errstate(invalid="ignore"):
         whole = np.where(open_, t[:-1] * stretch + moment, 0.0)
     full = np.concatenate([np.zeros((1, *omega.shape)), np.cumsum(whole, axis=0)])
-    time_integral = np.take_along_axis(full, take, 0)[0] + partial
+    time_integral = at(full, take) + partial
     # a drive already at a root of g stays there
     still = g0 == 0.0
     w1 = np.where(still, omega, w1)

@@ -5,7 +5,10 @@ free-form term) moves with the nominal model's mechanics; only the torque resist
 drives differs. A simulated batch of a few runs costs about what one run costs (each
 step's work is Python's, not the arithmetic's), so the closed-loop comparison advances
 both models' runs as one batch: one plant whose extra effects act on their own rows
-(:func:`plant_of_rows`), the rows of the nominal model untouched by them.
+(:func:`plant_of_rows`), the rows of the nominal model untouched by them. Drive axes
+batch any models of one rig's axes (:class:`DrivesOfRows`): each run reads its own
+model's inertia, lag and friction, so a model extended by a lag or changed parameters
+shares the batch too.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -72,3 +76,78 @@ def plant_of_rows(base: Plant, rows: Sequence[Plant]) -> Plant:
         mask = np.array([m is model for m in rows])[:, None]
         added += [OnRows(effect, mask) for effect in extra]
     return base if not added else base.replace(effects=(*base.effects, *added))
+
+
+@dataclass(frozen=True)
+class _RowsWinch:
+    """The winch parameter the axes' closed loop reads per run: the inertia (B, n)."""
+
+    inertia: np.ndarray
+
+
+@dataclass(frozen=True)
+class DrivesOfRows:
+    """Drive axes in a batch whose run ``b`` follows ``models[index[b]]``: models of one
+    rig's axes under one Coulomb law, each with its own parameters, lag and effects (the
+    nominal model beside one extended by a lag and a friction, which are not one model
+    plus drive torques). What the axes' closed loop (:class:`~cdpr_pipeline.sim.
+    axes_loop.AxesLoop`) reads of a model, per run: the inertia and lags (B, n), and the
+    resisting force, each model's on its own runs (the batch is the second-last axis of
+    every friction call). The closed form of an affine friction takes one model: such a
+    model is refused here. The sub-steps are chosen per model
+    (:func:`~cdpr_pipeline.sim.axes_loop.substeps_for` reads one model) and passed to
+    the loop.
+    """
+
+    models: tuple[Any, ...]
+    index: np.ndarray
+
+    def __post_init__(self) -> None:
+        first = self.models[0]
+        if any(m.n != first.n or m.sign_sharpness != first.sign_sharpness
+               for m in self.models):
+            raise ValueError("the models of a batch differ in axes or Coulomb law")
+        if any((m.sign_sharpness is None or np.isinf(m.sign_sharpness)) and not m.effects
+               for m in self.models):
+            raise ValueError("an affine friction (hard sign, no effect) is stepped in "
+                             "closed form, one model at a time")
+
+    @classmethod
+    def of(cls, rows: Sequence[Any]) -> DrivesOfRows:
+        """The batch whose run ``b`` follows ``rows[b]``."""
+        models = list({id(m): m for m in rows}.values())
+        index = np.array([next(k for k, m in enumerate(models) if m is row) for row in rows])
+        return cls(tuple(models), index)
+
+    @property
+    def n(self) -> int:
+        return int(self.models[0].n)
+
+    @property
+    def sign_sharpness(self) -> float | None:
+        return self.models[0].sign_sharpness
+
+    @property
+    def effects(self) -> tuple:
+        return tuple(e for m in self.models for e in m.effects)
+
+    @cached_property
+    def winch(self) -> _RowsWinch:
+        return _RowsWinch(np.stack([self.models[k].winch.inertia for k in self.index]))
+
+    @cached_property
+    def lags(self) -> np.ndarray:
+        return np.stack([self.models[k].lags for k in self.index])
+
+    @cached_property
+    def _runs(self) -> list[np.ndarray]:
+        return [np.flatnonzero(self.index == k) for k in range(len(self.models))]
+
+    def friction_torque(self, theta: np.ndarray, omega: np.ndarray) -> np.ndarray:
+        """Each model's resisting force on its own runs (axis -2 of both arrays)."""
+        theta, omega = np.asarray(theta, float), np.asarray(omega, float)
+        out = np.empty(np.broadcast_shapes(theta.shape, omega.shape))
+        for model, runs in zip(self.models, self._runs, strict=True):
+            out[..., runs, :] = model.friction_torque(theta[..., runs, :],
+                                                      omega[..., runs, :])
+        return out

@@ -161,3 +161,48 @@ def test_the_check_passes_rounding_and_catches_a_wrong_decomposition(lab, monkey
     bump = nominal.with_effects([StribeckFriction(static_ratio=2.0, stribeck_velocity=1.0)])
     monkeypatch.setattr(R, "_extra_rows", lambda *args: None)
     assert R.fast_path_strays(bump, nominal, sigs[0])["torque"] > 1e-3
+
+
+@pytest.mark.parametrize("sharpness", [None, 20.0])
+def test_an_effects_block_reuses_its_unchanged_columns_exactly(lab, monkeypatch, sharpness):
+    """A fit moves one winch's parameter at a time, or the lag: the next value's rows
+    (and the lag's slope rows) take the unchanged winches' columns from the last block
+    of the effect, to the bit, and filter only the changed ones."""
+    from cdpr_pipeline.discovery.signals import RunSignals
+    from cdpr_pipeline.sim.effects import EFFECTS
+
+    data, sigs = lab
+    sig = dataclasses.replace(sigs[0], settings=dataclasses.replace(
+        sigs[0].settings, sign_sharpness=sharpness), cache={})
+    nominal = R.nominal_model(data.rig, sharpness).replace(
+        actuator_time_constant=np.array([0.01, 0.02, 0.005]))
+    stribeck = EFFECTS["stribeck_friction"]
+    steps = [([2.0, 2.0, 2.0], [0.1, 0.1, 0.1], 0.01),
+             ([2.0, 2.5, 2.0], [0.1, 0.1, 0.1], 0.01),     # one winch's size
+             ([2.0, 2.5, 2.0], [0.1, 0.1, 0.3], 0.01),     # another winch's speed
+             ([2.0, 2.5, 2.0], [0.1, 0.1, 0.3], 0.02)]     # the lag alone
+    models = [nominal.replace(actuator_time_constant=np.array([lag, 0.02, 0.005]))
+              .with_effects([stribeck(static_ratio=r, stribeck_velocity=v)])
+              for r, v, lag in steps]
+    filtered = [0]
+    rows = RunSignals.rows
+
+    def counted(self, x):
+        filtered[0] += np.prod(np.shape(x)[1:], dtype=int)
+        return rows(self, x)
+
+    monkeypatch.setattr(RunSignals, "rows", counted)
+    fresh, alone_signals = [], []
+    for model in models:
+        filtered[0] = 0
+        fresh.append(R.residual_rows(model, nominal, dataclasses.replace(sig, cache={}),
+                                     frozenset({"torque"})))
+        alone_signals.append(filtered[0])
+    filtered[0] = 0
+    for model, expected in zip(models, fresh, strict=True):
+        got = R.residual_rows(model, nominal, sig, frozenset({"torque"}))
+        assert np.array_equal(got["torque"], expected["torque"])
+    # the first model as alone (the last one alone: the first also checked its
+    # structure against the direct rows); then one column and its slope per step, none
+    # for the lag's step, where the Stribeck torque did not change
+    assert filtered[0] == alone_signals[-1] + 2 + 2 + 0

@@ -84,8 +84,13 @@ class PositionDependentLoad(Effect):
     def winch_torque(self, theta, omega, plant):
         a = per_winch(self.a, self.cables, plant.n)
         b = per_winch(self.b, self.cables, plant.n)
-        return np.where(self.rotary(plant.n), a * np.sin(theta) + b * np.cos(theta),
-                        a * theta + b)
+        rotary = self.rotary(plant.n)
+        torque = a * theta + b
+        if rotary.any():
+            # the sines only on the rotary axes (a fit evaluates this at every step)
+            angle = np.asarray(theta)[..., rotary]
+            torque[..., rotary] = a[rotary] * np.sin(angle) + b[rotary] * np.cos(angle)
+        return torque
 
     def derived(self, plant):
         cables = self.cables or list(range(1, plant.n + 1))

@@ -62,15 +62,25 @@ def harmonic_shares(angle: np.ndarray, residual: np.ndarray, k: np.ndarray) -> n
     >>> int(np.argmax(shares)) + 1, round(float(shares.max()), 6)
     (4, 1.0)
     """
-    phase = np.asarray(angle, float)[:, None] * np.asarray(k, float)[None, :]
-    sn, cs = np.sin(phase), np.cos(phase)
-    ss, cc, sc = (sn * sn).sum(0), (cs * cs).sum(0), (sn * cs).sum(0)
-    rs, rc = residual @ sn, residual @ cs
-    det = ss * cc - sc * sc
-    ok = det > 1e-12 * np.maximum(ss * cc, 1e-300)
-    explained = np.where(ok, (cc * rs * rs - 2 * sc * rs * rc + ss * rc * rc)
-                         / np.where(ok, det, 1.0), 0.0)
+    angle, k = np.asarray(angle, float), np.asarray(k, float).reshape(-1)
+    explained = np.empty(k.size)
+    # a few dozen wavenumbers at a time: the sines of all of them (rows x hundreds) are
+    # tens of MB, written and read again several times (twice the time, same numbers)
+    for start in range(0, k.size, _WAVENUMBERS_AT_ONCE):
+        part = slice(start, start + _WAVENUMBERS_AT_ONCE)
+        phase = angle[:, None] * k[None, part]
+        sn, cs = np.sin(phase), np.cos(phase)
+        ss, cc, sc = (sn * sn).sum(0), (cs * cs).sum(0), (sn * cs).sum(0)
+        rs, rc = residual @ sn, residual @ cs
+        det = ss * cc - sc * sc
+        ok = det > 1e-12 * np.maximum(ss * cc, 1e-300)
+        explained[part] = np.where(ok, (cc * rs * rs - 2 * sc * rs * rc + ss * rc * rc)
+                                   / np.where(ok, det, 1.0), 0.0)
     return explained / max(float(residual @ residual), 1e-300)
+
+
+#: wavenumbers :func:`harmonic_shares` takes at once
+_WAVENUMBERS_AT_ONCE = 64
 
 
 def in_band(speed: np.ndarray, per_unit: float, band_hz: float) -> float:

@@ -22,6 +22,11 @@ def test_position_dependent_load_form_per_joint_type(nominal_plant):
     assert np.allclose(extra[:, 0], 2.0 * np.sin(q[:, 0]) + 0.5 * np.cos(q[:, 0]))
     assert np.allclose(extra[:, 1], 0.0)
     assert np.allclose(extra[:, 2], -3.0 * q[:, 2] + 0.25)
+    # a batch of positions (the closed loop's friction calls): the same per entry
+    batch = drives.with_effects([load]).friction_torque(np.stack([q, -q]),
+                                                        np.zeros((2, *q.shape)))
+    assert np.array_equal(batch[0], extra)
+    assert np.allclose(batch[1, :, 0], -2.0 * np.sin(q[:, 0]) + 0.5 * np.cos(q[:, 0]))
     assert load.scaled(0.5).a == [1.0, -1.5] and load.scaled(0.5).b == [0.25, 0.125]
     with pytest.raises(ValueError, match="drive axes"):
         load.apply(nominal_plant)
