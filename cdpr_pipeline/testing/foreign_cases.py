@@ -228,6 +228,15 @@ def grade(record: dict, hidden: list[str], outside: tuple[str, ...] = OUTSIDE_VO
             "misnamed": misnamed, "false_alarm": labels == ["none"] and found != ["none"]}
 
 
+def effects_above_noise(record: dict) -> set[str]:
+    """The effect names of ``record``'s causes, less those wholly below the measurement
+    noise (every part ``below_noise``: what the cause changes is under the channel's
+    noise, docs/method.md): the report names such a cause as below the noise, and a
+    test that a hidden effect is named alone does not count it as a second cause."""
+    return {c["effect"] for c in record["causes"]
+            if not c.get("sizes") or not all(p["below_noise"] for p in c["sizes"])}
+
+
 def first_step(record: dict, alpha: float) -> list[dict]:
     """The statistics every first-step candidate was tested on, with the thresholds they
     were held to (``selection.Judge``): the likelihood-ratio p-value against

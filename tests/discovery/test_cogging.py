@@ -24,7 +24,12 @@ from cdpr_pipeline.discovery.freeform.terms import ShapeFilter
 from cdpr_pipeline.sim.candidate_forms import DataScale
 from cdpr_pipeline.sim.effects import CoggingTorque
 from cdpr_pipeline.sim.effects.periodic import MOST_PERIODS
-from cdpr_pipeline.testing.foreign_cases import FAST, foreign_case, parameters_ok
+from cdpr_pipeline.testing.foreign_cases import (
+    FAST,
+    effects_above_noise,
+    foreign_case,
+    parameters_ok,
+)
 from cdpr_pipeline.testing.independent_sim import draw_effect
 from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset, rng_for
 
@@ -162,7 +167,7 @@ def _lab_cogging(rig, seed):
 
 def _assert_found(record, truth: CoggingTorque, case: str, rel: float) -> None:
     assert record["verdict"] == "cogging", case
-    assert {c["effect"] for c in record["causes"]} == {"cogging"}, case
+    assert effects_above_noise(record) == {"cogging"}, case
     p = record["causes"][0]["params"]
     assert p["cables"] == truth.cables, case
     assert p["periods"] == truth.periods, case
@@ -215,6 +220,6 @@ def test_independent_cogging_is_named_with_its_period_count_and_amplitude(
                         duration_s=duration, n=n, rig_options=rig_options)
     record = case.diagnose()
     assert record["verdict"] == "cogging", case.describe()
-    assert {c["effect"] for c in record["causes"]} == {"cogging"}, case.describe()
+    assert effects_above_noise(record) == {"cogging"}, case.describe()
     ok, why = parameters_ok(case, record["causes"][0])
     assert ok, f"{why}: {case.describe()}"

@@ -27,6 +27,7 @@ from cdpr_pipeline.testing.foreign_cases import (
     OUTSIDE,
     VOCABULARY,
     contribution_errors,
+    effects_above_noise,
     foreign_case,
     parameters_ok,
     rng_for,
@@ -42,12 +43,13 @@ def _diagnosed(tmp_path, kind: str, effects: list[str], seed: int):
 
 
 def _assert_named(case, record: dict, name: str, alone: bool = False) -> None:
-    """The verdict is ``name`` (with no other cause when ``alone``) and what was fitted is
+    """The verdict is ``name`` (with no other cause above the noise when ``alone``,
+    ``foreign_cases.effects_above_noise``) and what was fitted is
     the truth (``foreign_cases.parameters_ok``: a torque-side effect's held-out torque,
     any other's sizes)."""
     assert record["verdict"] == name, case.describe()
     if alone:
-        assert {c["effect"] for c in record["causes"]} == {name}, case.describe()
+        assert effects_above_noise(record) == {name}, case.describe()
     ok, why = parameters_ok(case, record["causes"][0])
     assert ok, f"{why}: {case.describe()}"
 
