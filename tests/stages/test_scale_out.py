@@ -74,13 +74,13 @@ def test_a_ddp_rank_that_fails_alone_fails_the_run(small_lab, tmp_path):
     assert not (out / "forecaster.pt").exists()
 
 
-#: a sweep of four jobs that train the references (closed-form fits: the sweep's machinery
-#: is under test, not the training)
-SWEEP = ["model=constant_velocity,arx", "seed=0,1", "quiet=true", "evaluation.max_train_runs=2",
+#: a sweep of two jobs that train the references (closed-form fits: the sweep's machinery
+#: is under test, not the training; two jobs started together are what once raced)
+SWEEP = ["model=constant_velocity,arx", "quiet=true", "evaluation.max_train_runs=2",
          "evaluation.onestep_stride=5", "data.test_fraction=0.34"]
 
 
-@pytest.mark.parametrize("launcher", [["hydra/launcher=joblib", "hydra.launcher.n_jobs=4"],
+@pytest.mark.parametrize("launcher", [["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"],
                                       ["hydra/launcher=submitit_local"]],
                          ids=["joblib", "submitit_local"])
 def test_a_sweep_on_a_fresh_store_logs_every_job(launcher, small_lab, tmp_path):
@@ -97,10 +97,10 @@ def test_a_sweep_on_a_fresh_store_logs_every_job(launcher, small_lab, tmp_path):
                  cwd=tmp_path)
     assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
     runs = _runs(uri, "sweep")
-    assert sorted((r.data.tags["model"], r.data.params["seed"], r.info.status) for r in runs) \
-        == [(m, s, "FINISHED") for m in ("arx", "constant_velocity") for s in ("0", "1")]
+    assert sorted((r.data.tags["model"], r.info.status) for r in runs) \
+        == [("arx", "FINISHED"), ("constant_velocity", "FINISHED")]
     assert sorted(p.name for p in sweep.iterdir() if p.is_dir() and p.name.isdigit()) \
-        == ["0", "1", "2", "3"]
-    assert all((sweep / job / "metrics.json").is_file() for job in ("0", "1", "2", "3"))
+        == ["0", "1"]
+    assert all((sweep / job / "metrics.json").is_file() for job in ("0", "1"))
     if "submitit" in launcher[0]:
         assert (sweep / ".submitit").is_dir()     # the jobs went through submitit
