@@ -11,6 +11,7 @@ from cdpr_pipeline.sim.effects import AsymmetricViscousFriction, WinchParameterE
 from cdpr_pipeline.testing.foreign_cases import (
     CONTRIBUTION_TOLERANCE,
     contribution_errors,
+    effects_above_noise,
     foreign_case,
 )
 
@@ -46,3 +47,15 @@ def test_the_torque_of_an_effect_counts_in_any_form_and_a_wrong_one_fails(tmp_pa
     for wrong in ([asym(c, -side)], [asym(0.5 * c, side)], []):
         errors = contribution_errors(case, wrong)
         assert max(errors.values()) > TOL, f"{wrong}: {errors}: {case.describe()}"
+
+
+def test_a_cause_counts_as_named_unless_every_part_is_below_the_noise() -> None:
+    def cause(effect, *below):
+        return {"effect": effect, "sizes": [{"below_noise": b} for b in below]}
+
+    record = {"causes": [cause("cogging", False, True), cause("unnamed", True),
+                         cause("stribeck_friction", True, True), {"effect": "actuator_lag"}]}
+    # a cause with no sizes recorded is not known to be below the noise: it counts
+    assert effects_above_noise(record) == {"cogging", "actuator_lag"}
+    record["causes"][1] = cause("unnamed", True, False)
+    assert effects_above_noise(record) == {"cogging", "unnamed", "actuator_lag"}
