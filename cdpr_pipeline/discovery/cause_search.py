@@ -15,12 +15,14 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from scipy.optimize._numdiff import approx_derivative
 
 from cdpr_pipeline.discovery.fitting import (
     FitContext,
     fit_at_start,
     fit_candidate,
     fit_winches,
+    one_blas_thread,
 )
 from cdpr_pipeline.discovery.freeform.periodicity import WINCH_ANGLE, Periodicity
 from cdpr_pipeline.discovery.freeform.search import (
@@ -72,6 +74,8 @@ class CauseSearch:
     nominal_held: dict[str, np.ndarray] | None = None
     scales: dict[str, np.ndarray] | None = None
     shapes: list[str] = field(default_factory=list)
+    #: per forward step after the first, the joint fits it made (:meth:`refit_passing`)
+    joint_fits: list[int] = field(default_factory=list)
     _log_n: float | None = None
 
     def _reference(self) -> None:
@@ -112,33 +116,42 @@ class CauseSearch:
 
     def forward(self, fixed: list[Effect], candidates: list[Candidate], freeform: bool,
                 max_steps: int) -> list[Judgement]:
-        """Add the best passing candidate (by BIC) until none passes. Every candidate is
-        fitted jointly with the causes already kept (their parameters start where they
-        are and may move), so an earlier cause does not keep what a later one explains
-        better (a winch offset absorbing a payload error). ``max_steps`` counts
-        distinct effects (see :attr:`SelectionSettings.max_causes`)."""
+        """Add the best passing candidate (by BIC) until none passes. ``max_steps``
+        counts distinct effects (see :attr:`SelectionSettings.max_causes`).
+
+        Every step first screens each candidate fitted on top of the causes already
+        kept, their parameters fixed (what one candidate costs alone). The candidates
+        that pass are then re-fitted jointly with the kept causes (their parameters
+        start where they are and may move), strongest first by the screen's BIC: at
+        least :attr:`SelectionSettings.joint_refits` of them, more only while none
+        passes jointly; the best that passes jointly joins. So an earlier cause does not
+        keep what a later one explains better (a winch offset absorbing a payload
+        error), and a step costs one screen of the vocabulary plus a few joint fits,
+        not a joint fit per candidate."""
         causes: list[Judgement] = []
         parts: list[tuple[Candidate, np.ndarray]] = []
         for _ in range(max_steps + self.scale.n):
             if len({c.effect for c in causes}) >= max_steps:
                 break
-            ctx, judge = self.joint_context(fixed, parts)
+            current = fixed + _build(parts)
+            ctx, judge = self.context(current)
             n_tests = len(candidates) + bool(freeform and self.freeform)
-            step = [_judge_joint(parts, c, ctx, judge, n_tests) for c in candidates]
+            # each candidate on top of the kept causes, what their parameters could
+            # still take up of it projected out (nothing kept yet: fitted alone on the
+            # model it extends, the first step's joint fit)
+            kept = KeptCauses(parts, *self.joint_context(fixed, parts)) if parts else None
+            step = [_screen(c, ctx, judge, kept, n_tests) for c in candidates]
+            templates: list[Candidate | None] = list(candidates)
             if freeform and self.freeform is not None:
-                f_ctx, f_judge = self.context(fixed + _build(parts))
-                ff = judge_freeform(self.freeform, f_ctx, f_judge, self.scale, self.kind,
-                                    n_tests, shapes=self.shapes)
-                step.append(ff)
+                step.append(judge_freeform(self.freeform, ctx, judge, self.scale, self.kind,
+                                           n_tests, shapes=self.shapes))
+                templates.append(None)      # a free-form part is fitted on top only
             # a sparse candidate (a winch re-identification) ranks by the parameters the
             # data need, as in the comparison with free-form terms: a wrong offset alone
             # is one parameter, not four (counted as four, a prismatic load's a q + b
             # took an offset error's place with an insignificant slope)
-            current = fixed + _build(parts)
-            if any(self.sparse(j) for j in step):
-                base_bic = self.bic(current, 0)
-                step = [self.lean(j, current, base_bic) if self.sparse(j) else j
-                        for j in step]
+            base_bic = self.bic(current, 0) if any(self.sparse(j) for j in step) else None
+            step = [self.lean(j, current, base_bic) if self.sparse(j) else j for j in step]
             # the winch re-identifications that pass on their own, also as one cause: a
             # variant acting on every winch at once (a load on every axis) would
             # otherwise take winches one re-identification at a time explains exactly
@@ -148,10 +161,15 @@ class CauseSearch:
                                           j.effect == WINCH_PARAMETER_ERROR and
                                           j.candidate is not None])
             if together is not None:
-                step.append(_judge_joint(parts, together, ctx, judge, n_tests))
+                step.append(_screen(together, ctx, judge, kept, n_tests))
+                templates.append(together)
+            eligible = list(range(len(step)))
+            if kept is not None:
+                step, eligible = self.refit_passing(step, templates, kept, n_tests)
             self.steps.append(step)
             self.log_step(step)
-            passed = sorted((j for j in step if j.passed), key=lambda j: -j.bic_drop)
+            passed = sorted((step[i] for i in eligible if step[i].passed),
+                            key=lambda j: -j.bic_drop)
             if not passed:
                 break
             best = passed[0]
@@ -166,6 +184,36 @@ class CauseSearch:
             candidates = [c for c in candidates if c.label != best.label
                           or best.effect == WINCH_PARAMETER_ERROR]
         return causes
+
+    def refit_passing(self, step: list[Judgement], templates: list[Candidate | None],
+                      kept: KeptCauses, n_tests: int) -> tuple[list[Judgement], list[int]]:
+        """The screened ``step`` with its passing candidates re-fitted jointly with the
+        ``kept`` causes (each from its ``templates`` entry, the kept causes from where
+        they are), strongest first by the screen's BIC drop: at least
+        :attr:`SelectionSettings.joint_refits` of them, more only while none passes
+        jointly. Returns the step and the indices of the judgements that may join: the
+        joint ones, and free-form parts (fitted on top only)."""
+        order = sorted((i for i, j in enumerate(step) if j.passed),
+                       key=lambda i: -step[i].bic_drop)
+        step, eligible = list(step), [i for i in order if templates[i] is None]
+        order = [i for i in order if templates[i] is not None]
+        if not order:
+            self.joint_fits.append(0)
+            return step, eligible
+        parts, ctx, judge = kept.parts, kept.ctx, kept.judge
+        current = ctx.base + judge.base_effects
+        base_bic, found, fits = None, False, 0
+        for i in order:
+            if fits >= self.settings.joint_refits and found:
+                break
+            j = _judge_joint(parts, templates[i], ctx, judge, n_tests)
+            if self.sparse(j):
+                base_bic = self.bic(current, 0) if base_bic is None else base_bic
+                j = self.lean(j, current, base_bic)
+            step[i], fits, found = j, fits + 1, found or j.passed
+            eligible.append(i)
+        self.joint_fits.append(fits)
+        return step, eligible
 
     def refit(self, judgement: Judgement, kept: list[Effect], n_tests: int) -> Judgement:
         """The same candidate (or free-form library) re-fitted on top of ``kept``."""
@@ -314,6 +362,105 @@ class CauseSearch:
                 self.log.info("  %-48s LR %10.1f BIC %+10.1f held-out RMSE drop %6.1f %% %s",
                               j.label, j.lr, j.bic_drop, 100 * j.heldout_rmse_drop,
                               "PASS" if j.passed else j.reason)
+
+
+class KeptCauses:
+    """The causes kept so far, their parameters linearised where they are: the screen of
+    a later step fits each candidate on top of them with what their parameters could
+    still take up of it projected out (a joint re-fit to first order: exact for causes
+    linear in their parameters, a winch offset or a payload), and moves them by that
+    step for the judgement.
+
+    Parameters
+    ----------
+    parts : list of (Candidate, array)
+        The kept causes' candidates and parameters.
+    ctx : FitContext
+        A context fitting on the model without them (the joint fits').
+    judge : Judge
+        The joint fits' judge: against the model with them.
+    """
+
+    def __init__(self, parts: list[tuple[Candidate, np.ndarray]], ctx: FitContext,
+                 judge: Judge) -> None:
+        self.parts, self.ctx, self.judge = parts, ctx, judge
+        last, x_last = parts[-1]
+        self.joint = _joint(parts[:-1], replace(last, starts=[np.asarray(x_last, float)]))
+        self.x = np.clip(self.joint.starts[0], self.joint.lower, self.joint.upper)
+        self._jacobian: np.ndarray | None = None
+        self._basis: np.ndarray | None = None
+
+    def vector(self, effects: Sequence[Effect], channels: frozenset[str]) -> np.ndarray:
+        """The weighted training residual vector of the model without the kept causes
+        extended by ``effects`` (recomputing ``channels``)."""
+        return self.ctx.vector(self.ctx.training_residuals(list(effects), channels), False)
+
+    def jacobian(self) -> np.ndarray:
+        """The residual vector's Jacobian in the kept parameters, each column times its
+        parameter's scale (finite differences, once per step)."""
+        if self._jacobian is None:
+            joint = self.joint
+            with one_blas_thread():
+                J = approx_derivative(
+                    lambda x: self.vector(joint.build(x), joint.affects), self.x,
+                    method="2-point", bounds=(joint.lower, joint.upper))
+            self._jacobian = np.atleast_2d(J) * joint.x_scale
+            u, sv, _ = np.linalg.svd(self._jacobian, full_matrices=False)
+            self._basis = u[:, sv > _RANK_TOL * sv.max()] if sv.size and sv.max() > 0 \
+                else u[:, :0]
+        return self._jacobian
+
+    def project(self, v: np.ndarray) -> np.ndarray:
+        """``v`` (a residual vector, or a Jacobian's columns) less what the kept
+        parameters' linear change explains of it."""
+        self.jacobian()
+        q = self._basis
+        return np.asfortranarray(v - q @ (q.T @ v))
+
+    def moved(self, v: np.ndarray) -> np.ndarray:
+        """The kept parameters after the linear least-squares step that best takes up
+        the residual vector ``v``, within their bounds."""
+        step = np.linalg.lstsq(self.jacobian(), -v, rcond=None)[0] * self.joint.x_scale
+        return np.clip(self.x + step, self.joint.lower, self.joint.upper)
+
+
+#: singular values of the kept causes' scaled Jacobian below this share of the largest
+#: span no direction of the projection (parameters the data do not move)
+_RANK_TOL = 1e-10
+
+
+def _screen(cand: Candidate, ctx: FitContext, judge: Judge, kept: KeptCauses | None,
+            n_tests: int) -> Judgement:
+    """``cand`` judged on top of the model ``ctx`` and ``judge`` extend: alone where no
+    cause is kept yet, else on top of the ``kept`` causes (:func:`_judge_on_kept`)."""
+    if kept is None:
+        return _judge_joint([], cand, ctx, judge, n_tests)
+    return _judge_on_kept(cand, ctx, judge, kept, n_tests)
+
+
+def _judge_on_kept(cand: Candidate, ctx: FitContext, judge: Judge, kept: KeptCauses,
+                   n_tests: int) -> Judgement:
+    """``cand`` screened on top of the ``kept`` causes (``ctx`` and ``judge`` extend the
+    model with them): fitted with what their parameters could take up of it projected
+    out, then judged as a joint fit is, against the model with them, with the kept
+    causes moved by their linear step (or where they are, when that step does not
+    lower the training residual: a cause nonlinear in its parameters). A candidate
+    re-identifying the winches beside is fitted on top only."""
+    cand = _on_winches(cand, ctx, judge)
+    fit = fit_candidate(cand, ctx, None if cand.refit_winches else kept.project)
+    if not fit.success and not fit.effects:
+        j = kept.judge(cand.effect, cand.label, list(kept.judge.base_effects),
+                       cand.n_params, n_tests)
+        return replace(j, fit=fit, candidate=cand).failed("fit failed")
+    where = list(kept.joint.build(kept.x)) + list(fit.effects)
+    if not cand.refit_winches:
+        channels = kept.joint.affects | cand.affects
+        v0 = kept.vector(where, channels)
+        moved = list(kept.joint.build(kept.moved(v0))) + list(fit.effects)
+        if float(np.sum(kept.vector(moved, channels) ** 2)) < float(np.sum(v0 ** 2)):
+            where = moved
+    j = kept.judge(cand.effect, cand.label, where, cand.n_params, n_tests)
+    return replace(j, fit=fit, candidate=cand)
 
 
 def effects_of(causes: Sequence[Judgement]) -> list[Effect]:

@@ -9,7 +9,7 @@ variances (to first order).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 from typing import Any
@@ -440,10 +440,16 @@ def one_blas_thread() -> AbstractContextManager:
     return _BLAS[0].limit(limits=1, user_api="blas")
 
 
-def fit_candidate(candidate: Candidate, ctx: FitContext) -> Fit:
-    """Best of the candidate's starts (bounded trust-region least squares)."""
+def fit_candidate(candidate: Candidate, ctx: FitContext,
+                  project: Callable[[np.ndarray], np.ndarray] | None = None) -> Fit:
+    """Best of the candidate's starts (bounded trust-region least squares).
+
+    ``project``: a linear map applied to the residual vector and its Jacobian (the fit
+    minimises what it leaves: :class:`~cdpr_pipeline.discovery.cause_search.KeptCauses`
+    projects out what the kept causes' parameters could still take up). The fit's cost
+    is the projected one."""
     with one_blas_thread():
-        return _fit_candidate(candidate, ctx)
+        return _fit_candidate(candidate, ctx, project)
 
 
 class GroupedJacobian:
@@ -537,7 +543,8 @@ class GroupedJacobian:
         return np.asfortranarray(J.toarray(), float)
 
 
-def _fit_candidate(candidate: Candidate, ctx: FitContext) -> Fit:
+def _fit_candidate(candidate: Candidate, ctx: FitContext,
+                   project: Callable[[np.ndarray], np.ndarray] | None) -> Fit:
     layout: list[np.ndarray] = []
 
     def fun(x: np.ndarray) -> np.ndarray:
@@ -554,8 +561,12 @@ def _fit_candidate(candidate: Candidate, ctx: FitContext) -> Fit:
     for x0 in candidate.starts:
         x0 = np.clip(x0, candidate.lower, candidate.upper)
         jac = GroupedJacobian(fun, blocks, bounds)
+        # a linear projection commutes with the finite differences: the Jacobian is
+        # taken (grouped) on the raw residuals and projected
+        f, j = (jac.fun, jac) if project is None else \
+            (lambda x, g=jac: project(g.fun(x)), lambda x, g=jac: project(g(x)))
         try:
-            sol = least_squares(jac.fun, x0, jac=jac, bounds=bounds,
+            sol = least_squares(f, x0, jac=j, bounds=bounds,
                                 x_scale=candidate.x_scale, method="trf",
                                 max_nfev=(8 if candidate.linear else ctx.max_nfev)
                                 * max(1, candidate.n_params))

@@ -57,6 +57,12 @@ class SelectionSettings:
         named one winch per step and counts once however many winches it re-identifies
         (at most one extra step per winch): with three steps in all, an error on four
         of six axes left one to free-form terms and the verdict was ``unnamed``.
+    joint_refits : int
+        After the first step, the candidates passing on top of the kept causes (their
+        parameters fixed) that are re-fitted jointly with them, strongest first by BIC;
+        more only while none of those passes jointly. The best that passes jointly
+        joins (a later step's ranking by the screen and by the joint fit can differ
+        where a candidate takes over part of what a kept cause explained).
     block_s : float
         Bootstrap block length (residuals are correlated within a block).
     n_boot : int
@@ -81,6 +87,7 @@ class SelectionSettings:
     min_gain: float = 0.10
     min_share: float = 0.0
     max_causes: int = 3
+    joint_refits: int = 2
     block_s: float = 1.0
     n_boot: int = 400
     effects: list[str] | None = None
