@@ -389,6 +389,7 @@ class KeptCauses:
         self.x = np.clip(self.joint.starts[0], self.joint.lower, self.joint.upper)
         self._jacobian: np.ndarray | None = None
         self._basis: np.ndarray | None = None
+        self._inverse: np.ndarray | None = None
 
     def vector(self, effects: Sequence[Effect], channels: frozenset[str]) -> np.ndarray:
         """The weighted training residual vector of the model without the kept causes
@@ -405,9 +406,10 @@ class KeptCauses:
                     lambda x: self.vector(joint.build(x), joint.affects), self.x,
                     method="2-point", bounds=(joint.lower, joint.upper))
             self._jacobian = np.atleast_2d(J) * joint.x_scale
-            u, sv, _ = np.linalg.svd(self._jacobian, full_matrices=False)
-            self._basis = u[:, sv > _RANK_TOL * sv.max()] if sv.size and sv.max() > 0 \
-                else u[:, :0]
+            u, sv, vt = np.linalg.svd(self._jacobian, full_matrices=False)
+            keep = sv > _RANK_TOL * sv.max() if sv.size and sv.max() > 0 else sv > np.inf
+            # the range's orthonormal basis, and the pseudo-inverse's other factor
+            self._basis, self._inverse = u[:, keep], vt[keep].T / sv[keep]
         return self._jacobian
 
     def project(self, v: np.ndarray) -> np.ndarray:
@@ -420,7 +422,8 @@ class KeptCauses:
     def moved(self, v: np.ndarray) -> np.ndarray:
         """The kept parameters after the linear least-squares step that best takes up
         the residual vector ``v``, within their bounds."""
-        step = np.linalg.lstsq(self.jacobian(), -v, rcond=None)[0] * self.joint.x_scale
+        self.jacobian()
+        step = -(self._inverse @ (self._basis.T @ v)) * self.joint.x_scale
         return np.clip(self.x + step, self.joint.lower, self.joint.upper)
 
 

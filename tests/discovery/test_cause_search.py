@@ -1,0 +1,107 @@
+"""The forward selection's steps after the first (docs/method.md 3.3): each candidate is
+screened on top of the kept causes with what their parameters could still take up of it
+projected out, and only the best passing ones are re-fitted jointly with them.
+
+A payload error hidden in the lab's data, with the winches re-identified first: the
+re-identified winch inertias and offsets take up nearly all of it, so a candidate fitted
+on top of them with their parameters fixed finds almost no payload error, while the joint
+re-fit gives it back. The screen must see what the joint fit sees, and a diagnosis of a
+payload error beside a wrong winch parameter must name both with few joint fits per step.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cdpr_pipeline.discovery import cause_search
+from cdpr_pipeline.discovery.candidates import candidates_for
+from cdpr_pipeline.discovery.cause_search import (
+    CauseSearch,
+    KeptCauses,
+    data_scale,
+)
+from cdpr_pipeline.discovery.diagnosis import diagnosis_split
+from cdpr_pipeline.discovery.fitting import fit_candidate
+from cdpr_pipeline.sim.effects import make_effect
+from cdpr_pipeline.testing.lab_cases import (
+    fast_settings,
+    heldout_signals,
+    lab_dataset,
+    rng_for,
+)
+
+#: measured on seeds 1-3: the re-identified winches keep 5-15 % of the payload error beside
+#: it in the joint fit (its size is not the truth's), the screen and the joint fit agree to
+#: 1e-4 (a winch re-identification is linear in its parameters); fixed, they leave a
+#: payload error below 0.005 and a likelihood ratio below 2 % of the joint one
+PAYLOAD_BESIDE_WINCHES = 0.05
+
+
+def _search(rig, effects, seed):
+    data = lab_dataset(rig, effects, seed)
+    settings = fast_settings()
+    split = diagnosis_split(data, settings)
+    train, nominal = heldout_signals(data, settings, split.train)
+    held, _ = heldout_signals(data, settings)
+    search = CauseSearch(nominal, train, held, settings.selection, None,
+                         data_scale(train, nominal.kind, nominal), nominal.kind)
+    return search, candidates_for(rig, search.scale, None, False)
+
+
+def test_the_screen_sees_what_a_joint_refit_of_the_kept_causes_gives_back(paper_rig, seed):
+    payload = make_effect("payload_mass_error", rng_for(seed), paper_rig.n)
+    search, cands = _search(paper_rig, [payload], seed)
+    # every winch re-identified first, as a forward step keeps it: it takes up the payload
+    winches = cause_search._winches_together(
+        [c for c in cands if c.effect == "winch_parameter_error"])
+    fit = fit_candidate(winches, search.fit_context([]))
+    parts = [(winches, np.asarray(fit.x, float))]
+    kept = KeptCauses(parts, *search.joint_context([], parts))
+    ctx, judge = search.context(cause_search._build(parts))
+    cand = next(c for c in cands if c.effect == "payload_mass_error")
+    n = len(cands)
+    fixed = cause_search._judge_joint([], cand, ctx, judge, n)
+    screened = cause_search._judge_on_kept(cand, ctx, judge, kept, n)
+    joint = cause_search._judge_joint(parts, cand, kept.ctx, kept.judge, n)
+    case = (f"seed {seed}: payload {payload.relative:+.4f}; kept fixed {fixed.fit.x[0]:+.4f} "
+            f"(LR {fixed.lr:.1f}), screened {screened.fit.x[0]:+.4f} (LR {screened.lr:.1f}), "
+            f"joint {joint.fit.x[-1]:+.4f} (LR {joint.lr:.1f})")
+    assert joint.passed and abs(joint.fit.x[-1] - payload.relative) <= PAYLOAD_BESIDE_WINCHES, case
+    assert screened.passed, case
+    assert screened.fit.x[0] == pytest.approx(joint.fit.x[-1], abs=1e-3), case
+    assert screened.lr == pytest.approx(joint.lr, rel=0.01), case
+    # what the screen would miss with the kept parameters fixed
+    assert fixed.lr < 0.1 * joint.lr, case
+
+
+def test_few_joint_fits_per_step_and_a_payload_beside_a_winch_error_is_named(
+        paper_rig, seed, monkeypatch):
+    payload = make_effect("payload_mass_error", rng_for(seed), paper_rig.n)
+    winch = make_effect("winch_parameter_error", rng_for(seed + 1), paper_rig.n)
+    search, cands = _search(paper_rig, [payload, winch], seed)
+    joint_fits: dict[int, list[bool]] = {}
+    judge_joint = cause_search._judge_joint
+
+    def counting(parts, cand, ctx, judge, n_tests):
+        j = judge_joint(parts, cand, ctx, judge, n_tests)
+        if parts:
+            joint_fits.setdefault(len(search.steps), []).append(j.passed)
+        return j
+
+    monkeypatch.setattr(cause_search, "_judge_joint", counting)
+    causes = search.forward([], cands, False, search.settings.max_causes)
+    found = {c.effect: c for c in causes}
+    case = (f"seed {seed}: hidden {payload.describe()}, {winch.describe()}; found "
+            f"{[c.label for c in causes]}; joint fits per step {joint_fits}")
+    assert "payload_mass_error" in found, case
+    size = found["payload_mass_error"].part[1][0]
+    assert size == pytest.approx(payload.relative, abs=PAYLOAD_BESIDE_WINCHES), case
+    assert search.joint_fits == [len(joint_fits.get(k, [])) for k in
+                                 range(1, len(search.steps))], case
+    limit = search.settings.joint_refits
+    for passed in joint_fits.values():
+        # the best ``limit`` candidates that passed the screen, more only while none of
+        # those passed jointly
+        assert len(passed) <= limit or not any(passed[:-1]), case
+        assert len(passed) < len(cands), case
