@@ -15,14 +15,12 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy.optimize._numdiff import approx_derivative
 
 from cdpr_pipeline.discovery.fitting import (
     FitContext,
     fit_at_start,
     fit_candidate,
     fit_winches,
-    one_blas_thread,
 )
 from cdpr_pipeline.discovery.freeform.periodicity import WINCH_ANGLE, Periodicity
 from cdpr_pipeline.discovery.freeform.search import (
@@ -31,6 +29,7 @@ from cdpr_pipeline.discovery.freeform.search import (
     symbolic_torque,
 )
 from cdpr_pipeline.discovery.judge import Judge, Judgement, SelectionSettings, fit_weights
+from cdpr_pipeline.discovery.kept import KeptCauses
 from cdpr_pipeline.discovery.residuals import Model, relative_sse, signal_scales
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.sim.candidate_forms import SLOW_SHARE, Candidate, DataScale
@@ -74,8 +73,9 @@ class CauseSearch:
     nominal_held: dict[str, np.ndarray] | None = None
     scales: dict[str, np.ndarray] | None = None
     shapes: list[str] = field(default_factory=list)
-    #: per forward step after the first, the joint fits it made (:meth:`refit_passing`)
-    joint_fits: list[int] = field(default_factory=list)
+    #: per forward step after the first, its joint fits: the screen's (where the kept
+    #: causes' linear step did not hold) and those of :meth:`refit_passing`
+    joint_fits: list[tuple[int, int]] = field(default_factory=list)
     _log_n: float | None = None
 
     def _reference(self) -> None:
@@ -139,13 +139,18 @@ class CauseSearch:
             # each candidate on top of the kept causes, what their parameters could
             # still take up of it projected out (nothing kept yet: fitted alone on the
             # model it extends, the first step's joint fit)
-            kept = KeptCauses(parts, *self.joint_context(fixed, parts)) if parts else None
-            step = [_screen(c, ctx, judge, kept, n_tests) for c in candidates]
+            kept = KeptCauses(parts, _kept_joint(parts), *self.joint_context(fixed, parts)) \
+                if parts else None
+            screened = [_screen(c, ctx, judge, kept, n_tests) for c in candidates]
+            step = [j for j, _ in screened]
+            # which judgements come from a joint fit (the screen's fallback)
+            joint = [is_joint for _, is_joint in screened]
             templates: list[Candidate | None] = list(candidates)
             if freeform and self.freeform is not None:
                 step.append(judge_freeform(self.freeform, ctx, judge, self.scale, self.kind,
                                            n_tests, shapes=self.shapes))
                 templates.append(None)      # a free-form part is fitted on top only
+                joint.append(False)
             # a sparse candidate (a winch re-identification) ranks by the parameters the
             # data need, as in the comparison with free-form terms: a wrong offset alone
             # is one parameter, not four (counted as four, a prismatic load's a q + b
@@ -161,11 +166,13 @@ class CauseSearch:
                                           j.effect == WINCH_PARAMETER_ERROR and
                                           j.candidate is not None])
             if together is not None:
-                step.append(_screen(together, ctx, judge, kept, n_tests))
+                j, is_joint = _screen(together, ctx, judge, kept, n_tests)
+                step.append(j)
                 templates.append(together)
+                joint.append(is_joint)
             eligible = list(range(len(step)))
             if kept is not None:
-                step, eligible = self.refit_passing(step, templates, kept, n_tests)
+                step, eligible = self.refit_passing(step, templates, joint, kept, n_tests)
             self.steps.append(step)
             self.log_step(step)
             passed = sorted((step[i] for i in eligible if step[i].passed),
@@ -186,19 +193,25 @@ class CauseSearch:
         return causes
 
     def refit_passing(self, step: list[Judgement], templates: list[Candidate | None],
-                      kept: KeptCauses, n_tests: int) -> tuple[list[Judgement], list[int]]:
+                      joint: list[bool], kept: KeptCauses, n_tests: int
+                      ) -> tuple[list[Judgement], list[int]]:
         """The screened ``step`` with its passing candidates re-fitted jointly with the
         ``kept`` causes (each from its ``templates`` entry, the kept causes from where
         they are), strongest first by the screen's BIC drop: at least
         :attr:`SelectionSettings.joint_refits` of them, more only while none passes
-        jointly. Returns the step and the indices of the judgements that may join: the
-        joint ones, and free-form parts (fitted on top only)."""
+        jointly (``joint``: judgements the screen already made by a joint fit, which
+        count as re-fitted). Returns the step and the indices of the judgements that may
+        join: the joint ones, and free-form parts (fitted on top only). Records the
+        step's joint fits, the screen's and these, in :attr:`joint_fits`."""
         order = sorted((i for i, j in enumerate(step) if j.passed),
                        key=lambda i: -step[i].bic_drop)
-        step, eligible = list(step), [i for i in order if templates[i] is None]
+        step = list(step)
+        eligible = [i for i in order if templates[i] is None] + \
+            [i for i, is_joint in enumerate(joint) if is_joint]
         order = [i for i in order if templates[i] is not None]
+        screen_fits = sum(joint)
         if not order:
-            self.joint_fits.append(0)
+            self.joint_fits.append((screen_fits, 0))
             return step, eligible
         parts, ctx, judge = kept.parts, kept.ctx, kept.judge
         current = ctx.base + judge.base_effects
@@ -206,13 +219,15 @@ class CauseSearch:
         for i in order:
             if fits >= self.settings.joint_refits and found:
                 break
-            j = _judge_joint(parts, templates[i], ctx, judge, n_tests)
-            if self.sparse(j):
-                base_bic = self.bic(current, 0) if base_bic is None else base_bic
-                j = self.lean(j, current, base_bic)
-            step[i], fits, found = j, fits + 1, found or j.passed
-            eligible.append(i)
-        self.joint_fits.append(fits)
+            if not joint[i]:
+                j = _judge_joint(parts, templates[i], ctx, judge, n_tests)
+                if self.sparse(j):
+                    base_bic = self.bic(current, 0) if base_bic is None else base_bic
+                    j = self.lean(j, current, base_bic)
+                step[i] = j
+                eligible.append(i)
+            fits, found = fits + 1, found or step[i].passed
+        self.joint_fits.append((screen_fits, fits - sum(joint[i] for i in order[:fits])))
         return step, eligible
 
     def refit(self, judgement: Judgement, kept: list[Effect], n_tests: int) -> Judgement:
@@ -259,9 +274,7 @@ class CauseSearch:
                               ).residuals([])
         ctx = FitContext(self.nominal, self.train, [], fit_weights(base_res, self.scales),
                          self.columns)
-        last, x_last = parts[-1]
-        joint = _joint(parts[:-1], replace(last, starts=[np.asarray(x_last, float)]))
-        fit = fit_candidate(joint, ctx)
+        fit = fit_candidate(_kept_joint(parts), ctx)
         if not fit.success and not fit.effects:
             return list(causes)
         out, k = [], 0
@@ -364,106 +377,53 @@ class CauseSearch:
                               "PASS" if j.passed else j.reason)
 
 
-class KeptCauses:
-    """The causes kept so far, their parameters linearised where they are: the screen of
-    a later step fits each candidate on top of them with what their parameters could
-    still take up of it projected out (a joint re-fit to first order: exact for causes
-    linear in their parameters, a winch offset or a payload), and moves them by that
-    step for the judgement.
-
-    Parameters
-    ----------
-    parts : list of (Candidate, array)
-        The kept causes' candidates and parameters.
-    ctx : FitContext
-        A context fitting on the model without them (the joint fits').
-    judge : Judge
-        The joint fits' judge: against the model with them.
-    """
-
-    def __init__(self, parts: list[tuple[Candidate, np.ndarray]], ctx: FitContext,
-                 judge: Judge) -> None:
-        self.parts, self.ctx, self.judge = parts, ctx, judge
-        last, x_last = parts[-1]
-        self.joint = _joint(parts[:-1], replace(last, starts=[np.asarray(x_last, float)]))
-        self.x = np.clip(self.joint.starts[0], self.joint.lower, self.joint.upper)
-        self._jacobian: np.ndarray | None = None
-        self._basis: np.ndarray | None = None
-        self._inverse: np.ndarray | None = None
-
-    def vector(self, effects: Sequence[Effect], channels: frozenset[str]) -> np.ndarray:
-        """The weighted training residual vector of the model without the kept causes
-        extended by ``effects`` (recomputing ``channels``)."""
-        return self.ctx.vector(self.ctx.training_residuals(list(effects), channels), False)
-
-    def jacobian(self) -> np.ndarray:
-        """The residual vector's Jacobian in the kept parameters, each column times its
-        parameter's scale (finite differences, once per step)."""
-        if self._jacobian is None:
-            joint = self.joint
-            with one_blas_thread():
-                J = approx_derivative(
-                    lambda x: self.vector(joint.build(x), joint.affects), self.x,
-                    method="2-point", bounds=(joint.lower, joint.upper))
-            self._jacobian = np.atleast_2d(J) * joint.x_scale
-            u, sv, vt = np.linalg.svd(self._jacobian, full_matrices=False)
-            keep = sv > _RANK_TOL * sv.max() if sv.size and sv.max() > 0 else sv > np.inf
-            # the range's orthonormal basis, and the pseudo-inverse's other factor
-            self._basis, self._inverse = u[:, keep], vt[keep].T / sv[keep]
-        return self._jacobian
-
-    def project(self, v: np.ndarray) -> np.ndarray:
-        """``v`` (a residual vector, or a Jacobian's columns) less what the kept
-        parameters' linear change explains of it."""
-        self.jacobian()
-        q = self._basis
-        return np.asfortranarray(v - q @ (q.T @ v))
-
-    def moved(self, v: np.ndarray) -> np.ndarray:
-        """The kept parameters after the linear least-squares step that best takes up
-        the residual vector ``v``, within their bounds."""
-        self.jacobian()
-        step = -(self._inverse @ (self._basis.T @ v)) * self.joint.x_scale
-        return np.clip(self.x + step, self.joint.lower, self.joint.upper)
-
-
-#: singular values of the kept causes' scaled Jacobian below this share of the largest
-#: span no direction of the projection (parameters the data do not move)
-_RANK_TOL = 1e-10
-
-
 def _screen(cand: Candidate, ctx: FitContext, judge: Judge, kept: KeptCauses | None,
-            n_tests: int) -> Judgement:
+            n_tests: int) -> tuple[Judgement, bool]:
     """``cand`` judged on top of the model ``ctx`` and ``judge`` extend: alone where no
-    cause is kept yet, else on top of the ``kept`` causes (:func:`_judge_on_kept`)."""
+    cause is kept yet, else on top of the ``kept`` causes (:func:`_judge_on_kept`); and
+    whether that judgement comes from a joint fit."""
     if kept is None:
-        return _judge_joint([], cand, ctx, judge, n_tests)
+        return _judge_joint([], cand, ctx, judge, n_tests), False
     return _judge_on_kept(cand, ctx, judge, kept, n_tests)
 
 
-def _judge_on_kept(cand: Candidate, ctx: FitContext, judge: Judge, kept: KeptCauses,
-                   n_tests: int) -> Judgement:
-    """``cand`` screened on top of the ``kept`` causes (``ctx`` and ``judge`` extend the
-    model with them): fitted with what their parameters could take up of it projected
-    out, then judged as a joint fit is, against the model with them, with the kept
-    causes moved by their linear step (or where they are, when that step does not
-    lower the training residual: a cause nonlinear in its parameters). A candidate
-    re-identifying the winches beside is fitted on top only."""
-    cand = _on_winches(cand, ctx, judge)
+#: the share of the screen's predicted drop of the training residual (the projected fit's)
+#: that the kept causes' linear step must deliver; where it does not, and the predicted
+#: drop would be significant, the candidate is fitted jointly with them
+_DELIVERED = 0.9
+
+
+def _judge_on_kept(template: Candidate, ctx: FitContext, judge: Judge, kept: KeptCauses,
+                   n_tests: int) -> tuple[Judgement, bool]:
+    """``template`` screened on top of the ``kept`` causes (``ctx`` and ``judge`` extend
+    the model with them): fitted with what their parameters could take up of it
+    projected out, then judged as a joint fit is, against the model with them, with the
+    kept causes moved by their linear step. Where that step does not deliver
+    :data:`_DELIVERED` of the drop the projected fit predicts (a kept parameter
+    stopped at its bound, a cause nonlinear in its parameters) and the predicted drop
+    would be significant, the candidate is fitted jointly with them instead, as the
+    joint re-fits are (returned True). A candidate re-identifying the winches beside is
+    fitted on top only."""
+    cand = _on_winches(template, ctx, judge)
     fit = fit_candidate(cand, ctx, None if cand.refit_winches else kept.project)
     if not fit.success and not fit.effects:
         j = kept.judge(cand.effect, cand.label, list(kept.judge.base_effects),
                        cand.n_params, n_tests)
-        return replace(j, fit=fit, candidate=cand).failed("fit failed")
+        return replace(j, fit=fit, candidate=cand).failed("fit failed"), False
     where = list(kept.joint.build(kept.x)) + list(fit.effects)
     if not cand.refit_winches:
         channels = kept.joint.affects | cand.affects
         v0 = kept.vector(where, channels)
         moved = list(kept.joint.build(kept.moved(v0))) + list(fit.effects)
-        if float(np.sum(kept.vector(moved, channels) ** 2)) < float(np.sum(v0 ** 2)):
+        sse = float(np.sum(kept.vector(moved, channels) ** 2))
+        base, predicted = kept.sse(), 2 * fit.cost
+        if sse > predicted + (1 - _DELIVERED) * (base - predicted) and \
+                kept.significant(base, predicted, cand.n_params, n_tests):
+            return _judge_joint(kept.parts, template, kept.ctx, kept.judge, n_tests), True
+        if sse < float(np.sum(v0 ** 2)):
             where = moved
     j = kept.judge(cand.effect, cand.label, where, cand.n_params, n_tests)
-    return replace(j, fit=fit, candidate=cand)
+    return replace(j, fit=fit, candidate=cand), False
 
 
 def effects_of(causes: Sequence[Judgement]) -> list[Effect]:
@@ -484,6 +444,12 @@ def _winches_together(cands: list[Candidate]) -> Candidate | None:
     together = _joint([(c, np.asarray(c.starts[0], float)) for c in cands[:-1]], cands[-1])
     return replace(together, label=f"{WINCH_PARAMETER_ERROR}[winches {winches}]",
                    sparse=False)
+
+
+def _kept_joint(parts: list[tuple[Candidate, np.ndarray]]) -> Candidate:
+    """The kept ``parts`` as one candidate, starting at their parameters."""
+    last, x_last = parts[-1]
+    return _joint(parts[:-1], replace(last, starts=[np.asarray(x_last, float)]))
 
 
 def _build(parts: Sequence[tuple[Candidate, np.ndarray]]) -> list[Effect]:
