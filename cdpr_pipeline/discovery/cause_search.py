@@ -10,7 +10,7 @@ kept winches' parameters count in the tests.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -73,9 +73,8 @@ class CauseSearch:
     nominal_held: dict[str, np.ndarray] | None = None
     scales: dict[str, np.ndarray] | None = None
     shapes: list[str] = field(default_factory=list)
-    #: per forward step after the first, its joint fits: the screen's (where the kept
-    #: causes' linear step did not hold) and those of :meth:`refit_passing`
-    joint_fits: list[tuple[int, int]] = field(default_factory=list)
+    #: per forward step after the first, its joint re-fits (:meth:`refit_passing`)
+    joint_fits: list[int] = field(default_factory=list)
     _log_n: float | None = None
 
     def _reference(self) -> None:
@@ -119,38 +118,35 @@ class CauseSearch:
         """Add the best passing candidate (by BIC) until none passes. ``max_steps``
         counts distinct effects (see :attr:`SelectionSettings.max_causes`).
 
-        Every step first screens each candidate fitted on top of the causes already
-        kept, their parameters fixed (what one candidate costs alone). The candidates
-        that pass are then re-fitted jointly with the kept causes (their parameters
-        start where they are and may move), strongest first by the screen's BIC: at
-        least :attr:`SelectionSettings.joint_refits` of them, more only while none
-        passes jointly; the best that passes jointly joins. So an earlier cause does not
-        keep what a later one explains better (a winch offset absorbing a payload
-        error), and a step costs one screen of the vocabulary plus a few joint fits,
-        not a joint fit per candidate."""
+        After the first step, every candidate is screened jointly with the causes
+        already kept (their parameters start where they are and may move), the kept
+        parameters' Jacobian columns taken once per step
+        (:class:`~cdpr_pipeline.discovery.kept.KeptColumns`: a joint fit at about the
+        cost of the candidate's own parameters). The best that pass are re-fitted
+        jointly with every column differenced (:meth:`refit_passing`) and the best
+        that passes that re-fit joins. So an earlier cause does not keep what a later
+        one explains better (a winch offset absorbing a payload error), and a step
+        costs one screen of the vocabulary and a few full joint fits, not a full joint
+        fit per candidate (on an 8-cable rig after its first cause, a 16-parameter
+        Stribeck bump, each column one evaluation of every run)."""
         causes: list[Judgement] = []
         parts: list[tuple[Candidate, np.ndarray]] = []
         for _ in range(max_steps + self.scale.n):
             if len({c.effect for c in causes}) >= max_steps:
                 break
             current = fixed + _build(parts)
-            ctx, judge = self.context(current)
             n_tests = len(candidates) + bool(freeform and self.freeform)
-            # each candidate on top of the kept causes, what their parameters could
-            # still take up of it projected out (nothing kept yet: fitted alone on the
-            # model it extends, the first step's joint fit)
+            # each candidate jointly with the kept causes (nothing kept yet: fitted alone
+            # on the model it extends); the model with them extended by free-form terms
             kept = KeptCauses(parts, _kept_joint(parts), *self.joint_context(fixed, parts)) \
                 if parts else None
-            screened = [_screen(c, ctx, judge, kept, n_tests) for c in candidates]
-            step = [j for j, _ in screened]
-            # which judgements come from a joint fit (the screen's fallback)
-            joint = [is_joint for _, is_joint in screened]
+            ctx, judge = self.context(current) if kept is None or freeform else (None, None)
+            step = [_screen(c, ctx, judge, kept, n_tests) for c in candidates]
             templates: list[Candidate | None] = list(candidates)
             if freeform and self.freeform is not None:
                 step.append(judge_freeform(self.freeform, ctx, judge, self.scale, self.kind,
                                            n_tests, shapes=self.shapes))
                 templates.append(None)      # a free-form part is fitted on top only
-                joint.append(False)
             # a sparse candidate (a winch re-identification) ranks by the parameters the
             # data need, as in the comparison with free-form terms: a wrong offset alone
             # is one parameter, not four (counted as four, a prismatic load's a q + b
@@ -166,13 +162,11 @@ class CauseSearch:
                                           j.effect == WINCH_PARAMETER_ERROR and
                                           j.candidate is not None])
             if together is not None:
-                j, is_joint = _screen(together, ctx, judge, kept, n_tests)
-                step.append(j)
+                step.append(_screen(together, ctx, judge, kept, n_tests))
                 templates.append(together)
-                joint.append(is_joint)
             eligible = list(range(len(step)))
             if kept is not None:
-                step, eligible = self.refit_passing(step, templates, joint, kept, n_tests)
+                step, eligible = self.refit_passing(step, templates, kept, n_tests)
             self.steps.append(step)
             self.log_step(step)
             passed = sorted((step[i] for i in eligible if step[i].passed),
@@ -193,41 +187,29 @@ class CauseSearch:
         return causes
 
     def refit_passing(self, step: list[Judgement], templates: list[Candidate | None],
-                      joint: list[bool], kept: KeptCauses, n_tests: int
-                      ) -> tuple[list[Judgement], list[int]]:
+                      kept: KeptCauses, n_tests: int) -> tuple[list[Judgement], list[int]]:
         """The screened ``step`` with its passing candidates re-fitted jointly with the
-        ``kept`` causes (each from its ``templates`` entry, the kept causes from where
-        they are), strongest first by the screen's BIC drop: at least
-        :attr:`SelectionSettings.joint_refits` of them, more only while none passes
-        jointly (``joint``: judgements the screen already made by a joint fit, which
-        count as re-fitted). Returns the step and the indices of the judgements that may
-        join: the joint ones, and free-form parts (fitted on top only). Records the
-        step's joint fits, the screen's and these, in :attr:`joint_fits`."""
+        ``kept`` causes, every Jacobian column differenced (each from its ``templates``
+        entry, the kept causes from where they are), strongest first by the screen's
+        BIC drop: at least :attr:`SelectionSettings.joint_refits` of them, more only
+        while none passes. Returns the step and the indices of the judgements that may
+        join: the re-fitted ones, and free-form parts (fitted on top only). Records the
+        step's re-fits in :attr:`joint_fits`."""
         order = sorted((i for i, j in enumerate(step) if j.passed),
                        key=lambda i: -step[i].bic_drop)
-        step = list(step)
-        eligible = [i for i in order if templates[i] is None] + \
-            [i for i, is_joint in enumerate(joint) if is_joint]
-        order = [i for i in order if templates[i] is not None]
-        screen_fits = sum(joint)
-        if not order:
-            self.joint_fits.append((screen_fits, 0))
-            return step, eligible
-        parts, ctx, judge = kept.parts, kept.ctx, kept.judge
-        current = ctx.base + judge.base_effects
+        step, eligible = list(step), [i for i in order if templates[i] is None]
+        current = kept.ctx.base + kept.judge.base_effects
         base_bic, found, fits = None, False, 0
-        for i in order:
+        for i in (i for i in order if templates[i] is not None):
             if fits >= self.settings.joint_refits and found:
                 break
-            if not joint[i]:
-                j = _judge_joint(parts, templates[i], ctx, judge, n_tests)
-                if self.sparse(j):
-                    base_bic = self.bic(current, 0) if base_bic is None else base_bic
-                    j = self.lean(j, current, base_bic)
-                step[i] = j
-                eligible.append(i)
-            fits, found = fits + 1, found or step[i].passed
-        self.joint_fits.append((screen_fits, fits - sum(joint[i] for i in order[:fits])))
+            j = _judge_joint(kept.parts, templates[i], kept.ctx, kept.judge, n_tests)
+            if self.sparse(j):
+                base_bic = self.bic(current, 0) if base_bic is None else base_bic
+                j = self.lean(j, current, base_bic)
+            step[i], fits, found = j, fits + 1, found or j.passed
+            eligible.append(i)
+        self.joint_fits.append(fits)
         return step, eligible
 
     def refit(self, judgement: Judgement, kept: list[Effect], n_tests: int) -> Judgement:
@@ -378,52 +360,22 @@ class CauseSearch:
 
 
 def _screen(cand: Candidate, ctx: FitContext, judge: Judge, kept: KeptCauses | None,
-            n_tests: int) -> tuple[Judgement, bool]:
+            n_tests: int) -> Judgement:
     """``cand`` judged on top of the model ``ctx`` and ``judge`` extend: alone where no
-    cause is kept yet, else on top of the ``kept`` causes (:func:`_judge_on_kept`); and
-    whether that judgement comes from a joint fit."""
+    cause is kept yet, else jointly with the ``kept`` causes (:func:`_judge_on_kept`)."""
     if kept is None:
-        return _judge_joint([], cand, ctx, judge, n_tests), False
-    return _judge_on_kept(cand, ctx, judge, kept, n_tests)
+        return _judge_joint([], cand, ctx, judge, n_tests)
+    return _judge_on_kept(cand, kept, n_tests)
 
 
-#: the share of the screen's predicted drop of the training residual (the projected fit's)
-#: that the kept causes' linear step must deliver; where it does not, and the predicted
-#: drop would be significant, the candidate is fitted jointly with them
-_DELIVERED = 0.9
-
-
-def _judge_on_kept(template: Candidate, ctx: FitContext, judge: Judge, kept: KeptCauses,
-                   n_tests: int) -> tuple[Judgement, bool]:
-    """``template`` screened on top of the ``kept`` causes (``ctx`` and ``judge`` extend
-    the model with them): fitted with what their parameters could take up of it
-    projected out, then judged as a joint fit is, against the model with them, with the
-    kept causes moved by their linear step. Where that step does not deliver
-    :data:`_DELIVERED` of the drop the projected fit predicts (a kept parameter
-    stopped at its bound, a cause nonlinear in its parameters) and the predicted drop
-    would be significant, the candidate is fitted jointly with them instead, as the
-    joint re-fits are (returned True). A candidate re-identifying the winches beside is
-    fitted on top only."""
-    cand = _on_winches(template, ctx, judge)
-    fit = fit_candidate(cand, ctx, None if cand.refit_winches else kept.project)
-    if not fit.success and not fit.effects:
-        j = kept.judge(cand.effect, cand.label, list(kept.judge.base_effects),
-                       cand.n_params, n_tests)
-        return replace(j, fit=fit, candidate=cand).failed("fit failed"), False
-    where = list(kept.joint.build(kept.x)) + list(fit.effects)
-    if not cand.refit_winches:
-        channels = kept.joint.affects | cand.affects
-        v0 = kept.vector(where, channels)
-        moved = list(kept.joint.build(kept.moved(v0))) + list(fit.effects)
-        sse = float(np.sum(kept.vector(moved, channels) ** 2))
-        base, predicted = kept.sse(), 2 * fit.cost
-        if sse > predicted + (1 - _DELIVERED) * (base - predicted) and \
-                kept.significant(base, predicted, cand.n_params, n_tests):
-            return _judge_joint(kept.parts, template, kept.ctx, kept.judge, n_tests), True
-        if sse < float(np.sum(v0 ** 2)):
-            where = moved
-    j = kept.judge(cand.effect, cand.label, where, cand.n_params, n_tests)
-    return replace(j, fit=fit, candidate=cand), False
+def _judge_on_kept(template: Candidate, kept: KeptCauses, n_tests: int) -> Judgement:
+    """``template`` fitted jointly with the ``kept`` causes and judged against the model
+    with them, as a joint re-fit is (:func:`_judge_joint`), the kept parameters' Jacobian
+    columns taken once per step (:class:`~cdpr_pipeline.discovery.kept.KeptColumns`): a
+    fit at about the cost of the candidate's own parameters. A candidate re-identifying
+    the winches beside is differenced in every parameter."""
+    return _judge_joint(kept.parts, template, kept.ctx, kept.judge, n_tests,
+                        None if template.refit_winches else kept.columns())
 
 
 def effects_of(causes: Sequence[Judgement]) -> list[Effect]:
@@ -513,7 +465,10 @@ def _on_winches(cand: Candidate, ctx: FitContext, judge: Judge) -> Candidate:
 
 
 def _judge_joint(parts: list[tuple[Candidate, np.ndarray]], cand: Candidate, ctx: FitContext,
-                 judge: Judge, n_tests: int) -> Judgement:
+                 judge: Judge, n_tests: int, jacobian: Callable[..., Any] | None = None
+                 ) -> Judgement:
+    """``cand`` fitted jointly with the kept ``parts`` (alone without them) and judged;
+    ``jacobian`` as :func:`~cdpr_pipeline.discovery.fitting.fit_candidate` takes it."""
     # variable projection per winch is exact only where winches do not mix
     projected = cand.form is not None and not cand.refit_winches \
         and not any(s.mixes for s in ctx.train)
@@ -522,7 +477,7 @@ def _judge_joint(parts: list[tuple[Candidate, np.ndarray]], cand: Candidate, ctx
         # fitted alone on the model it extends, variable projection found the optimum
         fit = fit_at_start(cand, ctx)
     else:
-        fit = fit_candidate(_joint(parts, cand) if parts else cand, ctx)
+        fit = fit_candidate(_joint(parts, cand) if parts else cand, ctx, jacobian)
     j = replace(judge(cand.effect, cand.label, fit.effects, cand.n_params, n_tests),
                 fit=fit, candidate=cand)
     return j.failed("fit failed") if not fit.success and not fit.effects else j

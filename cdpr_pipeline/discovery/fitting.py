@@ -441,15 +441,15 @@ def one_blas_thread() -> AbstractContextManager:
 
 
 def fit_candidate(candidate: Candidate, ctx: FitContext,
-                  project: Callable[[np.ndarray], np.ndarray] | None = None) -> Fit:
+                  jacobian: Callable[..., Any] | None = None) -> Fit:
     """Best of the candidate's starts (bounded trust-region least squares).
 
-    ``project``: a linear map applied to the residual vector and its Jacobian (the fit
-    minimises what it leaves: :class:`~cdpr_pipeline.discovery.cause_search.KeptCauses`
-    projects out what the kept causes' parameters could still take up). The fit's cost
-    is the projected one."""
+    ``jacobian``: what takes the residual vector's Jacobian, made per start as
+    ``jacobian(fun, blocks, bounds)`` (:class:`GroupedJacobian` when None; a joint fit
+    of kept causes with a new candidate may take the kept causes' columns as given:
+    :class:`~cdpr_pipeline.discovery.kept.KeptColumns`)."""
     with one_blas_thread():
-        return _fit_candidate(candidate, ctx, project)
+        return _fit_candidate(candidate, ctx, jacobian or GroupedJacobian)
 
 
 class GroupedJacobian:
@@ -543,8 +543,8 @@ class GroupedJacobian:
         return np.asfortranarray(J.toarray(), float)
 
 
-def _fit_candidate(candidate: Candidate, ctx: FitContext,
-                   project: Callable[[np.ndarray], np.ndarray] | None) -> Fit:
+def _fit_candidate(candidate: Candidate, ctx: FitContext, jacobian: Callable[..., Any]
+                   ) -> Fit:
     layout: list[np.ndarray] = []
 
     def fun(x: np.ndarray) -> np.ndarray:
@@ -560,13 +560,9 @@ def _fit_candidate(candidate: Candidate, ctx: FitContext,
     bounds = (candidate.lower, candidate.upper)
     for x0 in candidate.starts:
         x0 = np.clip(x0, candidate.lower, candidate.upper)
-        jac = GroupedJacobian(fun, blocks, bounds)
-        # a linear projection commutes with the finite differences: the Jacobian is
-        # taken (grouped) on the raw residuals and projected
-        f, j = (jac.fun, jac) if project is None else \
-            (lambda x, g=jac: project(g.fun(x)), lambda x, g=jac: project(g(x)))
+        jac = jacobian(fun, blocks, bounds)
         try:
-            sol = least_squares(f, x0, jac=j, bounds=bounds,
+            sol = least_squares(jac.fun, x0, jac=jac, bounds=bounds,
                                 x_scale=candidate.x_scale, method="trf",
                                 max_nfev=(8 if candidate.linear else ctx.max_nfev)
                                 * max(1, candidate.n_params))
