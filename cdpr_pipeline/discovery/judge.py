@@ -58,11 +58,12 @@ class SelectionSettings:
         (at most one extra step per winch): with three steps in all, an error on four
         of six axes left one to free-form terms and the verdict was ``unnamed``.
     joint_refits : int
-        After the first step, the candidates passing on top of the kept causes (their
-        parameters fixed) that are re-fitted jointly with them, strongest first by BIC;
-        more only while none of those passes jointly. The best that passes jointly
-        joins (a later step's ranking by the screen and by the joint fit can differ
-        where a candidate takes over part of what a kept cause explained).
+        After the first step, how many of the candidates that pass the screen (a joint
+        fit with the kept causes whose Jacobian columns are taken once per step) are
+        fitted jointly again with every column differenced, strongest first by BIC;
+        more only while none of those passes. The best that passes that fit joins (the
+        screen can stop short of it where a kept cause is nonlinear in its parameters,
+        and the ranking can differ).
     block_s : float
         Bootstrap block length (residuals are correlated within a block).
     n_boot : int
