@@ -63,14 +63,7 @@ class FitContext:
     def __post_init__(self) -> None:
         if self.columns is None:
             self.columns = np.concatenate([winch_columns(s, self.nominal) for s in self.train])
-        # projectors of the linear winch re-fit (variable projection): per winch, or one
-        # for every winch at once where the torque projection mixes them
-        if self.columns.ndim == 4:
-            rows, n = self.columns.shape[:2]
-            self._pinv = [np.linalg.pinv(self.columns.reshape(rows * n, -1))]
-        else:
-            self._pinv = [np.linalg.pinv(self.columns[:, i, :])
-                          for i in range(self.columns.shape[1])]
+        self._pinv_cache: list[np.ndarray] | None = None
         self._base_by_run = self.residuals([]).by_run if self.weights else []
 
     def residuals(self, effects: Sequence[Effect], signals: Sequence[RunSignals] | None = None
@@ -89,6 +82,21 @@ class FitContext:
         rows = runs_rows(model, self.nominal, self.train, channels)
         return Residuals([s.name for s in self.train], [
             {c: r.get(c, b[c]) for c in b} for r, b in zip(rows, self._base_by_run, strict=True)])
+
+    @property
+    def _pinv(self) -> list[np.ndarray]:
+        """The projectors of the linear winch re-fit (variable projection): per winch, or
+        one for every winch at once where the torque projection mixes them. Made when
+        first needed (a pseudo-inverse of every winch's columns at once takes a quarter
+        of a second on 8 cables, and most contexts never re-fit winches)."""
+        if self._pinv_cache is None:
+            if self.columns.ndim == 4:
+                rows, n = self.columns.shape[:2]
+                self._pinv_cache = [np.linalg.pinv(self.columns.reshape(rows * n, -1))]
+            else:
+                self._pinv_cache = [np.linalg.pinv(self.columns[:, i, :])
+                                    for i in range(self.columns.shape[1])]
+        return self._pinv_cache
 
     def winch_refit(self, torque_residual: np.ndarray) -> np.ndarray:
         """Least-squares winch parameter changes (n, 4) that best explain the stacked
