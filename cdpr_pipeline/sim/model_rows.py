@@ -40,6 +40,10 @@ class OnRows:
         # where, not a product: the effect may overflow on the other rows' speeds
         return np.where(self.rows, extra, 0.0)
 
+    def take(self, runs: np.ndarray) -> OnRows:
+        """The same effect on the batch of runs ``runs`` (indices into this batch)."""
+        return OnRows(self.effect, self.rows[runs])
+
 
 def _same(a: Any, b: Any) -> bool:
     if a is b:
@@ -76,6 +80,17 @@ def plant_of_rows(base: Plant, rows: Sequence[Plant]) -> Plant:
         mask = np.array([m is model for m in rows])[:, None]
         added += [OnRows(effect, mask) for effect in extra]
     return base if not added else base.replace(effects=(*base.effects, *added))
+
+
+def runs_of(plant: Plant, runs: np.ndarray) -> Plant:
+    """The plant of a batch's runs ``runs`` (indices): an effect that acts on some runs
+    (:class:`OnRows`) keeps those of them; every other effect acts alike on all. An
+    integrator that treats a few runs apart (a steep friction's path) steps them on it,
+    with arrays and friction calls the size of those runs."""
+    if not any(isinstance(e, OnRows) for e in plant.effects):
+        return plant
+    return plant.replace(effects=tuple(e.take(runs) if isinstance(e, OnRows) else e
+                                       for e in plant.effects))
 
 
 @dataclass(frozen=True)
