@@ -82,15 +82,6 @@ def plant_of_rows(base: Plant, rows: Sequence[Plant]) -> Plant:
     return base if not added else base.replace(effects=(*base.effects, *added))
 
 
-def runs_of(plant: Plant, runs: np.ndarray) -> Plant:
-    """The plant of a batch's runs ``runs`` (indices): an effect that acts on some runs
-    (:class:`OnRows`) keeps those of them; every other effect acts alike on all. An
-    integrator that treats a few runs apart (a steep friction's path) steps them on it,
-    with arrays and friction calls the size of those runs."""
-    if not any(isinstance(e, OnRows) for e in plant.effects):
-        return plant
-    return plant.replace(effects=tuple(e.take(runs) if isinstance(e, OnRows) else e
-                                       for e in plant.effects))
 
 
 @dataclass(frozen=True)
@@ -134,6 +125,10 @@ class DrivesOfRows:
         index = np.array([next(k for k, m in enumerate(models) if m is row) for row in rows])
         return cls(tuple(models), index)
 
+    def take(self, runs: np.ndarray) -> DrivesOfRows:
+        """The batch of runs ``runs`` (indices into this batch)."""
+        return DrivesOfRows(self.models, self.index[runs])
+
     @property
     def n(self) -> int:
         return int(self.models[0].n)
@@ -166,3 +161,17 @@ class DrivesOfRows:
             out[..., runs, :] = model.friction_torque(theta[..., runs, :],
                                                       omega[..., runs, :])
         return out
+
+
+def runs_of(plant: Any, runs: np.ndarray) -> Any:
+    """The model of a batch's runs ``runs`` (indices): drive axes of several models
+    (:class:`DrivesOfRows`) keep those runs' models; an effect that acts on some runs
+    (:class:`OnRows`) keeps those of them; every other effect acts alike on all. An
+    integrator that treats a few runs apart (a steep friction's path) steps them on it,
+    with arrays and friction calls the size of those runs."""
+    if isinstance(plant, DrivesOfRows):
+        return plant.take(runs)
+    if not any(isinstance(e, OnRows) for e in plant.effects):
+        return plant
+    return plant.replace(effects=tuple(e.take(runs) if isinstance(e, OnRows) else e
+                                       for e in plant.effects))
