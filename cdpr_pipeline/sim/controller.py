@@ -174,7 +174,8 @@ class PerRunComputedTorque:
         # geometry and tension distribution are computed once, not once per model
         base = min(models, key=lambda m: len(m.effects))
         try:
-            return ComputedTorquePD(plant_of_rows(base, believed), spec)
+            # (the law reads no actuator lag: models differing in theirs share it too)
+            return ComputedTorquePD(plant_of_rows(base, believed, own_lags=True), spec)
         except ValueError:
             pass
         rows = tuple(np.array([b for b, m in enumerate(believed) if m is model])

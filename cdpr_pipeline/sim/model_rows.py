@@ -56,32 +56,60 @@ def _same(a: Any, b: Any) -> bool:
     return bool(a == b)
 
 
-def extra_torques(base: Plant, model: Plant) -> tuple | None:
+def extra_torques(base: Plant, model: Plant, own_lags: bool = False) -> tuple | None:
     """The effects ``model`` adds to ``base`` when it is ``base`` plus drive torques
-    alone (the same mechanics, friction law and earlier effects), else None."""
+    alone (the same mechanics, friction law and earlier effects), else None;
+    ``own_lags``: the actuator lags may differ too (a run of a batch has its own,
+    :class:`PlantOfRows`)."""
     if type(model) is not type(base) or len(model.effects) < len(base.effects) \
             or any(a is not b for a, b in zip(base.effects, model.effects[:len(base.effects)],
                                              strict=True)):
         return None
+    free = {"effects", "actuator_time_constant"} if own_lags else {"effects"}
     if not all(_same(getattr(base, f.name), getattr(model, f.name))
-               for f in dataclasses.fields(base) if f.name != "effects"):
+               for f in dataclasses.fields(base) if f.name not in free):
         return None
     return tuple(model.effects[len(base.effects):])
 
 
-def plant_of_rows(base: Plant, rows: Sequence[Plant]) -> Plant:
+@dataclass(frozen=True)
+class PlantOfRows(Plant):
+    """A cable robot's plant whose runs each have their own actuator lags, ``run_lags``
+    (B, n; 0 where a drive has none): the nominal model beside one extended by a lag.
+    A run without lag keeps its lag state unused (its drums receive the command), so it
+    moves as its model moves alone."""
+
+    run_lags: np.ndarray | None = None
+
+    @cached_property
+    def lags(self) -> np.ndarray:
+        return self.run_lags
+
+    def take(self, runs: np.ndarray) -> PlantOfRows:
+        """The plant of the batch's runs ``runs`` (indices)."""
+        return self.replace(run_lags=self.run_lags[runs],
+                            effects=tuple(e.take(runs) if isinstance(e, OnRows) else e
+                                          for e in self.effects))
+
+
+def plant_of_rows(base: Plant, rows: Sequence[Plant], own_lags: bool = False) -> Plant:
     """One plant for a batch whose run ``b`` follows ``rows[b]``: ``base``, or ``base``
-    with extra drive torques (:func:`extra_torques`), each acting on its own runs."""
+    with extra drive torques (:func:`extra_torques`), each acting on its own runs;
+    ``own_lags``: rows may also differ in their actuator lags (a :class:`PlantOfRows`
+    where they do)."""
     added = []
     for model in {id(m): m for m in rows}.values():
-        extra = extra_torques(base, model)
+        extra = extra_torques(base, model, own_lags)
         if extra is None:
             raise ValueError("a row's model is not the base model plus drive torques")
         mask = np.array([m is model for m in rows])[:, None]
         added += [OnRows(effect, mask) for effect in extra]
-    return base if not added else base.replace(effects=(*base.effects, *added))
-
-
+    plant = base if not added else base.replace(effects=(*base.effects, *added))
+    lags = np.stack([m.lags for m in rows])
+    if np.array_equal(lags, np.broadcast_to(base.lags, lags.shape)):
+        return plant
+    return PlantOfRows(**{f.name: getattr(plant, f.name) for f in dataclasses.fields(plant)},
+                       run_lags=lags)
 
 
 @dataclass(frozen=True)
@@ -169,7 +197,7 @@ def runs_of(plant: Any, runs: np.ndarray) -> Any:
     (:class:`OnRows`) keeps those of them; every other effect acts alike on all. An
     integrator that treats a few runs apart (a steep friction's path) steps them on it,
     with arrays and friction calls the size of those runs."""
-    if isinstance(plant, DrivesOfRows):
+    if isinstance(plant, DrivesOfRows | PlantOfRows):
         return plant.take(runs)
     if not any(isinstance(e, OnRows) for e in plant.effects):
         return plant
