@@ -5,7 +5,10 @@ free-form term) moves with the nominal model's mechanics; only the torque resist
 drives differs. A simulated batch of a few runs costs about what one run costs (each
 step's work is Python's, not the arithmetic's), so the closed-loop comparison advances
 both models' runs as one batch: one plant whose extra effects act on their own rows
-(:func:`plant_of_rows`), the rows of the nominal model untouched by them. Drive axes
+(:func:`plant_of_rows`), the rows of the nominal model untouched by them, and whose runs
+may each have their own actuator lags (:class:`PlantOfRows`: what a diagnosis often
+adds beside a friction). An integrator that treats some runs apart (a steep friction's
+path, the coupled implicit step) takes the plant of those runs (:func:`runs_of`). Drive axes
 batch any models of one rig's axes (:class:`DrivesOfRows`): each run reads its own
 model's inertia, lag and friction, so a model extended by a lag or changed parameters
 shares the batch too.

@@ -11,8 +11,8 @@ from cdpr_pipeline.data.axis_controller import AxisController
 from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.sim.axes_loop import AxesLoop, AxesReferences
 from cdpr_pipeline.sim.axis_references import AxisReferenceSet
-from cdpr_pipeline.sim.effects import EFFECTS
 from cdpr_pipeline.sim.controller import ComputedTorquePD, PerRunComputedTorque
+from cdpr_pipeline.sim.effects import EFFECTS
 from cdpr_pipeline.sim.integrators import _steep_winches, friction_path_step
 from cdpr_pipeline.sim.kinematics import cable_geometry
 from cdpr_pipeline.sim.model_rows import (
