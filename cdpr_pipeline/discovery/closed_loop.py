@@ -205,7 +205,7 @@ def _resimulate_cables(nominal: Model, rig: Rig, jobs: Sequence[Job], label: str
                        settle_s: float = 1.0) -> list[dict[str, dict[str, np.ndarray]]]:
     """Every job's re-simulation, the results by slot (0, 1, 2) and run name. Jobs of
     runs of equal length advance as one batch (a batch of a few runs costs about what one run
-    costs): their moving models must be one model plus drive torques
+    costs): their moving models must be one model plus drive torques and actuator lags
     (:func:`~cdpr_pipeline.sim.model_rows.plant_of_rows`), their believed models
     share ``nominal``'s geometry (the encoders read alike)."""
     dt = 1.0 / rig.controller.rate_hz
@@ -217,7 +217,7 @@ def _resimulate_cables(nominal: Model, rig: Rig, jobs: Sequence[Job], label: str
     for group in groups.values():
         moving = [job[1] for job in group]
         plant = plant_of_rows(nominal if any(m is nominal for m in moving) else moving[0],
-                              moving)
+                              moving, own_lags=True)
         sim = BatchSimulator(plant, nominal, rig.controller, _EXACT, rig.sample_rate_hz,
                              settle_s=settle_s)
         substeps = sim.substeps_for(dt)
@@ -245,7 +245,8 @@ def _closed_loop_sims(nominal: Model, extended: Model, rig: Rig,
     """The nominal model's re-simulation, the extended model's (both under the stated
     controller) and the extended model's on ``ff_runs`` with itself as the
     controller's feedforward, by run name. A cable robot's runs share batches where
-    they can: every model, where the extended one is the nominal plus drive torques;
+    they can: every model, where the extended one is the nominal plus drive torques
+    and actuator lags;
     the extended model's two controllers, where its geometry is the nominal one. Drive
     axes share one batch (:func:`_axes_batches`), but for a nominal model stepped in
     closed form."""
@@ -258,7 +259,7 @@ def _closed_loop_sims(nominal: Model, extended: Model, rig: Rig,
     if not nominal.cables:
         return _resimulate_axes(rig, [*nominal_jobs, *extended_jobs, *own],
                                 "nominal and extended models")
-    if extra_torques(nominal, extended) is not None:
+    if extra_torques(nominal, extended, own_lags=True) is not None:
         return _resimulate_cables(nominal, rig, [*nominal_jobs, *extended_jobs, *own],
                                   "nominal and extended models")
     sims = [_resimulate_cables(nominal, rig, nominal_jobs, "nominal model")[0]]

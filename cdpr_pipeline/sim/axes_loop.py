@@ -27,6 +27,7 @@ import numpy as np
 
 from cdpr_pipeline.data.axis_controller import AxisController
 from cdpr_pipeline.sim.friction_path import friction_over_step
+from cdpr_pipeline.sim.model_rows import runs_of
 from cdpr_pipeline.sim.plant import Drives
 from cdpr_pipeline.sim.simulator import MAX_SUBSTEPS, SimulationCostError, lag_response
 
@@ -320,12 +321,16 @@ def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h:
     alpha = force[at] * beta
     reach = 2.0 * np.abs(np.concatenate([start[:1], rest[:3]])).max(axis=0)[at]
 
+    # the law is read on the runs with a steep entry alone (the model of those runs)
+    runs = np.unique(at[0])
+    part, row = runs_of(model, runs), np.searchsorted(runs, at[0])
+
     def friction(w: np.ndarray) -> np.ndarray:
-        # the law at the gathered entries' speeds: every entry of the batch at its start
-        # speed, the steep ones at ``w`` (the law is the model's, per run and axis)
-        full = np.repeat(v[None], len(w), axis=0)
-        full[(slice(None), *at)] = w
-        return model.friction_torque(middle, full)[(slice(None), *at)]
+        # the law at the gathered entries' speeds: every entry of those runs at its
+        # start speed, the steep ones at ``w`` (the law is the model's, per run and axis)
+        full = np.repeat(v[runs][None], len(w), axis=0)
+        full[:, row, at[1]] = w
+        return part.friction_torque(middle[runs], full)[:, row, at[1]]
 
     v0 = v[at]
     c0, c1 = friction_over_step(friction, v0, alpha, beta, h, reach, at_start=rest[3][at])

@@ -12,6 +12,7 @@ import numpy as np
 
 from cdpr_pipeline.data.rig import ControllerSpec
 from cdpr_pipeline.sim.kinematics import cable_geometry, winch_rates
+from cdpr_pipeline.sim.model_rows import plant_of_rows
 from cdpr_pipeline.sim.plant import Plant
 
 
@@ -159,13 +160,24 @@ class PerRunComputedTorque:
     def of(cls, believed: list[Plant], spec: ControllerSpec
            ) -> ComputedTorquePD | PerRunComputedTorque:
         """The law of runs believing ``believed`` (one model per run): a plain
-        :class:`ComputedTorquePD` where they all believe one."""
+        :class:`ComputedTorquePD` where they all believe one, or where they believe one
+        model plus drive torques (on a plant of rows, :func:`~cdpr_pipeline.sim.
+        model_rows.plant_of_rows`: the same torques, one call)."""
         models: list[Plant] = []
         for model in believed:
             if not any(model is known for known in models):
                 models.append(model)
         if len(models) == 1:
             return ComputedTorquePD(models[0], spec)
+        # models that are one model plus drive torques (the nominal and an extended
+        # friction) share one law on one plant, each torque on its own runs: the
+        # geometry and tension distribution are computed once, not once per model
+        base = min(models, key=lambda m: len(m.effects))
+        try:
+            # (the law reads no actuator lag: models differing in theirs share it too)
+            return ComputedTorquePD(plant_of_rows(base, believed, own_lags=True), spec)
+        except ValueError:
+            pass
         rows = tuple(np.array([b for b, m in enumerate(believed) if m is model])
                      for model in models)
         return cls(tuple(ComputedTorquePD(m, spec) for m in models), rows)

@@ -14,6 +14,7 @@ import numpy as np
 
 from cdpr_pipeline.sim.friction_path import friction_over_step
 from cdpr_pipeline.sim.kinematics import cable_geometry, winch_rates
+from cdpr_pipeline.sim.model_rows import runs_of
 from cdpr_pipeline.sim.plant import Plant
 
 
@@ -103,15 +104,18 @@ def friction_slope(plant: Plant, theta: np.ndarray, omega: np.ndarray,
     tick: 21 um RMS from a fine-step reference with the local slope, 3 um with the
     secant)."""
     delta = 1e-2 / plant.sign_sharpness if np.isfinite(plant.sign_sharpness) else 1e-6
-    slope = (plant.friction_torque(theta, omega + delta)
-             - plant.friction_torque(theta, omega - delta)) / (2.0 * delta)
-    if omega_end is not None:
-        change = omega_end - omega
-        far = np.abs(change) > delta
-        if far.any():
-            secant = (plant.friction_torque(theta, omega_end)
-                      - plant.friction_torque(theta, omega)) / np.where(far, change, 1.0)
-            slope = np.where(far, secant, slope)
+    if omega_end is None:
+        phi = plant.friction_torque(theta, np.stack([omega + delta, omega - delta]))
+        return np.maximum((phi[0] - phi[1]) / (2.0 * delta), 0.0)
+    # the law's four speeds in one call (each call's cost is Python's, not the arithmetic's)
+    phi = plant.friction_torque(theta, np.stack([omega + delta, omega - delta, omega_end,
+                                                 omega]))
+    slope = (phi[0] - phi[1]) / (2.0 * delta)
+    change = omega_end - omega
+    far = np.abs(change) > delta
+    if far.any():
+        secant = (phi[2] - phi[3]) / np.where(far, change, 1.0)
+        slope = np.where(far, secant, slope)
     return np.maximum(slope, 0.0)
 
 
@@ -251,23 +255,35 @@ def friction_path_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float
     multi = steep.sum(axis=1) > 1
     single = steep & ~multi[:, None]
     if single.any():
-        scaled = units / R[:, None]
-        mass = plant.mass * np.eye(3) + np.einsum("bni,n,bnj->bij", units,
-                                                  plant.winch.inertia / R ** 2, units)
+        # the path is solved on the runs with a steep winch alone (its arrays, nodes
+        # times drives, and the law's calls on them shrink to those runs); the others'
+        # friction is their law's
+        runs = np.flatnonzero(single.any(axis=1))
+        part = runs_of(plant, runs)
+        scaled = units[runs] / R[:, None]
+        mass = plant.mass * np.eye(3) + np.einsum("bni,n,bnj->bij", units[runs],
+                                                  plant.winch.inertia / R ** 2, units[runs])
         # speed change of each winch per unit of its own friction: k^T M^-1 k / R^2
         beta = np.einsum("bni,bin->bn", scaled,
                          np.linalg.solve(mass, np.swapaxes(scaled, 1, 2)))
-        reach = 2.0 * np.abs(phi[:4]).max(axis=0)
-        c0, c1 = friction_over_step(lambda w: plant.friction_torque(theta, w), omega,
-                                    rate + beta * phi[0], beta, dt, reach)
+        reach = 2.0 * np.abs(phi[:4, runs]).max(axis=0)
+        c0, c1 = np.zeros_like(omega), np.zeros_like(omega)
+        c0[runs], c1[runs] = friction_over_step(
+            lambda w: part.friction_torque(theta[runs], w), omega[runs],
+            rate[runs] + beta * phi[0, runs], beta, dt, reach)
         out = rk4_step(plant, state, u, dt, friction=lambda f: (single,
                                                                 c0 + c1 * (f - 0.5) * dt))
-    else:
+    elif not multi.all():
         out = rk4_step(plant, state, u, dt, k1)
+    else:       # every run is coupled (all at rest, as while settling): no RK4 step
+        out = np.empty_like(state)
     if multi.any():
+        # the coupled runs alone: their rows of the batch, on their own plant
+        runs = np.flatnonzero(multi)
+        part = runs_of(plant, runs)
         substeps = COUPLED_SUBSTEPS
-        coupled = rosenbrock_step(plant, state, u, dt / substeps, k1)
+        coupled = rosenbrock_step(part, state[runs], u[runs], dt / substeps, k1[runs])
         for _ in range(substeps - 1):
-            coupled = rosenbrock_step(plant, coupled, u, dt / substeps)
-        out = np.where(multi[:, None], coupled, out)
+            coupled = rosenbrock_step(part, coupled, u[runs], dt / substeps)
+        out[runs] = coupled
     return out

@@ -5,7 +5,10 @@ free-form term) moves with the nominal model's mechanics; only the torque resist
 drives differs. A simulated batch of a few runs costs about what one run costs (each
 step's work is Python's, not the arithmetic's), so the closed-loop comparison advances
 both models' runs as one batch: one plant whose extra effects act on their own rows
-(:func:`plant_of_rows`), the rows of the nominal model untouched by them. Drive axes
+(:func:`plant_of_rows`), the rows of the nominal model untouched by them, and whose runs
+may each have their own actuator lags (:class:`PlantOfRows`: what a diagnosis often
+adds beside a friction). An integrator that treats some runs apart (a steep friction's
+path, the coupled implicit step) takes the plant of those runs (:func:`runs_of`). Drive axes
 batch any models of one rig's axes (:class:`DrivesOfRows`): each run reads its own
 model's inertia, lag and friction, so a model extended by a lag or changed parameters
 shares the batch too.
@@ -40,6 +43,10 @@ class OnRows:
         # where, not a product: the effect may overflow on the other rows' speeds
         return np.where(self.rows, extra, 0.0)
 
+    def take(self, runs: np.ndarray) -> OnRows:
+        """The same effect on the batch of runs ``runs`` (indices into this batch)."""
+        return OnRows(self.effect, self.rows[runs])
+
 
 def _same(a: Any, b: Any) -> bool:
     if a is b:
@@ -52,30 +59,60 @@ def _same(a: Any, b: Any) -> bool:
     return bool(a == b)
 
 
-def extra_torques(base: Plant, model: Plant) -> tuple | None:
+def extra_torques(base: Plant, model: Plant, own_lags: bool = False) -> tuple | None:
     """The effects ``model`` adds to ``base`` when it is ``base`` plus drive torques
-    alone (the same mechanics, friction law and earlier effects), else None."""
+    alone (the same mechanics, friction law and earlier effects), else None;
+    ``own_lags``: the actuator lags may differ too (a run of a batch has its own,
+    :class:`PlantOfRows`)."""
     if type(model) is not type(base) or len(model.effects) < len(base.effects) \
             or any(a is not b for a, b in zip(base.effects, model.effects[:len(base.effects)],
                                              strict=True)):
         return None
+    free = {"effects", "actuator_time_constant"} if own_lags else {"effects"}
     if not all(_same(getattr(base, f.name), getattr(model, f.name))
-               for f in dataclasses.fields(base) if f.name != "effects"):
+               for f in dataclasses.fields(base) if f.name not in free):
         return None
     return tuple(model.effects[len(base.effects):])
 
 
-def plant_of_rows(base: Plant, rows: Sequence[Plant]) -> Plant:
+@dataclass(frozen=True)
+class PlantOfRows(Plant):
+    """A cable robot's plant whose runs each have their own actuator lags, ``run_lags``
+    (B, n; 0 where a drive has none): the nominal model beside one extended by a lag.
+    A run without lag keeps its lag state unused (its drums receive the command), so it
+    moves as its model moves alone."""
+
+    run_lags: np.ndarray | None = None
+
+    @cached_property
+    def lags(self) -> np.ndarray:
+        return self.run_lags
+
+    def take(self, runs: np.ndarray) -> PlantOfRows:
+        """The plant of the batch's runs ``runs`` (indices)."""
+        return self.replace(run_lags=self.run_lags[runs],
+                            effects=tuple(e.take(runs) if isinstance(e, OnRows) else e
+                                          for e in self.effects))
+
+
+def plant_of_rows(base: Plant, rows: Sequence[Plant], own_lags: bool = False) -> Plant:
     """One plant for a batch whose run ``b`` follows ``rows[b]``: ``base``, or ``base``
-    with extra drive torques (:func:`extra_torques`), each acting on its own runs."""
+    with extra drive torques (:func:`extra_torques`), each acting on its own runs;
+    ``own_lags``: rows may also differ in their actuator lags (a :class:`PlantOfRows`
+    where they do)."""
     added = []
     for model in {id(m): m for m in rows}.values():
-        extra = extra_torques(base, model)
+        extra = extra_torques(base, model, own_lags)
         if extra is None:
             raise ValueError("a row's model is not the base model plus drive torques")
         mask = np.array([m is model for m in rows])[:, None]
         added += [OnRows(effect, mask) for effect in extra]
-    return base if not added else base.replace(effects=(*base.effects, *added))
+    plant = base if not added else base.replace(effects=(*base.effects, *added))
+    lags = np.stack([m.lags for m in rows])
+    if np.array_equal(lags, np.broadcast_to(base.lags, lags.shape)):
+        return plant
+    return PlantOfRows(**{f.name: getattr(plant, f.name) for f in dataclasses.fields(plant)},
+                       run_lags=lags)
 
 
 @dataclass(frozen=True)
@@ -119,6 +156,10 @@ class DrivesOfRows:
         index = np.array([next(k for k, m in enumerate(models) if m is row) for row in rows])
         return cls(tuple(models), index)
 
+    def take(self, runs: np.ndarray) -> DrivesOfRows:
+        """The batch of runs ``runs`` (indices into this batch)."""
+        return DrivesOfRows(self.models, self.index[runs])
+
     @property
     def n(self) -> int:
         return int(self.models[0].n)
@@ -151,3 +192,17 @@ class DrivesOfRows:
             out[..., runs, :] = model.friction_torque(theta[..., runs, :],
                                                       omega[..., runs, :])
         return out
+
+
+def runs_of(plant: Any, runs: np.ndarray) -> Any:
+    """The model of a batch's runs ``runs`` (indices): drive axes of several models
+    (:class:`DrivesOfRows`) keep those runs' models; an effect that acts on some runs
+    (:class:`OnRows`) keeps those of them; every other effect acts alike on all. An
+    integrator that treats a few runs apart (a steep friction's path) steps them on it,
+    with arrays and friction calls the size of those runs."""
+    if isinstance(plant, DrivesOfRows | PlantOfRows):
+        return plant.take(runs)
+    if not any(isinstance(e, OnRows) for e in plant.effects):
+        return plant
+    return plant.replace(effects=tuple(e.take(runs) if isinstance(e, OnRows) else e
+                                       for e in plant.effects))

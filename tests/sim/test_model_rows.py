@@ -11,8 +11,17 @@ from cdpr_pipeline.data.axis_controller import AxisController
 from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.sim.axes_loop import AxesLoop, AxesReferences
 from cdpr_pipeline.sim.axis_references import AxisReferenceSet
+from cdpr_pipeline.sim.controller import ComputedTorquePD, PerRunComputedTorque
 from cdpr_pipeline.sim.effects import EFFECTS
-from cdpr_pipeline.sim.model_rows import DrivesOfRows, extra_torques, plant_of_rows
+from cdpr_pipeline.sim.integrators import _steep_winches, friction_path_step
+from cdpr_pipeline.sim.kinematics import cable_geometry
+from cdpr_pipeline.sim.model_rows import (
+    DrivesOfRows,
+    PlantOfRows,
+    extra_torques,
+    plant_of_rows,
+    runs_of,
+)
 from cdpr_pipeline.sim.plant import Drives, Plant
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import BatchSimulator
@@ -64,6 +73,107 @@ def test_rows_move_as_their_models_do_alone(paper_rig, sharpness):
     # the rows differ: the extended model moves otherwise, under either feedforward
     assert np.abs(joint[2:4] - joint[:2]).max() > 1e-6
     assert np.abs(joint[4] - joint[3]).max() > 1e-6
+
+
+@pytest.mark.parametrize("sharpness", [None, 500.0])
+def test_a_model_with_its_own_actuator_lag_shares_the_batch(paper_rig, sharpness):
+    # what a diagnosis often finds: a friction plus an actuator lag. The nominal model's
+    # runs step beside the extended model's, each run with its own lags (none on the
+    # nominal runs, whose drums take the command), and move as each model does alone
+    rig = paper_rig.replace(coulomb_sharpness=sharpness)
+    nominal = Plant.stated(rig, sharpness)
+    stribeck = EFFECTS["stribeck_friction"](static_ratio=2.5, stribeck_velocity=0.2)
+    extended = nominal.with_effects([stribeck, EFFECTS["actuator_lag"](
+        time_constant_s=[0.003, 0.0005, 0.002], cables=[1, 2, 3])])
+    assert extra_torques(nominal, extended) is None
+    assert extra_torques(nominal, extended, own_lags=True) == (stribeck,)
+    seed = 5
+    print(f"seed {seed}")
+    desired = draw_trajectories(["flat_eight", "spiral"], np.random.default_rng(seed),
+                                nominal.home, 1.0)
+    rows = [nominal, nominal, extended, extended, extended]
+    believed = [nominal, nominal, nominal, nominal, extended]
+    plant = plant_of_rows(nominal, rows, own_lags=True)
+    assert isinstance(plant, PlantOfRows)
+    np.testing.assert_array_equal(plant.lags[:2], 0.0)
+    np.testing.assert_array_equal(plant.lags[2:], np.tile(extended.lags, (3, 1)))
+    np.testing.assert_array_equal(runs_of(plant, np.array([1, 3])).lags,
+                                  np.stack([nominal.lags, extended.lags]))
+    sim = BatchSimulator(plant, nominal, rig.controller, EXACT, rig.sample_rate_hz,
+                         settle_s=0.3)
+    joint = sim.run(desired.take([0, 1, 0, 1, 1]), np.random.default_rng(0),
+                    believed=believed).truth["position"]
+
+    def alone(model, belief, finer=1):
+        sim = BatchSimulator(model, belief, rig.controller, EXACT, rig.sample_rate_hz,
+                             settle_s=0.3)
+        if finer > 1:
+            sim.substeps = finer * sim.substeps_for(1.0 / rig.controller.rate_hz)
+        return sim.run(desired, np.random.default_rng(0)).truth["position"]
+
+    # each run within what its own scheme's error is (against four times its sub-steps):
+    # a tick takes its sub-steps where any run of the batch meets the steep law, so a
+    # run's steps depend on its batch-mates, and a lagged run's more (measured: at most
+    # a quarter of the scheme's error, the extended model under its own feedforward;
+    # beside one other extended run it moves by 3e-8 m, the lag-free model by 6e-11 m)
+    for runs, model, belief, take in (([0, 1], nominal, nominal, [0, 1]),
+                                      ([2, 3], extended, nominal, [0, 1]),
+                                      ([4], extended, extended, [1])):
+        own = alone(model, belief)[take]
+        scheme = np.abs(own - alone(model, belief, finer=4)[take]).max()
+        print(f"runs {runs}: {np.abs(joint[runs] - own).max():.3g} m from alone, "
+              f"scheme error {scheme:.3g} m")
+        assert np.abs(joint[runs] - own).max() < 0.5 * scheme
+    # the lag and the friction move the extended runs otherwise
+    assert np.abs(joint[2:4] - joint[:2]).max() > 1e-6
+
+
+@pytest.mark.parametrize("sharpness", [None, 500.0])
+def test_a_steep_step_on_some_runs_is_what_each_run_gets_alone(paper_rig, sharpness):
+    # friction_path_step solves the friction's path and the coupled implicit steps on
+    # the runs that need them alone (runs_of: each extra torque kept on its own runs),
+    # and the controller's laws of the nominal and the extended model are one law on a
+    # plant of rows: a run's step and command are what it gets simulated by itself
+    rig = paper_rig.replace(coulomb_sharpness=sharpness)
+    nominal = Plant.stated(rig, sharpness)
+    extended = EFFECTS["stribeck_friction"](static_ratio=2.5, stribeck_velocity=0.2).apply(
+        nominal)
+    seed = 7
+    print(f"seed {seed}")
+    rng = np.random.default_rng(seed)
+    models = [nominal, extended] * 4
+    plant = plant_of_rows(nominal, models)
+    batch = len(models)
+    state = plant.initial_state(nominal.home + 0.05 * rng.standard_normal((batch, 3)))
+    # runs at rest (every winch steep: the coupled step), runs with one winch near
+    # zero speed (its path), runs in motion (plain RK4)
+    _, units = cable_geometry(nominal.anchors, state[:, 0:3])
+    speed = np.array([0.0, 0.0, 1e-3, 1e-3, 0.3, 0.3, 0.2, 0.2])
+    across = units[:, 1] - np.einsum("bi,bi->b", units[:, 1], units[:, 0])[:, None] \
+        * units[:, 0]            # square to the first cable: its winch at rest
+    state[:, 3:6] = speed[:, None] * across / np.linalg.norm(across, axis=1)[:, None]
+    state[6:, 3:6] = 0.2 * rng.standard_normal((2, 3))
+    law = PerRunComputedTorque.of(models, rig.controller)
+    assert isinstance(law, ComputedTorquePD)       # one law on the plant of rows
+    desired = state[:, 0:3] + 0.01
+    u = law(state[:, 0:3], state[:, 3:6], desired, np.zeros((batch, 3)),
+            np.zeros((batch, 3)))
+    dt = 1.0 / rig.controller.rate_hz
+    steep = _steep_winches(plant, state, plant.derivative(state, u), dt, 0.5)[0]
+    counts = steep.sum(axis=1)
+    assert (counts > 1).any() and (counts == 1).any() and (counts == 0).any(), counts
+    joint = friction_path_step(plant, state, u, dt)
+    for b, model in enumerate(models):
+        own = ComputedTorquePD(model, rig.controller)(
+            state[b:b + 1, 0:3], state[b:b + 1, 3:6], desired[b:b + 1], np.zeros((1, 3)),
+            np.zeros((1, 3)))
+        np.testing.assert_allclose(u[b:b + 1], own, rtol=1e-13, atol=1e-13)
+        alone = friction_path_step(model, state[b:b + 1], u[b:b + 1], dt)
+        np.testing.assert_allclose(joint[b:b + 1], alone, rtol=1e-13, atol=1e-15)
+    # the models differ where it counts: the nominal runs stepped with the extended
+    # friction move otherwise (a mask taken from the wrong runs would show)
+    other = friction_path_step(extended, state[0::2], u[0::2], dt)
+    assert np.abs(other - joint[0::2]).max() > 1e-9
 
 
 @pytest.mark.parametrize("sharpness", [None, 500.0])
