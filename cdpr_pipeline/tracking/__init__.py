@@ -3,6 +3,7 @@
 from cdpr_pipeline.tracking.mlflow import (
     DEFAULT_TRACKING_URI,
     PARENT_RUN_ENV,
+    LocalRuns,
     experiment_id,
     finished_or_failed,
     flatten_params,
@@ -12,11 +13,13 @@ from cdpr_pipeline.tracking.mlflow import (
     log_run,
     make_logger,
     mlflow_client,
+    open_runs,
     run_name,
     stage_run,
     tracking_uri,
 )
 
-__all__ = ["DEFAULT_TRACKING_URI", "PARENT_RUN_ENV", "experiment_id", "finished_or_failed",
-           "flatten_params", "latest_runs", "log_metrics", "log_params_once", "log_run",
-           "make_logger", "mlflow_client", "run_name", "stage_run", "tracking_uri"]
+__all__ = ["DEFAULT_TRACKING_URI", "PARENT_RUN_ENV", "LocalRuns", "experiment_id",
+           "finished_or_failed", "flatten_params", "latest_runs", "log_metrics",
+           "log_params_once", "log_run", "make_logger", "mlflow_client", "open_runs",
+           "run_name", "stage_run", "tracking_uri"]
