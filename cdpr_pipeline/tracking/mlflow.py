@@ -6,8 +6,9 @@ store, nothing to start; ``make run`` sets ``MLFLOW_TRACKING_URI`` to the projec
 
 Pipeline stages run inside :func:`stage_run`: one MLflow run per stage, nested under the
 pipeline's parent run when ``CDPR_MLFLOW_PARENT_RUN_ID`` is set (``cdpr repro`` sets it
-for the ``dvc repro`` it starts). A stage that logs through :func:`make_logger` writes
-into that stage run instead of opening its own.
+for the ``dvc repro`` it starts). A stage that logs through
+:func:`~cdpr_pipeline.tracking.loggers.make_logger` writes into that stage run instead of
+opening its own.
 
 A command writes its runs through a *runs* object (:func:`open_runs`): :class:`LocalRuns`
 on an ``MlflowClient`` in this process, or, in a stage that ``cdpr repro`` started,
@@ -123,64 +124,6 @@ def run_name(command: str, dataset: str | Path | None, detail: str | None = None
     return f"{name} ({detail})" if detail else name
 
 
-class RunLogger:
-    """An MLflow run as the stages use it: ``experiment`` (the runs object it is written
-    through, :func:`open_runs`), ``run_id`` and :meth:`log_hyperparams`, as on Lightning's
-    ``MLFlowLogger``, without importing Lightning (and torch): that import is most of a
-    short stage's time (5-15 s per process on 2 cores)."""
-
-    def __init__(self, runs, run_id: str):
-        self.experiment = runs
-        self.run_id = run_id
-
-    def log_hyperparams(self, params: Mapping[str, Any]) -> None:
-        """Log flat params (values cut to 250 characters, as ``MLFlowLogger`` does);
-        those the run has already are left as they are."""
-        self.experiment.log_run(self.run_id, params={k: str(v)[:250]
-                                                     for k, v in params.items()})
-
-    def log_metrics(self, metrics: Mapping[str, float], step: int = 0) -> None:
-        """Log metrics in batches (:func:`log_run`: names made acceptable, non-finite
-        values left out)."""
-        self.experiment.log_run(self.run_id, metrics=metrics, step=step)
-
-
-def make_logger(experiment: str, run_name: str, uri: str | None = None,
-                tags: Mapping[str, str] | None = None, lightning: bool = False):
-    """The MLflow run a command logs into: inside a pipeline stage the stage's run, else
-    a new run ``run_name`` in ``experiment`` on the resolved URI.
-
-    ``lightning=True``: Lightning's ``MLFlowLogger`` (what a ``Trainer`` takes; the new
-    run starts on first use); else a :class:`RunLogger`, which does not import Lightning.
-    """
-    stage_run_id = claim_stage_run()
-    resolved = tracking_uri(uri)
-    if not lightning:
-        runs = open_runs(resolved)
-        if stage_run_id is not None:
-            run_id = stage_run_id
-            for key, value in (tags or {}).items():
-                runs.set_tag(run_id, key, value)
-        else:
-            run_id = runs.create_run(experiment, run_name, tags)
-        return RunLogger(runs, run_id)
-    from lightning.pytorch.loggers import MLFlowLogger
-
-    client = mlflow_client(resolved)
-
-    if stage_run_id is not None:
-        # inside a pipeline stage: write into its run (once; a nested call gets its own)
-        logger = MLFlowLogger(tracking_uri=resolved, run_id=stage_run_id, log_model=False)
-        for key, value in (tags or {}).items():
-            logger.experiment.set_tag(stage_run_id, key, value)
-        return logger
-    # created here, where two jobs creating it at once are handled (experiment_id)
-    experiment_id(client, experiment)
-    return MLFlowLogger(experiment_name=experiment, run_name=run_name,
-                        tracking_uri=resolved, tags=dict(tags or {}), log_model=False,
-                        artifact_location=artifact_location(resolved))
-
-
 def claim_stage_run() -> str | None:
     """The open pipeline stage's run (:func:`stage_run`) for the caller to write into,
     claimed once (a nested caller gets a run of its own); None outside a stage."""
@@ -240,7 +183,8 @@ def stage_run(name: str, experiment: str, uri: str | None = None,
 
     Nested under ``$CDPR_MLFLOW_PARENT_RUN_ID`` (in the parent's experiment) when set,
     else a top-level run in ``experiment``. The run ends FINISHED, or FAILED if the block
-    raises. :func:`make_logger` called inside the block writes into this run."""
+    raises. :func:`~cdpr_pipeline.tracking.loggers.make_logger` called inside the block
+    writes into this run."""
     runs = open_runs(uri)
     run_id = runs.create_run(experiment, name, {"cdpr_stage": name, **(tags or {})},
                              os.environ.get(PARENT_RUN_ENV) or None)
@@ -396,16 +340,3 @@ def latest_runs(experiment: str, uri: str | None = None, task: str = "train",
     if runs.empty:
         return runs
     return runs.drop_duplicates(subset=[f"tags.{key}"], keep="first").reset_index(drop=True)
-
-
-
-
-@contextmanager
-def finished_or_failed(logger):
-    """Mark the logger's MLflow run FINISHED when the block ends, FAILED if it raises."""
-    try:
-        yield logger
-    except BaseException:
-        logger.experiment.set_terminated(logger.run_id, "FAILED")
-        raise
-    logger.experiment.set_terminated(logger.run_id, "FINISHED")
