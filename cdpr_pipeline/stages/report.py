@@ -28,7 +28,7 @@ from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.rig import WINCH_KEYS
 from cdpr_pipeline.errors import InputError
 from cdpr_pipeline.pipeline.skip import skipped_reason
-from cdpr_pipeline.stages.virtual import RECORD as VIRTUAL_RECORD
+from cdpr_pipeline.stages import VIRTUAL_RECORD
 from cdpr_pipeline.tables import to_markdown
 from cdpr_pipeline.tracking import finished_or_failed, make_logger
 
