@@ -70,6 +70,8 @@ HEAVY = {
     ("cdpr_pipeline.models.blackbox", "cdpr_pipeline.models.reconstruction"),
     # Lightning only for a reconstruction fit that uses it (the black box's does not)
     ("cdpr_pipeline.models.reconstruction", "cdpr_pipeline.models.module"),
+    # Lightning's logger class only for a training (the stages' own loggers do not)
+    ("cdpr_pipeline.tracking.loggers", "cdpr_pipeline.tracking.trainer_logger"),
 }
 #: top-layer modules whose functions load a command's modules on the call (PEP 562 in
 #: the package, the Python API): `import cdpr_pipeline` stays cheap

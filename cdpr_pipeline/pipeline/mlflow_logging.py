@@ -10,7 +10,6 @@ from pathlib import Path
 from typing import Any
 
 from cdpr_pipeline.pipeline.skip import SKIP_MARKER
-from cdpr_pipeline.tracking import log_metrics
 
 #: output files the runner logs to MLflow for a stage that logged none itself
 ARTIFACT_SUFFIXES = (".json", ".yaml", ".csv", ".md", ".png", ".html")
@@ -47,39 +46,38 @@ def json_numbers(tree: Any, prefix: str) -> dict[str, float]:
     return {}
 
 
-def log_stage_outputs(client, run_id: str, out_dir: Path) -> None:
+def log_stage_outputs(runs, run_id: str, out_dir: Path) -> None:
     """Log a stage's small top-level output files and their numbers, unless the stage
     logged its own (then the stage chose what matters).
 
     Parameters
     ----------
-    client : mlflow.tracking.MlflowClient
-        The stage run's client.
+    runs : LocalRuns or RemoteRuns
+        What the stage run is written through (:func:`~cdpr_pipeline.tracking.open_runs`).
     run_id : str
         The stage run.
     out_dir : Path
         Where the stage wrote.
     """
-    data = client.get_run(run_id).data
-    if data.metrics or client.list_artifacts(run_id):
+    if runs.has_logged(run_id):
         return
     files = [p for p in sorted(out_dir.iterdir()) if p.is_file()
              and p.suffix in ARTIFACT_SUFFIXES and p.stat().st_size <= MAX_ARTIFACT_BYTES]
     metrics: dict[str, float] = {}
     for p in files:
-        client.log_artifact(run_id, str(p))
+        runs.log_artifact(run_id, str(p))
         if p.suffix == ".json":
             metrics |= json_numbers(json.loads(p.read_text()), p.stem + "/")
-    log_metrics(client, run_id, metrics)
+    runs.log_run(run_id, metrics=metrics)
 
 
-def log_skipped(client, run_id: str, reason: str, out_dir: Path) -> None:
+def log_skipped(runs, run_id: str, reason: str, out_dir: Path) -> None:
     """Mark a stage run as skipped: the tag ``cdpr_skipped=<reason>`` and the marker.
 
     Parameters
     ----------
-    client : mlflow.tracking.MlflowClient
-        The stage run's client.
+    runs : LocalRuns or RemoteRuns
+        What the stage run is written through (:func:`~cdpr_pipeline.tracking.open_runs`).
     run_id : str
         The stage run.
     reason : str
@@ -88,5 +86,5 @@ def log_skipped(client, run_id: str, reason: str, out_dir: Path) -> None:
         Where the runner wrote the skip markers (its ``SKIPPED.json`` is logged; the other
         markers stand in for outputs and say nothing more).
     """
-    client.set_tag(run_id, SKIPPED_TAG, reason[:MAX_TAG_CHARS])
-    client.log_artifact(run_id, str(out_dir / SKIP_MARKER))
+    runs.set_tag(run_id, SKIPPED_TAG, reason[:MAX_TAG_CHARS])
+    runs.log_artifact(run_id, str(out_dir / SKIP_MARKER))

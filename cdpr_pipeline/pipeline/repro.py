@@ -1,6 +1,8 @@
 """``cdpr repro``'s work: write ``params.yaml``, then run ``dvc repro`` under one MLflow
 parent run (``CDPR_MLFLOW_PARENT_RUN_ID``, which every stage run nests under) that gets
-``dvc metrics`` and the reports at the end. Nothing to reproduce: no run."""
+``dvc metrics`` and the reports at the end. Nothing to reproduce: no run. While dvc runs,
+this process serves the MLflow store to the stages
+(:class:`~cdpr_pipeline.tracking.remote.RunServer`)."""
 
 from __future__ import annotations
 
@@ -17,12 +19,14 @@ from cdpr_pipeline.pipeline.dvc_cli import run_dvc, up_to_date, workspace_metric
 from cdpr_pipeline.pipeline.params import pipeline_params, write_params
 from cdpr_pipeline.tracking import (
     PARENT_RUN_ENV,
+    LocalRuns,
     experiment_id,
     flatten_params,
     log_metrics,
     log_params_once,
     mlflow_client,
 )
+from cdpr_pipeline.tracking.remote import RunServer
 
 log = logging.getLogger(__name__)
 
@@ -82,7 +86,10 @@ def repro(cfg: DictConfig) -> int:
     # a terminated repro still closes its parent run (as FAILED)
     previous = signal.signal(signal.SIGTERM, _raise_interrupt)
     try:
-        rc = run_dvc("repro", *dvc_args, env=env).returncode
+        # the stages write their runs through this process, which has MLflow loaded and
+        # its store open (each stage would pay about 2.2 s of CPU for it)
+        with RunServer(lambda uri: LocalRuns(mlflow_client(uri))) as server:
+            rc = run_dvc("repro", *dvc_args, env=env | server.env).returncode
         log_metrics(client, run_id, workspace_metrics(env))
         for name in PIPELINE_ARTIFACTS:
             if Path(name).exists():   # kept at their project paths (two report.html)

@@ -33,7 +33,7 @@ from cdpr_pipeline.pipeline.inputs import (
 from cdpr_pipeline.pipeline.mlflow_logging import log_skipped, log_stage_outputs
 from cdpr_pipeline.pipeline.params import PARAMS_FILE, read_section
 from cdpr_pipeline.pipeline.skip import Skipped, StageNotApplicable, write_skip_markers
-from cdpr_pipeline.tracking import flatten_params, log_params_once, stage_run
+from cdpr_pipeline.tracking import flatten_params, stage_run
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +93,7 @@ def run_stage(key: str, params_file: str | Path = PARAMS_FILE) -> Any:
         cfg = OmegaConf.create(rebase_paths(checked.config, str(out_dir), str(partial)))
         with stage_run(key, experiment, tracking.get("uri"),
                        tags={"cdpr_stage_function": section["function"],
-                             "params_digest": digest}) as (client, run_id):
+                             "params_digest": digest}) as (runs, run_id):
             result = None
             if reason is None:
                 try:
@@ -105,14 +105,14 @@ def run_stage(key: str, params_file: str | Path = PARAMS_FILE) -> Any:
                                       f"  {blame(err, inputs)}; the inputs are untouched and "
                                       f"{out_dir} was not replaced (its work so far is in "
                                       f"{partial})") from err
-            log_params_once(client, run_id, flatten_params(config))
+            runs.log_run(run_id, params=flatten_params(config))
             if reason is None:
-                log_stage_outputs(client, run_id, partial)
+                log_stage_outputs(runs, run_id, partial)
             else:
                 # what the stage wrote before it found it cannot apply is no output
                 empty_dir(partial)
                 write_skip_markers(partial, list(section.get("outputs") or []), reason, key)
-                log_skipped(client, run_id, reason, partial)
+                log_skipped(runs, run_id, reason, partial)
     if reason is not None:
         log.info("stage %s skipped: %s", key, reason)
         return Skipped(reason)

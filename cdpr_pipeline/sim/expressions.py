@@ -12,6 +12,7 @@ write, the simulator can run, and :func:`to_infix` prints it for people.
 from __future__ import annotations
 
 import ast
+import hashlib
 from collections import OrderedDict
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -149,26 +150,41 @@ def to_infix(expression: str, subscript: str = "",
 
 _VALUES: OrderedDict[tuple, np.ndarray] = OrderedDict()
 
+#: arrays smaller than this are evaluated directly (a simulation step's state)
+CACHED_SIZE = 256
 
-def _fingerprint(x: np.ndarray) -> tuple:
-    flat = x.reshape(-1)
-    return (x.__array_interface__["data"][0], x.shape,
-            float(flat[0]), float(flat[len(flat) // 2]), float(flat[-1]))
+
+def content_key(*arrays: np.ndarray) -> tuple:
+    """What identifies the content of ``arrays``: their shapes, dtypes and a SHA-256
+    digest of every element. Not their addresses: a buffer rewritten in place, as a
+    simulator's state is tick after tick, or freed and reused, must not be taken for
+    its old content."""
+    digest = hashlib.sha256()
+    for x in arrays:
+        digest.update(np.ascontiguousarray(x).view(np.uint8).reshape(-1))
+    return (tuple((np.shape(x), np.asarray(x).dtype.str) for x in arrays),
+            digest.digest())
 
 
 def evaluate_cached(expression: str, omega: np.ndarray, theta: np.ndarray,
-                    max_entries: int = 512) -> np.ndarray:
-    """:func:`evaluate` for large, long-lived arrays (a run's winch state), memoised:
-    fitting a free-form model re-evaluates the same terms on the same run hundreds of
-    times while only the coefficients change. Small arrays (a simulation step) are
-    evaluated directly. The key is the buffer plus sampled values, so a freed and
-    reused buffer with other content is not mistaken for the old one."""
-    if omega.size < 256:
+                    key: tuple | None = None, max_entries: int = 512) -> np.ndarray:
+    """:func:`evaluate` for large arrays (a run's winch state), memoised on their
+    content: fitting a free-form model re-evaluates the same terms on the same run
+    hundreds of times while only the coefficients change. Arrays of fewer than
+    :data:`CACHED_SIZE` elements (a simulation step) are evaluated directly.
+
+    ``key`` identifies the content of ``omega`` and ``theta`` when the caller knows it
+    already (built on :func:`content_key` of arrays they are taken from, so that many
+    terms on one run's state digest it once); by default :func:`content_key` of the two.
+    Arrays that differ anywhere never share a value. The value returned is shared and
+    read-only."""
+    if omega.size < CACHED_SIZE:
         return evaluate(expression, {"omega": omega, "theta": theta})
-    key = (expression, _fingerprint(omega), _fingerprint(theta))
+    key = (expression, content_key(omega, theta) if key is None else key)
     value = _VALUES.get(key)
     if value is None:
         value = evaluate(expression, {"omega": omega, "theta": theta})
+        value.flags.writeable = False
         _VALUES[key] = value
         if len(_VALUES) > max_entries:
             _VALUES.popitem(last=False)

@@ -183,6 +183,24 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
 #: reference by 9.4 % of the tracking error with one, 1.04 % with four, 1.00 % with
 #: sixteen (the rest is the single winches' paths)
 COUPLED_SUBSTEPS = 4
+#: fewest of those sub-steps per control tick: the positions' error is judged against the
+#: tracking error, which shrinks with the control tick. An 8-cable rig at 1 kHz with
+#: ``tanh(500 w)`` takes one step per tick, nearly every steep run coupled (96 % of them
+#: on its five runs): 1.14 % of the tracking error with four, 0.41 % with eight (seed 3,
+#: 3 s runs); the rigs of slower ticks take eight or more already (two steps of four).
+#: A hard sign needs no more (0.03 % of the tracking error on 4 cables at 500 Hz with four
+#: in one step per tick)
+COUPLED_PER_TICK = 8
+
+
+def coupled_substeps(substeps: int, smooth_law: bool) -> int:
+    """The :func:`rosenbrock_step` sub-steps of a coupled run within each of
+    ``substeps`` steps of :func:`friction_path_step` per control tick: at least
+    :data:`COUPLED_PER_TICK` per tick under a smooth law (``tanh(k w)``, stated by
+    the model), :data:`COUPLED_SUBSTEPS` per step under a hard sign."""
+    if not smooth_law:
+        return COUPLED_SUBSTEPS
+    return max(COUPLED_SUBSTEPS, math.ceil(COUPLED_PER_TICK / substeps))
 
 
 def _steep_winches(plant: Plant, state: np.ndarray, k1: np.ndarray, dt: float,
@@ -211,26 +229,30 @@ def _steep_winches(plant: Plant, state: np.ndarray, k1: np.ndarray, dt: float,
 
 def friction_path_tick(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
                        substeps: int, k1: np.ndarray | None = None,
-                       accuracy: float = 0.5) -> np.ndarray:
+                       accuracy: float = 0.5, coupled: int = COUPLED_SUBSTEPS
+                       ) -> np.ndarray:
     """A control tick of ``dt`` by :func:`friction_path_step`: ``substeps`` steps
     where a winch of any run meets the friction law's steep part within the tick, else
     one RK4 step of the whole tick (the friction then sets no step; the mechanics
     alone ask for one per tick, as they do of a gentle law's RK4). Steep parts are
     rare: on a 4-cable rig at 500 Hz with ``tanh(500 w)``, five runs, 8.5 % of the
-    ticks meet one, so a tick costs 1.1 steps instead of 2."""
+    ticks meet one, so a tick costs 1.1 steps instead of 2. A coupled run takes
+    ``coupled`` steps of :func:`rosenbrock_step` within each step (see
+    :func:`coupled_substeps`)."""
     if k1 is None:
         k1 = plant.derivative(state, u)
     if substeps > 1 and not _steep_winches(plant, state, k1, dt, accuracy)[0].any():
         return rk4_step(plant, state, u, dt, k1)
     h = dt / substeps
     for _ in range(substeps):
-        state = friction_path_step(plant, state, u, h, k1, accuracy)
+        state = friction_path_step(plant, state, u, h, k1, accuracy, coupled)
         k1 = None
     return state
 
 
 def friction_path_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
-                       k1: np.ndarray | None = None, accuracy: float = 0.5) -> np.ndarray:
+                       k1: np.ndarray | None = None, accuracy: float = 0.5,
+                       coupled: int = COUPLED_SUBSTEPS) -> np.ndarray:
     """One RK4 step of a *rigid* plant whose friction law is steep (a hard sign, a steep
     ``tanh``, a narrow Stribeck bump), the step set by the mechanics alone.
 
@@ -241,6 +263,8 @@ def friction_path_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float
     speed with everything else frozen, solved in the speed, which places the switch (or
     the stick: a hard sign's set-valued rest) where it falls within the step; RK4 then
     integrates that friction, linear in time, exactly. Every other winch keeps its law.
+    A run with several steep winches at once takes ``coupled`` steps of
+    :func:`rosenbrock_step` instead, which couple them.
     """
     if plant.elastic:
         raise ValueError("friction_path_step integrates rigid plants only")
@@ -281,9 +305,8 @@ def friction_path_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float
         # the coupled runs alone: their rows of the batch, on their own plant
         runs = np.flatnonzero(multi)
         part = runs_of(plant, runs)
-        substeps = COUPLED_SUBSTEPS
-        coupled = rosenbrock_step(part, state[runs], u[runs], dt / substeps, k1[runs])
-        for _ in range(substeps - 1):
-            coupled = rosenbrock_step(part, coupled, u[runs], dt / substeps)
-        out[runs] = coupled
+        moved = rosenbrock_step(part, state[runs], u[runs], dt / coupled, k1[runs])
+        for _ in range(coupled - 1):
+            moved = rosenbrock_step(part, moved, u[runs], dt / coupled)
+        out[runs] = moved
     return out

@@ -27,6 +27,7 @@ from cdpr_pipeline.errors import UserError
 from cdpr_pipeline.progress import progress
 from cdpr_pipeline.sim.controller import ComputedTorquePD, PerRunComputedTorque
 from cdpr_pipeline.sim.integrators import (  # noqa: F401  (re-exported: the simulator's steps)
+    coupled_substeps,
     friction_path_step,
     friction_path_tick,
     lag_response,
@@ -361,7 +362,8 @@ class BatchSimulator:
         dt = grid.dt / substeps
         # sub-steps chosen for a steep law's stretches take the whole tick elsewhere;
         # sub-steps given (a fine-step reference) are taken throughout
-        adaptive = step is friction_path_step and not self.substeps and substeps > 1
+        adaptive = step is friction_path_step and not self.substeps
+        coupled = coupled_substeps(substeps, bool(np.isfinite(self.plant.sign_sharpness)))
         law = ComputedTorquePD(self.nominal, self.controller) if believed is None else \
             PerRunComputedTorque.of(list(believed), self.controller)
         xd, vd, ad = grid.desired
@@ -405,7 +407,8 @@ class BatchSimulator:
             if k == n_ticks - 1:
                 break
             if adaptive:
-                state = friction_path_tick(plant, state, u, grid.dt, substeps, deriv)
+                state = friction_path_tick(plant, state, u, grid.dt, substeps, deriv,
+                                           coupled=coupled)
             else:
                 for _ in range(substeps):
                     state = step(plant, state, u, dt, deriv)

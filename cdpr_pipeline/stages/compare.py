@@ -53,7 +53,6 @@ from cdpr_pipeline.tables import to_markdown
 from cdpr_pipeline.tracking import (
     finished_or_failed,
     latest_runs,
-    log_metrics,
     make_logger,
     run_name,
     tracking_uri,
@@ -500,7 +499,7 @@ def compare(cfg: DictConfig) -> Comparison:
     with finished_or_failed(logger):
         logger.log_hyperparams({"models": ",".join(columns), "data.path": str(path),
                                 "extended_model": str(cfg.get("extended_model"))})
-        log_metrics(logger.experiment, logger.run_id, {
+        logger.log_metrics({
             f"{m}/{k}": v for m, row in numbers.iterrows() for k, v in row.items()
             if k in (*SUMMARY_KEYS, "train_s")})
         for f in files:

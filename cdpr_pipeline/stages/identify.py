@@ -26,7 +26,6 @@ from cdpr_pipeline.identification.pipeline import (
 from cdpr_pipeline.tracking import (
     finished_or_failed,
     flatten_params,
-    log_metrics,
     make_logger,
     run_name,
 )
@@ -82,7 +81,7 @@ def identify(cfg: DictConfig) -> Identification:
                                                      "method": cfg.method})
     with finished_or_failed(logger):
         logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
-        log_metrics(logger.experiment, logger.run_id, _flat_metrics(
+        logger.log_metrics(_flat_metrics(
             dict(result.metrics) | {"params": result.estimate.params,
                                     "std": result.estimate.std}))
         logger.experiment.log_artifact(logger.run_id, str(path))

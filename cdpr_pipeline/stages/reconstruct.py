@@ -34,7 +34,6 @@ from cdpr_pipeline.tables import to_markdown
 from cdpr_pipeline.tracking import (
     finished_or_failed,
     flatten_params,
-    log_metrics,
     make_logger,
     run_name,
 )
@@ -130,7 +129,7 @@ def reconstruct(cfg: DictConfig) -> dict:
                                                      "method": method})
     with finished_or_failed(logger):
         logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
-        log_metrics(logger.experiment, logger.run_id, {
+        logger.log_metrics({
             f"{tab}/{label}/{m}/{i + 1}": v
             for tab, sc in (("table4", table4), ("table5", table5))
             for label, row in sc.items() for m, vals in row.items() for i, v in enumerate(vals)})

@@ -28,9 +28,9 @@ from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.rig import WINCH_KEYS
 from cdpr_pipeline.errors import InputError
 from cdpr_pipeline.pipeline.skip import skipped_reason
-from cdpr_pipeline.stages.virtual import RECORD as VIRTUAL_RECORD
+from cdpr_pipeline.stages import VIRTUAL_RECORD
 from cdpr_pipeline.tables import to_markdown
-from cdpr_pipeline.tracking import finished_or_failed, log_metrics, make_logger
+from cdpr_pipeline.tracking import finished_or_failed, make_logger
 
 log = logging.getLogger(__name__)
 
@@ -241,8 +241,7 @@ def build_report(cfg: DictConfig) -> dict:
                          tags={"cdpr_task": "report",
                                "verdict": diagnosis["verdict"] if diagnosis else "skipped"})
     with finished_or_failed(logger):
-        log_metrics(logger.experiment, logger.run_id,
-                    {k: v for k, v in summary.items() if isinstance(v, (int, float))})
+        logger.log_metrics({k: v for k, v in summary.items() if isinstance(v, (int, float))})
         for name in ("report.html", "report.md", "summary.json"):
             logger.experiment.log_artifact(logger.run_id, str(out / name))
     log.info("report: %s", out / "report.html")

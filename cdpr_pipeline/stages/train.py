@@ -30,9 +30,8 @@ from cdpr_pipeline.models.forecast import Forecaster
 from cdpr_pipeline.models.module import ForecastModule, TimeToBest, quiet_fit
 from cdpr_pipeline.tracking import (
     flatten_params,
-    log_metrics,
     make_logger,
-    mlflow_client,
+    open_runs,
     run_name,
 )
 
@@ -123,8 +122,7 @@ def train(cfg: DictConfig) -> TrainResult:
             return _train(cfg)
         except BaseException:
             if os.environ.get(DDP_RUN_ENV):
-                mlflow_client(cfg.tracking.uri).set_terminated(os.environ[DDP_RUN_ENV],
-                                                               "FAILED")
+                open_runs(cfg.tracking.uri).set_terminated(os.environ[DDP_RUN_ENV], "FAILED")
             raise
 
 
@@ -143,7 +141,7 @@ def _train(cfg: DictConfig) -> TrainResult:
                                "data_path": str(Path(cfg.data.path).resolve())},
                          lightning=True)
     logger.log_hyperparams(flatten_params(OmegaConf.to_container(cfg, resolve=True)))
-    client, run_id = logger.experiment, logger.run_id
+    runs, run_id = logger.experiment, logger.run_id
     previous_env = os.environ.get(DDP_RUN_ENV)
     if not rank_zero_only.rank:
         os.environ[DDP_RUN_ENV] = run_id
@@ -168,7 +166,7 @@ def _train(cfg: DictConfig) -> TrainResult:
         metrics = evaluate(fc, dm.runs_of("train"), dm.runs_of("test"), settings)
         summary["time/eval_s"] = time.perf_counter() - start
         metrics |= summary
-        log_metrics(client, run_id, metrics)
+        runs.log_run(run_id, metrics=metrics)
 
         fc_path = fc.save(out_dir / "forecaster.pt")
         (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=1, sort_keys=True))
@@ -189,10 +187,10 @@ def _train(cfg: DictConfig) -> TrainResult:
         if best is not None and best.exists():
             artifacts.append(best)
         for path in artifacts:
-            client.log_artifact(run_id, str(path))
-        client.set_terminated(run_id, "FINISHED")
+            runs.log_artifact(run_id, str(path))
+        runs.set_terminated(run_id, "FINISHED")
     except BaseException:
-        client.set_terminated(run_id, "FAILED")
+        runs.set_terminated(run_id, "FAILED")
         raise
     finally:
         if not rank_zero_only.rank:

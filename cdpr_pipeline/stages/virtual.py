@@ -48,11 +48,10 @@ from cdpr_pipeline.models.virtual import (
     write_virtual_dataset,
 )
 from cdpr_pipeline.pipeline.skip import StageNotApplicable
+from cdpr_pipeline.stages import VIRTUAL_RECORD
 
 log = logging.getLogger(__name__)
 
-#: what ``cdpr virtual`` writes beside the runs: which predictor drove them, and why
-RECORD = "virtual.json"
 #: the metric that ranks fallback predictors (``cdpr train``'s metrics.json): the held-out
 #: 1 s free-run position RMSE, the closest of its scores to what a virtual run is
 RANK_METRIC = "freerun_1s/test/all/overall/rmse"
@@ -265,7 +264,7 @@ def virtual(cfg: DictConfig) -> Path:
               "configured": tried[0].name, "fallback": chosen is not tried[0],
               "why": why, "runs": len(valid), "dropped": dropped,
               "in_range": {r.name: {"kept": len(r.valid), "of": len(r.runs)} for r in tried}}
-    (out / RECORD).write_text(json.dumps(record, indent=1) + "\n")
+    (out / VIRTUAL_RECORD).write_text(json.dumps(record, indent=1) + "\n")
     log.info("%d virtual runs in %.1f s -> %s", len(valid), sum(r.seconds for r in tried), out)
     return out
 

@@ -6,8 +6,14 @@ store, nothing to start; ``make run`` sets ``MLFLOW_TRACKING_URI`` to the projec
 
 Pipeline stages run inside :func:`stage_run`: one MLflow run per stage, nested under the
 pipeline's parent run when ``CDPR_MLFLOW_PARENT_RUN_ID`` is set (``cdpr repro`` sets it
-for the ``dvc repro`` it starts). A stage that logs through :func:`make_logger` writes
-into that stage run instead of opening its own.
+for the ``dvc repro`` it starts). A stage that logs through
+:func:`~cdpr_pipeline.tracking.loggers.make_logger` writes into that stage run instead of
+opening its own.
+
+A command writes its runs through a *runs* object (:func:`open_runs`): :class:`LocalRuns`
+on an ``MlflowClient`` in this process, or, in a stage that ``cdpr repro`` started,
+:class:`~cdpr_pipeline.tracking.remote.RemoteRuns`, the repro's own store served to it
+(the stage then imports no MLflow).
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ from typing import Any
 import pandas as pd
 
 from cdpr_pipeline.outputs import final_paths
+from cdpr_pipeline.tracking.remote import SERVER_ENV, RemoteRuns
 
 #: MLflow's default store (``mlflow.store.tracking.DEFAULT_TRACKING_URI``): relative to the
 #: working directory; :func:`tracking_uri` makes it absolute when it is used
@@ -117,58 +124,6 @@ def run_name(command: str, dataset: str | Path | None, detail: str | None = None
     return f"{name} ({detail})" if detail else name
 
 
-class RunLogger:
-    """An MLflow run as the stages use it: ``experiment`` (the
-    :class:`~mlflow.tracking.MlflowClient`), ``run_id`` and :meth:`log_hyperparams`, as on
-    Lightning's ``MLFlowLogger``, without importing Lightning (and torch): that import is
-    most of a short stage's time (5-15 s per process on 2 cores)."""
-
-    def __init__(self, client, run_id: str):
-        self.experiment = client
-        self.run_id = run_id
-
-    def log_hyperparams(self, params: Mapping[str, Any]) -> None:
-        """Log flat params (values cut to 250 characters, as ``MLFlowLogger`` does);
-        those the run has already are left as they are."""
-        log_params_once(self.experiment, self.run_id,
-                        {k: str(v)[:250] for k, v in params.items()})
-
-
-def make_logger(experiment: str, run_name: str, uri: str | None = None,
-                tags: Mapping[str, str] | None = None, lightning: bool = False):
-    """The MLflow run a command logs into: inside a pipeline stage the stage's run, else
-    a new run ``run_name`` in ``experiment`` on the resolved URI.
-
-    ``lightning=True``: Lightning's ``MLFlowLogger`` (what a ``Trainer`` takes; the new
-    run starts on first use); else a :class:`RunLogger`, which does not import Lightning.
-    """
-    stage_run_id = claim_stage_run()
-    resolved = tracking_uri(uri)
-    client = mlflow_client(resolved)
-    if not lightning:
-        if stage_run_id is not None:
-            run_id = stage_run_id
-            for key, value in (tags or {}).items():
-                client.set_tag(run_id, key, value)
-        else:
-            run_id = client.create_run(experiment_id(client, experiment), run_name=run_name,
-                                       tags=dict(tags or {})).info.run_id
-        return RunLogger(client, run_id)
-    from lightning.pytorch.loggers import MLFlowLogger
-
-    if stage_run_id is not None:
-        # inside a pipeline stage: write into its run (once; a nested call gets its own)
-        logger = MLFlowLogger(tracking_uri=resolved, run_id=stage_run_id, log_model=False)
-        for key, value in (tags or {}).items():
-            logger.experiment.set_tag(stage_run_id, key, value)
-        return logger
-    # created here, where two jobs creating it at once are handled (experiment_id)
-    experiment_id(client, experiment)
-    return MLFlowLogger(experiment_name=experiment, run_name=run_name,
-                        tracking_uri=resolved, tags=dict(tags or {}), log_model=False,
-                        artifact_location=artifact_location(resolved))
-
-
 def claim_stage_run() -> str | None:
     """The open pipeline stage's run (:func:`stage_run`) for the caller to write into,
     claimed once (a nested caller gets a run of its own); None outside a stage."""
@@ -223,30 +178,89 @@ def experiment_id(client, name: str) -> str:
 @contextmanager
 def stage_run(name: str, experiment: str, uri: str | None = None,
               tags: Mapping[str, str] | None = None) -> Iterator[tuple[object, str]]:
-    """Open one MLflow run for a pipeline stage; yields ``(client, run_id)``.
+    """Open one MLflow run for a pipeline stage; yields ``(runs, run_id)``, ``runs`` the
+    object it is written through (:func:`open_runs`).
 
     Nested under ``$CDPR_MLFLOW_PARENT_RUN_ID`` (in the parent's experiment) when set,
     else a top-level run in ``experiment``. The run ends FINISHED, or FAILED if the block
-    raises. :func:`make_logger` called inside the block writes into this run."""
-    client = mlflow_client(uri)
-    parent = os.environ.get(PARENT_RUN_ENV)
-    all_tags = {"cdpr_stage": name, **(tags or {})}
-    if parent:
-        exp = client.get_run(parent).info.experiment_id
-        all_tags["mlflow.parentRunId"] = parent
-    else:
-        exp = experiment_id(client, experiment)
-    run = client.create_run(exp, run_name=name, tags=all_tags)
-    run_id = run.info.run_id
+    raises. :func:`~cdpr_pipeline.tracking.loggers.make_logger` called inside the block
+    writes into this run."""
+    runs = open_runs(uri)
+    run_id = runs.create_run(experiment, name, {"cdpr_stage": name, **(tags or {})},
+                             os.environ.get(PARENT_RUN_ENV) or None)
     token = _STAGE_RUN.set(run_id)
     try:
-        yield client, run_id
+        yield runs, run_id
     except BaseException:
-        client.set_terminated(run_id, "FAILED")
+        runs.set_terminated(run_id, "FAILED")
         raise
     finally:
         _STAGE_RUN.reset(token)
-    client.set_terminated(run_id, "FINISHED")
+    runs.set_terminated(run_id, "FINISHED")
+
+
+def open_runs(uri: str | None = None):
+    """How this process writes runs to the store ``uri`` resolves to
+    (:func:`tracking_uri`): through the server of the ``cdpr repro`` that started it
+    (:class:`~cdpr_pipeline.tracking.remote.RemoteRuns`, no MLflow imported) where
+    ``$CDPR_MLFLOW_SERVER`` names one, else :class:`LocalRuns` on an ``MlflowClient``."""
+    resolved = tracking_uri(uri)
+    if os.environ.get(SERVER_ENV):
+        return RemoteRuns(resolved)
+    return LocalRuns(mlflow_client(resolved))
+
+
+class LocalRuns:
+    """The operations commands write runs with, on an ``MlflowClient``: the methods
+    :class:`~cdpr_pipeline.tracking.remote.RemoteRuns` forwards to a server (which
+    calls these); arguments and results are plain data.
+
+    Parameters
+    ----------
+    client : mlflow.tracking.MlflowClient
+    """
+
+    def __init__(self, client) -> None:
+        self.client = client
+        self.tracking_uri = client.tracking_uri
+
+    def create_run(self, experiment: str, run_name: str,
+                   tags: Mapping[str, str] | None = None,
+                   parent_run_id: str | None = None) -> str:
+        """A new run ``run_name`` in ``experiment`` (created if missing), or nested under
+        ``parent_run_id`` in the parent's experiment; returns its id."""
+        tags = dict(tags or {})
+        if parent_run_id:
+            exp = self.client.get_run(parent_run_id).info.experiment_id
+            tags["mlflow.parentRunId"] = parent_run_id
+        else:
+            exp = experiment_id(self.client, experiment)
+        return self.client.create_run(exp, run_name=run_name, tags=tags).info.run_id
+
+    def log_run(self, run_id: str, params: Mapping[str, Any] | None = None,
+                metrics: Mapping[str, float] | None = None, step: int = 0) -> int:
+        """:func:`log_run` on this store."""
+        return log_run(self.client, run_id, params=params, metrics=metrics, step=step)
+
+    def write_run(self, run_id: str | None, experiment: str, run_name: str,
+                  **message: Any) -> str:
+        """:func:`write_run` on this store."""
+        return write_run(self.client, run_id, experiment, run_name, **message)
+
+    def log_artifact(self, run_id: str, local_path: str,
+                     artifact_path: str | None = None) -> None:
+        self.client.log_artifact(run_id, str(local_path), artifact_path)
+
+    def set_tag(self, run_id: str, key: str, value: str) -> None:
+        self.client.set_tag(run_id, key, value)
+
+    def set_terminated(self, run_id: str, status: str) -> None:
+        self.client.set_terminated(run_id, status)
+
+    def has_logged(self, run_id: str) -> bool:
+        """Whether the run has metrics or artifacts (a stage that logged its own)."""
+        return bool(self.client.get_run(run_id).data.metrics
+                    or self.client.list_artifacts(run_id))
 
 
 def log_params_once(client, run_id: str, params: Mapping[str, str]) -> None:
@@ -326,16 +340,3 @@ def latest_runs(experiment: str, uri: str | None = None, task: str = "train",
     if runs.empty:
         return runs
     return runs.drop_duplicates(subset=[f"tags.{key}"], keep="first").reset_index(drop=True)
-
-
-
-
-@contextmanager
-def finished_or_failed(logger):
-    """Mark the logger's MLflow run FINISHED when the block ends, FAILED if it raises."""
-    try:
-        yield logger
-    except BaseException:
-        logger.experiment.set_terminated(logger.run_id, "FAILED")
-        raise
-    logger.experiment.set_terminated(logger.run_id, "FINISHED")

@@ -8,14 +8,16 @@ times what writing a run takes. :class:`RunWriter`, started at the beginning of 
 command works; the command then hands over what it logs and waits only for it to be
 stored.
 
-Where MLflow is already loaded in the process (a pipeline stage that opened its run, a
-test session, a notebook) there is nothing to overlap, and the run is written in the
-process itself, by the same function (:func:`~cdpr_pipeline.tracking.mlflow.write_run`).
+Where MLflow is already loaded in the process (a test session, a notebook) there is
+nothing to overlap, and the run is written in the process itself, by the same function
+(:func:`~cdpr_pipeline.tracking.mlflow.write_run`); in a pipeline stage that ``cdpr
+repro`` started, the repro's server writes it (:mod:`~cdpr_pipeline.tracking.remote`).
 The helper creates no run if it is sent nothing (a command stopped before it logged).
 """
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Mapping, Sequence
 from types import TracebackType
@@ -25,9 +27,11 @@ from cdpr_pipeline.helper_process import HelperProcess, serve
 from cdpr_pipeline.tracking.mlflow import (
     claim_stage_run,
     mlflow_client,
+    open_runs,
     tracking_uri,
     write_run,
 )
+from cdpr_pipeline.tracking.remote import SERVER_ENV
 
 
 class RunWriter:
@@ -47,9 +51,9 @@ class RunWriter:
         self.experiment, self.run_name = experiment, run_name
         self.uri = tracking_uri(uri)
         self.run_id = claim_stage_run()
-        self._client = None
+        self._runs = None
         self._helper: HelperProcess | None = None
-        if "mlflow" not in sys.modules:
+        if "mlflow" not in sys.modules and not os.environ.get(SERVER_ENV):
             self._helper = HelperProcess(__name__, "MLflow logging")
             self._helper.send({"uri": self.uri, "experiment": experiment,
                                "run_name": run_name, "run_id": self.run_id})
@@ -77,10 +81,10 @@ class RunWriter:
                                if v is not None},
                    "artifacts": [str(a) for a in artifacts], "status": status}
         if self._helper is None:
-            if self._client is None:
-                self._client = mlflow_client(self.uri)
-            self.run_id = write_run(self._client, self.run_id, self.experiment,
-                                    self.run_name, **message)
+            if self._runs is None:
+                self._runs = open_runs(self.uri)
+            self.run_id = self._runs.write_run(self.run_id, self.experiment, self.run_name,
+                                               **message)
         else:
             self.run_id = self._helper.request(message)
         if status is not None:
@@ -100,7 +104,7 @@ class RunWriter:
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
                  trace: TracebackType | None) -> None:
         if kind is not None and self.run_id is not None and (
-                self._helper is not None or self._client is not None):
+                self._helper is not None or self._runs is not None):
             try:
                 self.log(status="FAILED")
             except RuntimeError:

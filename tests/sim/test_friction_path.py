@@ -150,3 +150,19 @@ def test_drive_axes_closed_loop_within_one_percent_of_tracking(law):
     print(f"{law}: {now.substeps} sub-steps, {100 * gap / tracking:.3f} % of tracking")
     assert now.substeps == 1
     assert gap < 0.01 * tracking
+
+
+@pytest.mark.parametrize("substeps", [1, 2, 3, 4, 16])
+def test_coupled_runs_take_a_floor_of_steps_per_control_tick(substeps):
+    """Under a smooth law a coupled run takes at least COUPLED_PER_TICK implicit steps
+    per control tick whatever its steps per tick (one at 1 kHz took four: 1.1 % of the
+    tracking error on 8 cables), at least COUPLED_SUBSTEPS per step; a hard sign keeps
+    COUPLED_SUBSTEPS per step."""
+    smooth = integrators.coupled_substeps(substeps, smooth_law=True)
+    assert substeps * smooth >= integrators.COUPLED_PER_TICK
+    assert smooth >= integrators.COUPLED_SUBSTEPS
+    # no more than the floor asks
+    assert smooth == integrators.COUPLED_SUBSTEPS \
+        or substeps * (smooth - 1) < integrators.COUPLED_PER_TICK
+    assert integrators.coupled_substeps(substeps, smooth_law=False) \
+        == integrators.COUPLED_SUBSTEPS

@@ -12,7 +12,7 @@ import pytest
 HEAVY = ("torch", "lightning", "mlflow")
 
 
-@pytest.mark.parametrize("stage", ["diagnose", "simulate", "validate", "identify"])
+@pytest.mark.parametrize("stage", ["diagnose", "simulate", "validate", "identify", "report"])
 def test_stage_import_leaves_heavy_dependencies_out(stage):
     code = (f"import sys, cdpr_pipeline.cli, cdpr_pipeline.stages.{stage}\n"
             f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))")

@@ -29,8 +29,9 @@ from cdpr_pipeline.pipeline.params import write_params
 from cdpr_pipeline.pipeline.skip import Skipped, StageNotApplicable, skipped_reason
 from cdpr_pipeline.pipeline.stage_runner import run_stage
 from cdpr_pipeline.resources import foreign_rig_path
+from cdpr_pipeline.stages import VIRTUAL_RECORD as RECORD
 from cdpr_pipeline.stages.report import virtual_note
-from cdpr_pipeline.stages.virtual import RANK_METRIC, RECORD, virtual
+from cdpr_pipeline.stages.virtual import RANK_METRIC, virtual
 from cdpr_pipeline.tracking import PARENT_RUN_ENV
 
 #: the diverging predictors' bias on each position increment, m per sample

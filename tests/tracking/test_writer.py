@@ -108,13 +108,13 @@ def test_in_a_process_that_loaded_mlflow_no_child_is_started(tmp_path):
 
 def test_inside_a_pipeline_stage_the_command_writes_into_the_stage_run(tmp_path):
     uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
-    with stage_run("diagnose", "exp", uri) as (client, stage_run_id):
+    with stage_run("diagnose", "exp", uri) as (_, stage_run_id):
         with RunWriter("exp", "diagnose:lab", uri) as writer:
             writer.log(tags={"verdict": "none"}, metrics={"gain/after": 2.0})
             assert writer.log(status="FINISHED") == stage_run_id
         # claimed once: a second writer in the stage gets a run of its own
         with RunWriter("exp", "other", uri) as other:
             assert other.log(status="FINISHED") != stage_run_id
-    run = client.get_run(stage_run_id)
+    run = mlflow_client(uri).get_run(stage_run_id)
     assert run.info.status == "FINISHED" and run.data.tags["verdict"] == "none"
     assert run.data.metrics == {"gain/after": 2.0}

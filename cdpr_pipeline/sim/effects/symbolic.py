@@ -13,7 +13,7 @@ from cdpr_pipeline.sim.effects.base import (
     drive,
     unit,
 )
-from cdpr_pipeline.sim.expressions import evaluate_cached, to_infix
+from cdpr_pipeline.sim.expressions import CACHED_SIZE, content_key, evaluate_cached, to_infix
 
 
 @dataclass
@@ -34,12 +34,16 @@ class SymbolicWinchTorque(Effect):
 
     def winch_torque(self, theta, omega, plant):
         out = np.zeros(np.broadcast_shapes(np.shape(theta), np.shape(omega)))
+        # a run's state is digested once for all its terms (a step's is not cached)
+        state = content_key(theta, omega) \
+            if self.terms and np.size(omega[..., 0]) >= CACHED_SIZE else None
         for term in self.terms:
             i = int(term["cable"]) - 1
             if not 0 <= i < plant.n:
                 raise ValueError(f"term for cable {term['cable']} on a {plant.n}-cable rig")
             out[..., i] += float(term["coefficient"]) * evaluate_cached(
-                term["expression"], omega[..., i], theta[..., i])
+                term["expression"], omega[..., i], theta[..., i],
+                None if state is None else (state, i))
         return out
 
     @classmethod
