@@ -40,14 +40,23 @@ def test_only_added_drive_torques_make_rows(nominal_plant):
         plant_of_rows(nominal_plant, [nominal_plant, heavier])
 
 
+def _with_stribeck(paper_rig, sharpness):
+    """The lab rig under a Coulomb law of ``sharpness``, its stated plant, and that plant
+    with a Stribeck bump (the extended model the batch tests pair with it)."""
+    rig = paper_rig.replace(coulomb_sharpness=sharpness)
+    nominal = Plant.stated(rig, sharpness)
+    return rig, nominal, STRIBECK.apply(nominal)
+
+
+#: the Stribeck bump of the batch tests
+STRIBECK = EFFECTS["stribeck_friction"](static_ratio=2.5, stribeck_velocity=0.2)
+
+
 @pytest.mark.parametrize("sharpness", [None, 500.0])
 def test_rows_move_as_their_models_do_alone(paper_rig, sharpness):
     # the hard sign and a steep tanh: the steps along the friction's path, and the
     # coupled implicit steps, taken for some rows of the batch only
-    rig = paper_rig.replace(coulomb_sharpness=sharpness)
-    nominal = Plant.stated(rig, sharpness)
-    extended = EFFECTS["stribeck_friction"](static_ratio=2.5, stribeck_velocity=0.2).apply(
-        nominal)
+    rig, nominal, extended = _with_stribeck(paper_rig, sharpness)
     seed = 5
     print(f"seed {seed}")
     desired = draw_trajectories(["flat_eight", "spiral"], np.random.default_rng(seed),
@@ -80,9 +89,8 @@ def test_a_model_with_its_own_actuator_lag_shares_the_batch(paper_rig, sharpness
     # what a diagnosis often finds: a friction plus an actuator lag. The nominal model's
     # runs step beside the extended model's, each run with its own lags (none on the
     # nominal runs, whose drums take the command), and move as each model does alone
-    rig = paper_rig.replace(coulomb_sharpness=sharpness)
-    nominal = Plant.stated(rig, sharpness)
-    stribeck = EFFECTS["stribeck_friction"](static_ratio=2.5, stribeck_velocity=0.2)
+    rig, nominal, _ = _with_stribeck(paper_rig, sharpness)
+    stribeck = STRIBECK
     extended = nominal.with_effects([stribeck, EFFECTS["actuator_lag"](
         time_constant_s=[0.003, 0.0005, 0.002], cables=[1, 2, 3])])
     assert extra_torques(nominal, extended) is None
@@ -134,10 +142,7 @@ def test_a_steep_step_on_some_runs_is_what_each_run_gets_alone(paper_rig, sharpn
     # the runs that need them alone (runs_of: each extra torque kept on its own runs),
     # and the controller's laws of the nominal and the extended model are one law on a
     # plant of rows: a run's step and command are what it gets simulated by itself
-    rig = paper_rig.replace(coulomb_sharpness=sharpness)
-    nominal = Plant.stated(rig, sharpness)
-    extended = EFFECTS["stribeck_friction"](static_ratio=2.5, stribeck_velocity=0.2).apply(
-        nominal)
+    rig, nominal, extended = _with_stribeck(paper_rig, sharpness)
     seed = 7
     print(f"seed {seed}")
     rng = np.random.default_rng(seed)
