@@ -215,12 +215,15 @@ class CauseSearch:
             if j.candidate is None or j.n_params >= best_size and not self.sparse(j):
                 continue
             effects, size = described(j)
-            if size < best_size and not self.adds_beyond(
-                    best_effects, best_size - size, effects, n_tests, best.label).passed:
+            if size >= best_size:
+                continue
+            beyond = self.adds_beyond(best_effects, best_size - size, effects, n_tests,
+                                      best.label)
+            if not beyond.passed:
                 if self.log:
-                    self.log.info("  %s in place of %s: %d parameters for its %d, and it "
-                                  "adds nothing beyond them", j.label, best.label, size,
-                                  best_size)
+                    self.log.info("  %s in place of %s: %d parameters for its %d, which "
+                                  "add nothing beyond them (%s)", j.label, best.label,
+                                  size, best_size, beyond.reason)
                 best, best_effects, best_size = j, effects, size
         return best
 

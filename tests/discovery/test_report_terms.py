@@ -126,8 +126,8 @@ def test_each_cause_is_plotted_against_its_own_variable(pages, kind_cases, kind)
         assert f.variable == variable, (cause.effect, f.variable, case.describe())
         assert VARIABLES[variable][0] in f.xlabel, (f.xlabel, variable)
     # the hidden effects' own variables, where the diagnosis named them: this is a test of
-    # the report, not of detection (seed 15065724 named one free-form q1'^2 term on the
-    # axes instead of both effects; its figure is checked by the loop above)
+    # the report, not of detection (seed 15065724 once named one free-form q1'^2 term on
+    # the axes instead of both effects, whose figure the loop above checks)
     expected = {"axes": {"position_dependent_load": "position", "stribeck_friction": "speed"},
                 "cdpr": {"cable_elasticity": "tension x length"}}[kind]
     for effect, variable in expected.items():
