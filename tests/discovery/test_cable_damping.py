@@ -26,9 +26,20 @@ within 1.96 of them on the lab; fresh noise on one draw's recording scatters the
 estimate by 0.95-0.98 of it); the offset is the errors-in-variables attenuation of the
 stretch's lag (:mod:`~cdpr_pipeline.discovery.damping`), which the interval does not
 cover. With that offset (normal fits to the measured z), 3 standard errors miss in
-about 0.4 % (lab) and 0.8 % (independent) of draws, 3.5 in 0.07 % and 0.2 %; of the
-measured draws 1 of 200 and 1 of 60 lay beyond 3 (3.29 and 3.40), none beyond 3.5,
-and of the bench's 93 more draws each, 0 and 1 (3.27), none beyond 3.5.
+about 0.4 % (lab) and 0.8 % (independent) of draws, 3.5 in 0.07 % and 0.2 %, 4.5 in
+0.002 % and 0.006 %; of the measured draws 1 of 200 and 1 of 60 lay beyond 3 (3.29 and
+3.40), none beyond 3.5, and of the bench's 93 more draws each, 0 and 1 (3.27), none
+beyond 3.5; CI's draw of one commit (seed 1509013982, independent) came out at -3.6.
+
+The bound is set by what a test may cost CI, not by one draw: CI runs about 80
+random-draw tests, one draw each per commit, so for a commit to be green on more than
+luck each test may fail on well under 1 in 1000 of its draws when the code is right
+(0.2 % per test is about one red commit in seven from the rest of the suite). 4.5
+standard errors is the smallest half-step bound whose miss rate under the measured
+spread is below 1e-4 on both generators. The standard error's calibration itself (the
+95 % coverage) is measured by ``benchmarks/bench_cable_damping.py --coverage``, not here;
+a standard error half its true size (z spread 2) would still fail this test on about
+1 draw in 40.
 """
 
 from __future__ import annotations
@@ -58,8 +69,9 @@ TAU_RANGE = (0.010, 0.030)
 LAB_EA_RANGE = (1.0e4, 2.0e4)
 #: the issue's accuracy
 WITHIN = 0.25
-#: standard errors within which the truth must lie (module docstring: measured spread)
-K_STDERR = 3.5
+#: standard errors within which the truth must lie (module docstring: the measured
+#: spread and CI's budget of false failures)
+K_STDERR = 4.5
 
 
 def _damping(record_or_effects) -> CableElasticity:
