@@ -10,8 +10,11 @@ Ranges drawn (documented, not tuned to a seed):
   with the reason (docs/method.md, known limits; a test below checks that damping-free
   data are not given one).
 * independent generator: its own stiffness draw (static stretch 2-6 mm), every cable
-  elastic; its faster, larger motions determine the time constant to 1-5 %
-  (``benchmarks/bench_cable_damping.py``), so it must be reported within 25 %.
+  elastic; its faster, larger motions mostly determine the time constant to 1-5 %
+  (``benchmarks/bench_cable_damping.py``), where it must be reported within 25 %; a
+  low-rate rig of stiff cables can leave it undetermined (seed 603855716: 4 cables of
+  16-35 kN at 102 Hz, +-34 %; 1 of the first 60 draws of ``bench_test_draws``), and
+  then its note and interval are checked as on the lab.
 * lab: ``EA`` 1e4-2e4 N (log-uniform; the lower part of the effect's 1e4-5e4 range:
   standard errors 1.5-7 ms at 4-5e4 N). The paper rig's slow paths leave it
   undetermined in some draws even there, so the lab test checks the report is honest
@@ -55,6 +58,7 @@ from cdpr_pipeline.discovery.damping import (
     with_fitted_damping,
 )
 from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnose
+from cdpr_pipeline.discovery.diagnosis.never_worse import damping_fit
 from cdpr_pipeline.discovery.residuals import nominal_model
 from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.sim.effects import CableElasticity
@@ -122,15 +126,20 @@ def test_damping_is_identified_on_the_lab_where_the_data_determine_it(paper_rig,
     effect = _damping(diag.causes[0].effects)
     fitted = np.atleast_1d(effect.ea_n)
     assert fitted == pytest.approx(np.full(fitted.shape, ea), rel=0.15), what
+    _reported_or_honest(diag, ds, effect, tau, what)
+
+
+def _reported_or_honest(diag, ds, effect: CableElasticity, tau: float, what: str) -> None:
+    """Reported within 25 % and inside its interval; or ``null``, and then the fit
+    behind the note, repeated on the diagnosis' training runs, has the interval stated,
+    and an honest one."""
     if effect.damping_time_s is not None:
         _check(effect, tau, what)
         assert f"{1e3 * effect.damping_time_s:.3g} ms" in effect.describe()
         return
-    # the fit behind the note, repeated on the diagnosis' training runs: its interval
-    # is the one stated, and honest
     reg = resolve_settings(DiagnosisSettings().regression, ds.trajectories, ds.rig)
     train = [s for s in dataset_signals(ds.trajectories, ds.rig, reg) if s.name in diag.train]
-    fit = fit_cable_damping(diag.extended, diag.nominal, train)
+    fit = damping_fit(diag.causes, diag.nominal, train)
     assert effect.damping_note == fit.reason and not fit.reported, what
     assert effect.damping_interval_s == pytest.approx(list(fit.interval_s)), what
     assert abs(fit.tau_s - tau) <= K_STDERR * fit.stderr_s, f"{what}: {fit}"
@@ -139,7 +148,9 @@ def test_damping_is_identified_on_the_lab_where_the_data_determine_it(paper_rig,
 def test_damping_is_identified_on_the_independent_generator(tmp_path, seed):
     """Independent generator, the full experiment (five 15 s runs, 3 or 4 cables,
     100-1000 Hz), every cable elastic with one drawn time constant: reported within
-    25 % and inside its interval."""
+    25 % and inside its interval where the data determine it to 25 %, else ``null``
+    with an honest interval (a low-rate rig of stiff cables: seed 603855716, 4 cables
+    of 16-35 kN at 102 Hz, +-34 %)."""
     def draw(rig, rng):
         return draw_effect("cable_elasticity", rig, rng, channels=list(range(rig.n)),
                            damping_time_s=TAU_RANGE)
@@ -148,7 +159,8 @@ def test_damping_is_identified_on_the_independent_generator(tmp_path, seed):
     tau = float(case.truth.effects[0].params["damping_time_s"][0])
     record = case.diagnose(fast_settings(freeform=None))
     assert record["verdict"] == "cable_elasticity", case.describe()
-    _check(_damping(case.diagnosis.causes[0].effects), tau, case.describe())
+    _reported_or_honest(case.diagnosis, case.dataset, _damping(case.diagnosis.causes[0].effects),
+                        tau, case.describe())
     # the extended model (extended_model.yaml) carries it too
     assert _damping(case.diagnosis.effects) == _damping(case.diagnosis.causes[0].effects)
 
