@@ -44,8 +44,9 @@ def test_a_cause_imitating_a_force_above_the_band_gives_way_to_the_wider_look(tm
     assert "left a held-out residual" in record["summary"]
     # the wavenumbers the generator used, in the terms found
     truth = case.truth.effects[0].params["wavenumber"]
-    terms = " ".join(str(t) for c in record["causes"] for t in c["effects"])
-    found = [float(w) for w in re.findall(r"(?:sin|cos)\(([\d.]+) q\d", terms)]
+    terms = " ".join(t["expression"] for c in record["causes"] for t in c["params"]["terms"])
+    found = [float(w) for w in re.findall(r"(?:sin|cos)_k\(theta, ([\d.]+)\)", terms)]
+    assert found, terms
     for k in np.atleast_1d(truth):
         assert any(abs(w / k - 1) < 0.02 for w in found), (k, terms)
     assert record["gain"]["ci95"][0] > 0.5
