@@ -99,7 +99,7 @@ def _load(model: Plant, sig: RunSignals, acceleration: np.ndarray):
     key = (model.anchors.tobytes(), float(model.gravity), id(acceleration))
     # full-rate arrays, 4.8 MB a run each on 8 cables at 1 kHz: four per run (the
     # nominal geometry and the few a fit comes back to; sixteen held 380 MB there, for
-    # the same evaluations)
+    # the same evaluations; two cost anchor fits a third more CPU)
     unit, g, units = _memo(sig, "load", key, lambda: model.replace(mass=1.0).load_tensions(
         sig.position, acceleration), size=4)
     return float(model.mass) * unit, g, units
@@ -268,7 +268,10 @@ def _extra_rows(sig: RunSignals, effect, model: Model, key: tuple | None
         last_key = ("residuals", "last extra", type(effect))
         block = _Filtered(sig, lambda: effect.winch_torque(sig.theta, sig.omega, model),
                           extra, sig.cache.get(last_key))
-        sig.cache[last_key] = (extra, block)
+        if not sig.mixes:
+            # (where winches mix, every column is filtered again: the full-rate block,
+            # 1 MB per effect a run on 8 cables at 1 kHz, would be kept for nothing)
+            sig.cache[last_key] = (extra, block)
         return block
 
     return make() if key is None else _memo(sig, "extra", key, make, size=64)
