@@ -17,7 +17,9 @@ seeds are listed, each replayed by ``CDPR_TEST_SEED=<seed> python -m pytest -n 0
 ``-n`` runs each draw's tests on that many pytest-xdist processes. Results go to JSON
 after every draw (``--resume`` continues an interrupted run from it) and, at the end,
 into this benchmark's section of docs/measurements.md (``test-draws``; ``--no-record``
-leaves it alone, as for a trial on a few tests).
+leaves it alone, as for a trial on a few tests). Draws are costly, so the tests are
+measured in parts: ``--part NAME`` records section ``test-draws-NAME`` instead and leaves
+the other parts' sections (each with its own command, machine, date and commit) alone.
 
 How long it takes: one draw of the 63 fast random-draw tests (``-m "random_draw and not
 slow"``), measured with this script (``--draws 1 -n 0``, in seven parts by file) on 2
@@ -201,6 +203,9 @@ def main() -> None:
                         help="continue the run in --out (same tests, next draws)")
     parser.add_argument("--record", action=argparse.BooleanOptionalAction, default=True,
                         help="write the section of docs/measurements.md")
+    parser.add_argument("--part", default=None,
+                        help="record into section test-draws-PART (a run over some tests "
+                             "beside the others' sections) instead of test-draws")
     args = parser.parse_args()
 
     ids = random_draw_tests(args.slow, args.keyword, args.tests)
@@ -230,8 +235,10 @@ def main() -> None:
     text = markdown(summary, results)
     print(text)
     if args.record:
-        measurements.record("test-draws", "Pass rate of every random-draw test", text,
-                            command=measurements.invoked_as())
+        name, title = "test-draws", "Pass rate of every random-draw test"
+        if args.part:
+            name, title = f"test-draws-{args.part}", f"Pass rate of random-draw tests: {args.part}"
+        measurements.record(name, title, text, command=measurements.invoked_as())
 
 
 if __name__ == "__main__":

@@ -97,6 +97,9 @@ class DampingFit:
         The interval lies within :data:`REPORT_WITHIN` of the value.
     reason : str
         Why it is not reported (empty when it is).
+    sse : float
+        The length residual's sum of squares at ``tau_s`` (models fitted on the same runs
+        compare by it: nothing but the compliance factors and zeros is fitted).
     """
 
     tau_s: float
@@ -106,6 +109,7 @@ class DampingFit:
     rows: int
     reported: bool
     reason: str
+    sse: float = float("nan")
 
 
 def kelvin_voigt_lag(x: np.ndarray, tau: float, fs: float) -> np.ndarray:
@@ -300,15 +304,17 @@ def fit_cable_damping(model: Plant, nominal: Plant, signals: Sequence[RunSignals
                   f"{100 * REPORT_WITHIN:.0f} %")
     else:
         reason = ""
-    return DampingFit(tau, stderr, interval, chi2, rows, not reason, reason)
+    return DampingFit(tau, stderr, interval, chi2, rows, not reason, reason, sse)
 
 
 def with_fitted_damping(effect: CableElasticity, model: Plant, nominal: Plant,
-                        signals: Sequence[RunSignals]) -> CableElasticity:
+                        signals: Sequence[RunSignals], fit: DampingFit | None = None
+                        ) -> CableElasticity:
     """``effect`` (part of ``model``) with the time constant the data give: set where
     :func:`fit_cable_damping` reports it, left unknown (None) otherwise; the interval
-    and the reason go with it. Unchanged when nothing could be fitted."""
-    fit = fit_cable_damping(model, nominal, signals)
+    and the reason go with it. Unchanged when nothing could be fitted. ``fit``: that
+    fit, where the caller has made it."""
+    fit = fit if fit is not None else fit_cable_damping(model, nominal, signals)
     if fit is None:
         return effect
     return replace(effect, damping_time_s=fit.tau_s if fit.reported else None,

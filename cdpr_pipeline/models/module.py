@@ -22,6 +22,13 @@ _NOTICE_LOGGERS = ("lightning.pytorch.utilities.rank_zero", "lightning.fabric.ut
 #: Python warnings of Lightning about itself, not about the run: its own use of a torch
 #: function that torch deprecated
 _LIGHTNING_WARNINGS = (r"`isinstance\(treespec, LeafSpec\)` is deprecated",)
+#: Lightning's advice on a machine with a GPU when the configuration chose the CPU
+#: (``trainer.accelerator``; the residual networks' ``accelerator``): the choice is made
+_LIGHTNING_ADVICE = (r"GPU available but not used",)
+#: its advice, on a machine of many cores, to give a loader worker processes: a window
+#: fit's windows are in memory, where workers would copy them and add their start-up to
+#: every epoch (``cdpr train`` leaves it: ``data.num_workers`` is the user's setting)
+_WORKERS_ADVICE = r"The '\w+_dataloader' does not have many workers"
 
 
 class _DropNotices(logging.Filter):
@@ -60,7 +67,7 @@ def quiet_fit(*, validates: bool = True) -> Iterator[None]:
     fit without validation data skips validation: a fixed number of epochs is meant)."""
     quiet_lightning()
     with warnings.catch_warnings():
-        for message in _LIGHTNING_WARNINGS:
+        for message in (*_LIGHTNING_WARNINGS, *_LIGHTNING_ADVICE):
             warnings.filterwarnings("ignore", message=message)
         if not validates:
             warnings.filterwarnings("ignore", message="You defined a `validation_step` but "
@@ -175,7 +182,8 @@ def fit_window_network(make_net: Callable[[], nn.Module], inputs: list, targets:
         module = ForecastModule(net, partial(torch.optim.Adam, lr=lr))
         sampler = torch.utils.data.RandomSampler(ds, num_samples=min(max_windows, len(ds)))
         loader = torch.utils.data.DataLoader(ds, batch_size=batch_size, sampler=sampler)
-        with quiet_fit(validates=False):
+        with quiet_fit(validates=False), warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=_WORKERS_ADVICE)
             trainer = L.Trainer(max_epochs=epochs, logger=False, enable_checkpointing=False,
                                 enable_progress_bar=False, enable_model_summary=False,
                                 accelerator=accelerator, devices=1)

@@ -17,15 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from cdpr_pipeline.pipeline.dvc_cli import run_dvc, up_to_date, workspace_metrics
 from cdpr_pipeline.pipeline.params import pipeline_params, write_params
-from cdpr_pipeline.tracking import (
-    PARENT_RUN_ENV,
-    LocalRuns,
-    experiment_id,
-    flatten_params,
-    log_metrics,
-    log_params_once,
-    mlflow_client,
-)
+from cdpr_pipeline.tracking import PARENT_RUN_ENV, LocalRuns, flatten_params, mlflow_client
 from cdpr_pipeline.tracking.remote import RunServer
 
 log = logging.getLogger(__name__)
@@ -71,13 +63,11 @@ def repro(cfg: DictConfig) -> int:
     if not dvc_args and up_to_date(env):
         log.info("the pipeline is up to date: nothing to reproduce")
         return 0
-    client = mlflow_client(cfg.tracking_uri)
-    exp = experiment_id(client, str(cfg.experiment))
-    parent = client.create_run(exp, run_name=f"pipeline-{cfg.profile.name}", tags={
+    runs = LocalRuns(mlflow_client(cfg.tracking_uri))
+    run_id = runs.create_run(str(cfg.experiment), f"pipeline-{cfg.profile.name}", tags={
         "cdpr_task": "pipeline", "profile": str(cfg.profile.name),
         "dataset_source": str(cfg.dataset.source), "git_commit": _git_commit()})
-    run_id = parent.info.run_id
-    log_params_once(client, run_id, flatten_params(
+    runs.log_run(run_id, params=flatten_params(
         {"profile": cfg.profile.name, "virtual_model": cfg.virtual_model,
          "dataset": OmegaConf.to_container(cfg.dataset, resolve=True)}))
     env[PARENT_RUN_ENV] = run_id
@@ -90,15 +80,14 @@ def repro(cfg: DictConfig) -> int:
         # its store open (each stage would pay about 2.2 s of CPU for it)
         with RunServer(lambda uri: LocalRuns(mlflow_client(uri))) as server:
             rc = run_dvc("repro", *dvc_args, env=env | server.env).returncode
-        log_metrics(client, run_id, workspace_metrics(env))
+        runs.log_run(run_id, metrics=workspace_metrics(env))
         for name in PIPELINE_ARTIFACTS:
             if Path(name).exists():   # kept at their project paths (two report.html)
                 parent_dir = str(Path(name).parent)
-                client.log_artifact(run_id, name,
-                                    None if parent_dir == "." else parent_dir)
+                runs.log_artifact(run_id, name, None if parent_dir == "." else parent_dir)
     finally:
         signal.signal(signal.SIGTERM, previous)
-        client.set_terminated(run_id, "FINISHED" if rc == 0 else "FAILED")
+        runs.set_terminated(run_id, "FINISHED" if rc == 0 else "FAILED")
     if rc:
         log.error("dvc repro failed (exit %d); finished stages keep their outputs and a "
                   "rerun continues from the failed stage", rc)

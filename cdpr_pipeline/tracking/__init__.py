@@ -8,8 +8,6 @@ from cdpr_pipeline.tracking.mlflow import (
     experiment_id,
     flatten_params,
     latest_runs,
-    log_metrics,
-    log_params_once,
     log_run,
     mlflow_client,
     open_runs,
@@ -19,6 +17,5 @@ from cdpr_pipeline.tracking.mlflow import (
 )
 
 __all__ = ["DEFAULT_TRACKING_URI", "PARENT_RUN_ENV", "LocalRuns", "RunLogger", "experiment_id",
-           "finished_or_failed", "flatten_params", "latest_runs", "log_metrics",
-           "log_params_once", "log_run", "make_logger", "mlflow_client", "open_runs",
-           "run_name", "stage_run", "tracking_uri"]
+           "finished_or_failed", "flatten_params", "latest_runs", "log_run", "make_logger",
+           "mlflow_client", "open_runs", "run_name", "stage_run", "tracking_uri"]

@@ -263,12 +263,6 @@ class LocalRuns:
                     or self.client.list_artifacts(run_id))
 
 
-def log_params_once(client, run_id: str, params: Mapping[str, str]) -> None:
-    """Log params the run does not have yet (MLflow refuses to change a logged param);
-    values are cut to MLflow's 6000 characters."""
-    log_run(client, run_id, params=params)
-
-
 #: what one ``log_batch`` request may carry (MLflow's limits)
 BATCH_PARAMS, BATCH_METRICS, BATCH_ENTRIES = 100, 1000, 1000
 
@@ -313,13 +307,6 @@ def metric_name(name: str) -> str:
     'time/signals_motion_band_s'
     """
     return re.sub(r"[^\w\-. :/]", "_", re.sub(r"[()\[\]{}]", "", name))
-
-
-def log_metrics(client, run_id: str, metrics: Mapping[str, float], step: int = 0) -> None:
-    """Log many metrics in batches (:func:`log_run`), their names made acceptable to
-    MLflow (:func:`metric_name`). Non-finite values (a NaN time-to-best, an undefined
-    R^2) are left out rather than stored as numbers."""
-    log_run(client, run_id, metrics=metrics, step=step)
 
 
 def latest_runs(experiment: str, uri: str | None = None, task: str = "train",

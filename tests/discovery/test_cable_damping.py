@@ -10,8 +10,11 @@ Ranges drawn (documented, not tuned to a seed):
   with the reason (docs/method.md, known limits; a test below checks that damping-free
   data are not given one).
 * independent generator: its own stiffness draw (static stretch 2-6 mm), every cable
-  elastic; its faster, larger motions determine the time constant to 1-5 %
-  (``benchmarks/bench_cable_damping.py``), so it must be reported within 25 %.
+  elastic; its faster, larger motions mostly determine the time constant to 1-5 %
+  (``benchmarks/bench_cable_damping.py``), where it must be reported within 25 %; a
+  low-rate rig of stiff cables can leave it undetermined (seed 603855716: 4 cables of
+  16-35 kN at 102 Hz, +-34 %; 1 of the first 60 draws of ``bench_test_draws``), and
+  then its note and interval are checked as on the lab.
 * lab: ``EA`` 1e4-2e4 N (log-uniform; the lower part of the effect's 1e4-5e4 range:
   standard errors 1.5-7 ms at 4-5e4 N). The paper rig's slow paths leave it
   undetermined in some draws even there, so the lab test checks the report is honest
@@ -26,9 +29,20 @@ within 1.96 of them on the lab; fresh noise on one draw's recording scatters the
 estimate by 0.95-0.98 of it); the offset is the errors-in-variables attenuation of the
 stretch's lag (:mod:`~cdpr_pipeline.discovery.damping`), which the interval does not
 cover. With that offset (normal fits to the measured z), 3 standard errors miss in
-about 0.4 % (lab) and 0.8 % (independent) of draws, 3.5 in 0.07 % and 0.2 %; of the
-measured draws 1 of 200 and 1 of 60 lay beyond 3 (3.29 and 3.40), none beyond 3.5,
-and of the bench's 93 more draws each, 0 and 1 (3.27), none beyond 3.5.
+about 0.4 % (lab) and 0.8 % (independent) of draws, 3.5 in 0.07 % and 0.2 %, 4.5 in
+0.002 % and 0.006 %; of the measured draws 1 of 200 and 1 of 60 lay beyond 3 (3.29 and
+3.40), none beyond 3.5, and of the bench's 93 more draws each, 0 and 1 (3.27), none
+beyond 3.5; CI's draw of one commit (seed 1509013982, independent) came out at -3.6.
+
+The bound is set by what a test may cost CI, not by one draw: CI runs about 80
+random-draw tests, one draw each per commit, so for a commit to be green on more than
+luck each test may fail on well under 1 in 1000 of its draws when the code is right
+(0.2 % per test is about one red commit in seven from the rest of the suite). 4.5
+standard errors is the smallest half-step bound whose miss rate under the measured
+spread is below 1e-4 on both generators. The standard error's calibration itself (the
+95 % coverage) is measured by ``benchmarks/bench_cable_damping.py --coverage``, not here;
+a standard error half its true size (z spread 2) would still fail this test on about
+1 draw in 40.
 """
 
 from __future__ import annotations
@@ -44,6 +58,7 @@ from cdpr_pipeline.discovery.damping import (
     with_fitted_damping,
 )
 from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnose
+from cdpr_pipeline.discovery.diagnosis.never_worse import damping_fit
 from cdpr_pipeline.discovery.residuals import nominal_model
 from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.sim.effects import CableElasticity
@@ -58,8 +73,9 @@ TAU_RANGE = (0.010, 0.030)
 LAB_EA_RANGE = (1.0e4, 2.0e4)
 #: the issue's accuracy
 WITHIN = 0.25
-#: standard errors within which the truth must lie (module docstring: measured spread)
-K_STDERR = 3.5
+#: standard errors within which the truth must lie (module docstring: the measured
+#: spread and CI's budget of false failures)
+K_STDERR = 4.5
 
 
 def _damping(record_or_effects) -> CableElasticity:
@@ -110,15 +126,20 @@ def test_damping_is_identified_on_the_lab_where_the_data_determine_it(paper_rig,
     effect = _damping(diag.causes[0].effects)
     fitted = np.atleast_1d(effect.ea_n)
     assert fitted == pytest.approx(np.full(fitted.shape, ea), rel=0.15), what
+    _reported_or_honest(diag, ds, effect, tau, what)
+
+
+def _reported_or_honest(diag, ds, effect: CableElasticity, tau: float, what: str) -> None:
+    """Reported within 25 % and inside its interval; or ``null``, and then the fit
+    behind the note, repeated on the diagnosis' training runs, has the interval stated,
+    and an honest one."""
     if effect.damping_time_s is not None:
         _check(effect, tau, what)
         assert f"{1e3 * effect.damping_time_s:.3g} ms" in effect.describe()
         return
-    # the fit behind the note, repeated on the diagnosis' training runs: its interval
-    # is the one stated, and honest
     reg = resolve_settings(DiagnosisSettings().regression, ds.trajectories, ds.rig)
     train = [s for s in dataset_signals(ds.trajectories, ds.rig, reg) if s.name in diag.train]
-    fit = fit_cable_damping(diag.extended, diag.nominal, train)
+    fit = damping_fit(diag.causes, diag.nominal, train)
     assert effect.damping_note == fit.reason and not fit.reported, what
     assert effect.damping_interval_s == pytest.approx(list(fit.interval_s)), what
     assert abs(fit.tau_s - tau) <= K_STDERR * fit.stderr_s, f"{what}: {fit}"
@@ -127,7 +148,9 @@ def test_damping_is_identified_on_the_lab_where_the_data_determine_it(paper_rig,
 def test_damping_is_identified_on_the_independent_generator(tmp_path, seed):
     """Independent generator, the full experiment (five 15 s runs, 3 or 4 cables,
     100-1000 Hz), every cable elastic with one drawn time constant: reported within
-    25 % and inside its interval."""
+    25 % and inside its interval where the data determine it to 25 %, else ``null``
+    with an honest interval (a low-rate rig of stiff cables: seed 603855716, 4 cables
+    of 16-35 kN at 102 Hz, +-34 %)."""
     def draw(rig, rng):
         return draw_effect("cable_elasticity", rig, rng, channels=list(range(rig.n)),
                            damping_time_s=TAU_RANGE)
@@ -136,7 +159,8 @@ def test_damping_is_identified_on_the_independent_generator(tmp_path, seed):
     tau = float(case.truth.effects[0].params["damping_time_s"][0])
     record = case.diagnose(fast_settings(freeform=None))
     assert record["verdict"] == "cable_elasticity", case.describe()
-    _check(_damping(case.diagnosis.causes[0].effects), tau, case.describe())
+    _reported_or_honest(case.diagnosis, case.dataset, _damping(case.diagnosis.causes[0].effects),
+                        tau, case.describe())
     # the extended model (extended_model.yaml) carries it too
     assert _damping(case.diagnosis.effects) == _damping(case.diagnosis.causes[0].effects)
 

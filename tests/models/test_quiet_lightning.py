@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 from torch import nn
 
-from cdpr_pipeline.models.module import LIGHTNING_NOTICES, fit_window_network
+from cdpr_pipeline.models.module import LIGHTNING_NOTICES, fit_window_network, quiet_fit
 
 
 class _Last(nn.Module):
@@ -42,3 +42,19 @@ def test_a_fit_prints_no_notice_and_nothing_twice(caplog):
         assert logger.propagate and not [h for h in logger.handlers
                                          if type(h) is logging.StreamHandler], name
     assert not [str(w.message) for w in caught if "lightning" in (w.filename or "")]
+
+
+def test_advice_seen_on_a_gpu_machine_is_not_repeated_to_the_user():
+    """On a machine with a GPU and 16 cores (a device check of tests/models/test_gpu.py),
+    a CPU fit drew Lightning's "GPU available but not used" and, for a window fit, its
+    advice to give the in-memory loader worker processes: both are dropped, a warning
+    about the run is not."""
+    gpu = ("GPU available but not used. You can set it by doing "
+           "`Trainer(accelerator='gpu')`.")
+    run = "the run's own warning"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with quiet_fit():
+            warnings.warn(gpu, stacklevel=1)
+            warnings.warn(run, stacklevel=1)
+    assert [str(w.message) for w in caught] == [run]

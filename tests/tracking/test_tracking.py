@@ -12,7 +12,7 @@ from cdpr_pipeline.tracking import experiment_id, flatten_params, run_name, trac
 from cdpr_pipeline.tracking.mlflow import (
     DEFAULT_TRACKING_URI,
     artifact_location,
-    log_metrics,
+    log_run,
     metric_name,
 )
 
@@ -47,8 +47,8 @@ def test_metric_names_mlflow_refuses_are_made_acceptable(tmp_path):
     batch (and `cdpr diagnose` fail after writing its outputs)."""
     client = MlflowClient(f"sqlite:///{tmp_path / 'mlflow.db'}")
     run = client.create_run(experiment_id(client, "x"))
-    log_metrics(client, run.info.run_id, {"time/signals_(motion_band)_s": 1.5,
-                                          "gain/relative": 0.25, "nan": float("nan")})
+    log_run(client, run.info.run_id, metrics={"time/signals_(motion_band)_s": 1.5,
+                                              "gain/relative": 0.25, "nan": float("nan")})
     got = client.get_run(run.info.run_id).data.metrics
     assert got == {"time/signals_motion_band_s": 1.5, "gain/relative": 0.25}
     assert metric_name("a b/c:d-e.f") == "a b/c:d-e.f" and metric_name("x*y") == "x_y"

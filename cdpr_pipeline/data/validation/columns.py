@@ -25,6 +25,13 @@ from .report import ValidationReport
 
 NAN_WORDS = frozenset({"nan", "-nan", "+nan"})
 FIRST_DATA_LINE = 2  # header is line 1
+#: pandas before 3.1 parses numbers with its fast parser by default, which can come out
+#: one unit in the last place off (seen with pandas 3.0.6: torques written with 17 digits
+#: read back 1e-16 off); its round-trip parser is exact. From pandas 3.1 the default is
+#: exact and the argument deprecated.
+EXACT_NUMBERS: dict[str, str] = (
+    {} if tuple(int(v) for v in pd.__version__.split(".")[:2]) >= (3, 1)
+    else {"float_precision": "round_trip"})
 
 
 def _layout(rig: Rig) -> tuple[list[str], list[list[str]], re.Pattern[str], str]:
@@ -210,7 +217,8 @@ def _read(run: RunFile, names: list[str]) -> pd.DataFrame | None:
         with interrupt_deferred():
             return pd.read_csv(run.path, header=0, names=unique, encoding="utf-8-sig",
                                skipinitialspace=True, keep_default_na=False,
-                               na_values=[""], skip_blank_lines=False, index_col=False)
+                               na_values=[""], skip_blank_lines=False, index_col=False,
+                               **EXACT_NUMBERS)
     except pd.errors.ParserError as exc:
         match = re.search(r"line (\d+)", str(exc))
         reason = str(exc).strip().removeprefix("Error tokenizing data. C error: ")
