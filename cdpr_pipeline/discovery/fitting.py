@@ -22,6 +22,7 @@ from cdpr_pipeline.discovery.adequacy import analysed_band_hz
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,
+    own_extra_rows,
     residuals,
     runs_rows,
 )
@@ -205,6 +206,28 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
         return r0 - ctx.training_residuals([*current, *form.make(parts)],
                                            TORQUE).stacked("torque")
 
+    base_model = ctx.nominal.with_effects([*ctx.base, *current])
+
+    def own(variants: Sequence[Any], shapes: np.ndarray | None, winches: Sequence[int],
+            quadrature: bool) -> np.ndarray:
+        """Each of ``winches``' own column (rows, n; zero elsewhere) where winches mix:
+        the effect on every one of them at once through the projection's diagonal
+        (:func:`~cdpr_pipeline.discovery.residuals.own_extra_rows`), or one evaluation
+        per winch where the effect changes more than the torques."""
+        parts = {i + 1: WinchPart(variants[i], 0.0 if quadrature else 1.0,
+                                  None if shapes is None else float(shapes[i]),
+                                  1.0 if quadrature else 0.0) for i in winches}
+        col = np.zeros_like(r0)
+        rows = own_extra_rows(base_model.with_effects(form.make(parts)), base_model,
+                              ctx.train)
+        on = list(winches)
+        if rows is not None:
+            col[:, on] = rows[:, on]
+            return col
+        for i in winches:
+            col[:, i] = unit(variants, shapes, [i], quadrature)[:, i]
+        return col
+
     def own_columns(variants: Sequence[Any], shapes: np.ndarray | None,
                     winches: Sequence[int]) -> list[np.ndarray]:
         """Each winch's own unit column(s) on ``winches`` (rows, n), one per component."""
@@ -212,10 +235,10 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
         for quadrature in components:
             if mixes:
                 # the internal-force projection carries a winch's effect into the
-                # others' residuals: each winch's own column comes from that winch alone
-                col = np.zeros_like(r0)
-                for i in winches:
-                    col[:, i] = unit(variants, shapes, [i], quadrature)[:, i]
+                # others' residuals: each winch's own column is what that winch alone
+                # adds to its own residual (the projection's diagonal), all winches in
+                # one evaluation where the effect adds torques only
+                col = own(variants, shapes, winches, quadrature)
             else:
                 col = unit(variants, shapes, winches, quadrature)
             out.append(col)

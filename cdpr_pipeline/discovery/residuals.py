@@ -26,7 +26,14 @@ import numpy as np
 from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.sim.kinematics import cable_geometry
-from cdpr_pipeline.sim.plant import PLANTS, Drives, Plant, nominal_plant, smooth_sign
+from cdpr_pipeline.sim.plant import (
+    PLANTS,
+    Drives,
+    Plant,
+    commanded_torque,
+    nominal_plant,
+    smooth_sign,
+)
 from cdpr_pipeline.sim.sensors import Sensors
 
 #: channel -> column prefix in the data contract
@@ -90,8 +97,11 @@ def _load(model: Plant, sig: RunSignals, acceleration: np.ndarray):
     # tensions are linear in the mass: cache them per unit mass, so fitting a payload
     # error does not repeat the per-sample solves
     key = (model.anchors.tobytes(), float(model.gravity), id(acceleration))
+    # full-rate arrays, 4.8 MB a run each on 8 cables at 1 kHz: four per run (the
+    # nominal geometry and the few a fit comes back to; sixteen held 380 MB there, for
+    # the same evaluations; two cost anchor fits a third more CPU)
     unit, g, units = _memo(sig, "load", key, lambda: model.replace(mass=1.0).load_tensions(
-        sig.position, acceleration), size=16)      # full-rate arrays, 0.5 MB a run each
+        sig.position, acceleration), size=4)
     return float(model.mass) * unit, g, units
 
 
@@ -258,10 +268,45 @@ def _extra_rows(sig: RunSignals, effect, model: Model, key: tuple | None
         last_key = ("residuals", "last extra", type(effect))
         block = _Filtered(sig, lambda: effect.winch_torque(sig.theta, sig.omega, model),
                           extra, sig.cache.get(last_key))
-        sig.cache[last_key] = (extra, block)
+        if not sig.mixes:
+            # (where winches mix, every column is filtered again: the full-rate block,
+            # 1 MB per effect a run on 8 cables at 1 kHz, would be kept for nothing)
+            sig.cache[last_key] = (extra, block)
         return block
 
     return make() if key is None else _memo(sig, "extra", key, make, size=64)
+
+
+def own_extra_rows(model: Model, before: Model, signals: Sequence[RunSignals]
+                   ) -> np.ndarray | None:
+    """What the effects ``model`` adds to ``before`` add to each drive's *own* torque
+    prediction on the statistics rows, stacked over ``signals`` (rows, n): the extra
+    torque, commanded through the model's lag (:func:`~cdpr_pipeline.sim.plant.
+    commanded_torque`), then the diagonal of the torque projection
+    (:meth:`~cdpr_pipeline.discovery.signals.RunSignals.torque_own`) and the filter.
+
+    For effects that put on each drive a torque of that drive's own angle and speed
+    alone (a :class:`~cdpr_pipeline.sim.candidate_forms.WinchForm`'s), column ``i`` is
+    what the effect on drive ``i`` alone adds to drive ``i``'s residual: where the
+    internal-force projection mixes winches, one evaluation gives every winch's own
+    column, which an evaluation per winch gave before (the filter acts column by
+    column; the numbers agree to rounding). None where ``model`` is not ``before`` with
+    effects appended (an effect that changes the model's own parameters, a lag): the
+    caller then evaluates drive by drive."""
+    n0 = len(before.effects)
+    if len(model.effects) < n0 or any(a is not b for a, b in zip(
+            model.effects, before.effects, strict=False)) \
+            or _model_key(model) is None or _model_key(model) != _model_key(before):
+        return None
+    added = model.effects[n0:]
+    parts = []
+    for sig in signals:
+        extra = [x for x in (e.winch_torque(sig.theta, sig.omega, model) for e in added)
+                 if x is not None]
+        total = sum(extra[1:], extra[0]) if extra else np.zeros_like(sig.omega)
+        parts.append(sig.rows(sig.torque_own(
+            commanded_torque(total, sig.t, model.actuator_time_constant))))
+    return np.concatenate(parts)
 
 
 def _linear_rows(model: Model, nominal: Model, sig: RunSignals,

@@ -26,8 +26,8 @@ from cdpr_pipeline.data.validation import check_run_lengths, run_file
 from cdpr_pipeline.identification.identifiers import Estimate, fit_metrics
 from cdpr_pipeline.identification.regressors import (
     WinchRegression,
-    build_regression,
     dataset_regression,
+    rotated_targets,
 )
 from cdpr_pipeline.sim.lab import truth_path_for
 from cdpr_pipeline.wavelet import WaveletSplit
@@ -132,10 +132,9 @@ def check_torque_labels(dataset: Dataset, settings: RegressionSettings) -> None:
         # rotated by s = 0 .. n-1 give every column's target with any other torque in
         # it: n regressions, where rebuilding one per exchanged pair took 1 + n(n-1)/2
         # (29 per run on 8 cables: most of the command's time before its first phase)
-        regs = [build_regression(replace(tr, torques=np.roll(tr.torques, -s, axis=1)),
-                                 rig, settings) for s in range(rig.n)]
-        rotated = [reg.target for reg in regs]
-        predicted = regs[0].predict(theta)
+        # (the motion's part of them, geometry, tensions, regressors, taken once)
+        reg, rotated = rotated_targets(tr, rig, settings)
+        predicted = reg.predict(theta)
         labelled = float(np.sum((rotated[0] - predicted) ** 2))
         for a in range(rig.n):
             for b in range(a + 1, rig.n):

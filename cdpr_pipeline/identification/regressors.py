@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -193,44 +193,69 @@ def _assemble(position: np.ndarray, torque: np.ndarray, smooth_load: np.ndarray,
     axis did not have: filtering ``sign(b)`` through a stop instead spreads +-1 over rows
     whose friction is the holding torque (I 2-14 % high, F_v up to 70 % off).
     """
-    step = float(np.median(np.diff(t)))
-    fs = 1.0 / step
-    filt = settings.filter
-    _, b, a = filt.compact_derivatives(position, t)
-    torque = held_torque(torque, settings.hold)
-    if settings.sign_sharpness is not None:       # a smooth law: friction known everywhere
-        c, one = smooth_sign(b, settings.sign_sharpness), np.ones_like(b)
-        target, c = filt.smooth(torque, fs) - smooth_load, filt.smooth(c, fs)
-    else:
-        keep = sliding(position, b)
-        keep[:, ~settings.rest_channels(position)] = True
-        if np.any(smooth_load):
-            # the load comes from filtered motion: it spreads each stop's and reversal's
-            # jump over the filter's reach, where the raw torque has none (measured on
-            # independent-simulator cable robots: inertia up to 20 % off without this)
-            keep = clear_of_reach(keep, filt, fs)
-        drop = (~keep).astype(float)
-        c = filt.smooth(keep * np.sign(b), fs)
-        one = filt.smooth(keep.astype(float), fs)
-        # what a, b and the load (filtered already) hold of the dropped samples comes out
-        a = a - filt.smooth(drop * second_difference(position, step), fs)
-        b = b - filt.smooth(drop * np.gradient(position, t, axis=0), fs)
-        load = smooth_load - filt.smooth(drop * smooth_load, fs)
-        target = filt.smooth(keep * torque, fs) - load
-    phi = np.stack([a, b, c, one], axis=-1)
-    trim = int(round(filt.trim_s * fs))
-    phi, target = phi[trim:len(t) - trim], target[trim:len(t) - trim]
-    if settings.decimate > 1:
-        q = int(settings.decimate)
-        # SciPy's decimate as the published protocol has it (odd extension at the ends;
-        # the diagnosis's rows mirror them instead: discovery.signals.zero_phase_decimate)
-        phi = decimate(phi, q, axis=0, zero_phase=True)
-        target = decimate(target, q, axis=0, zero_phase=True)
-    if internal is not None:
-        # directions at the rows' own samples (the zero-phase decimation keeps every
-        # q-th sample of the trimmed signal in place)
-        internal = internal[trim:len(t) - trim][::max(1, int(settings.decimate))]
-    return WinchRegression(phi, target, None, internal)
+    rows = _MotionRows(position, smooth_load, t, settings, internal)
+    return WinchRegression(rows.phi, rows.target(torque), None, rows.internal)
+
+
+class _MotionRows:
+    """What :func:`_assemble` takes from the motion alone (the regressors, the load, the
+    samples kept), so that the targets of several torques of one run (its columns
+    rotated: :func:`rotated_targets`) cost their own filtering only. Column by column
+    the same operations as one :func:`_assemble` each, so the same numbers."""
+
+    def __init__(self, position: np.ndarray, smooth_load: np.ndarray, t: np.ndarray,
+                 settings: ResolvedReading, internal: np.ndarray | None = None) -> None:
+        step = float(np.median(np.diff(t)))
+        self.fs = fs = 1.0 / step
+        self.settings = settings
+        filt = settings.filter
+        _, b, a = filt.compact_derivatives(position, t)
+        if settings.sign_sharpness is not None:   # a smooth law: friction known everywhere
+            c, one = smooth_sign(b, settings.sign_sharpness), np.ones_like(b)
+            self.keep, self.load, c = None, smooth_load, filt.smooth(c, fs)
+        else:
+            keep = sliding(position, b)
+            keep[:, ~settings.rest_channels(position)] = True
+            if np.any(smooth_load):
+                # the load comes from filtered motion: it spreads each stop's and
+                # reversal's jump over the filter's reach, where the raw torque has none
+                # (measured on independent-simulator cable robots: inertia up to 20 %
+                # off without this)
+                keep = clear_of_reach(keep, filt, fs)
+            drop = (~keep).astype(float)
+            c = filt.smooth(keep * np.sign(b), fs)
+            one = filt.smooth(keep.astype(float), fs)
+            # what a, b and the load (filtered already) hold of the dropped samples comes
+            # out
+            a = a - filt.smooth(drop * second_difference(position, step), fs)
+            b = b - filt.smooth(drop * np.gradient(position, t, axis=0), fs)
+            self.keep = keep
+            self.load = smooth_load - filt.smooth(drop * smooth_load, fs)
+        self.trim = trim = int(round(filt.trim_s * fs))
+        self.phi = self._rows(np.stack([a, b, c, one], axis=-1))
+        self.internal = None
+        if internal is not None:
+            # directions at the rows' own samples (the zero-phase decimation keeps every
+            # q-th sample of the trimmed signal in place)
+            self.internal = internal[trim:len(t) - trim][::max(1, int(settings.decimate))]
+
+    def _rows(self, x: np.ndarray) -> np.ndarray:
+        """``x`` trimmed and, with decimation, decimated."""
+        x = x[self.trim:len(x) - self.trim]
+        if self.settings.decimate > 1:
+            # SciPy's decimate as the published protocol has it (odd extension at the
+            # ends; the diagnosis's rows mirror them instead:
+            # discovery.signals.zero_phase_decimate)
+            x = decimate(x, int(self.settings.decimate), axis=0, zero_phase=True)
+        return x
+
+    def target(self, torque: np.ndarray) -> np.ndarray:
+        """The rows of ``u - load`` for the recorded torque ``torque`` (N, n)."""
+        filt = self.settings.filter
+        torque = held_torque(torque, self.settings.hold)
+        if self.keep is None:
+            return self._rows(filt.smooth(torque, self.fs) - self.load)
+        return self._rows(filt.smooth(self.keep * torque, self.fs) - self.load)
 
 
 def winch_regression(traj: Trajectory, rig: CdprRig, home_lengths: np.ndarray | None = None,
@@ -242,6 +267,14 @@ def winch_regression(traj: Trajectory, rig: CdprRig, home_lengths: np.ndarray | 
     None: the defaults) are chosen from this run (:func:`dataset_regression`).
     """
     settings = as_resolved(settings, [traj], rig)
+    rows = _winch_rows(traj, rig, home_lengths, settings)
+    return WinchRegression(rows.phi, rows.target(np.asarray(traj.torques, float)), None,
+                           rows.internal)
+
+
+def _winch_rows(traj: Trajectory, rig: CdprRig, home_lengths: np.ndarray | None,
+                settings: ResolvedReading) -> _MotionRows:
+    """What :func:`winch_regression` takes from the run's motion."""
     R = rig.drum_radius_m
     ref = traj.lengths[0] if home_lengths is None else home_lengths
     theta = (ref - traj.lengths) / R
@@ -249,8 +282,8 @@ def winch_regression(traj: Trajectory, rig: CdprRig, home_lengths: np.ndarray | 
     _, units = cable_geometry(rig.anchors_m, pos)
     gravity = np.array([0.0, 0.0, -rig.gravity])
     tension = tensions_for_force(units, rig.platform_mass_kg * (acc - gravity))
-    return _assemble(theta, np.asarray(traj.torques, float), R * tension, traj.t, settings,
-                     internal_force_directions(units, R))
+    return _MotionRows(theta, R * tension, traj.t, settings,
+                       internal_force_directions(units, R))
 
 
 def axis_regression(traj: Trajectory, rig: AxesRig,
@@ -261,6 +294,27 @@ def axis_regression(traj: Trajectory, rig: AxesRig,
     position = np.asarray(traj.position, float)
     return _assemble(position, np.asarray(traj.torques, float), np.zeros_like(position),
                      traj.t, settings)
+
+
+def rotated_targets(traj: Trajectory, rig: Rig, settings: RegressionSettings | None = None
+                    ) -> tuple[WinchRegression, list[np.ndarray]]:
+    """The regression of ``traj`` (:func:`build_regression`) and the targets of its
+    torque columns rotated by ``s = 0 .. n-1`` (``np.roll(torques, -s, axis=1)``: column
+    ``j`` holding ``u_{j+s}``), the motion's part taken once: each target is what the
+    regression of the rotated run has (column by column the same operations)."""
+    settings = as_resolved(settings, [traj], rig)
+    if rig.kind == CdprRig.kind:
+        rows = _winch_rows(traj, rig, None, settings)
+    elif rig.kind == AxesRig.kind:
+        position = np.asarray(traj.position, float)
+        rows = _MotionRows(position, np.zeros_like(position), traj.t, settings)
+    else:
+        return build_regression(traj, rig, settings), [
+            build_regression(replace(traj, torques=np.roll(traj.torques, -s, axis=1)), rig,
+                             settings).target for s in range(rig.n)]
+    torques = np.asarray(traj.torques, float)
+    targets = [rows.target(np.roll(torques, -s, axis=1)) for s in range(rig.n)]
+    return WinchRegression(rows.phi, targets[0], None, rows.internal), targets
 
 
 def build_regression(traj: Trajectory, rig: Rig,

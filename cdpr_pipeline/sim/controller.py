@@ -70,9 +70,13 @@ def _nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
     short and cycle; near the optimum cables at the bound leave and rejoin the short
     set, and the steps converge linearly: 60 steps reached 1e-8 N on the worst of 200
     poses). Feasible poses end at the bound; others as near it as the force allows."""
-    n, t_force = units.shape[1], t
-    # the projector onto the null space of K^T: steps that leave the force alone
-    null = np.eye(n) - np.einsum("bni,bij,bmj->bnm", units, np.linalg.inv(gram), units)
+    t_force = t
+    # an orthonormal basis Z (B, n, n-3) of the null space of K^T: steps Z z leave the
+    # force alone. The Newton step on the short cables A, -P pinv(P D_A P) P g with the
+    # projector P = Z Z^T, is Z pinv(Z^T D_A Z) Z^T (short) in its coordinates: an
+    # (n-3)-square pseudo-inverse per step where the projector's took an n-square one
+    # (and numpy's pinv, for batches of 8 x 8 at every control tick, most of the time)
+    basis = np.linalg.svd(units)[0][:, :, 3:]
     fractions = 0.5 ** np.arange(_HALVINGS + 1)
 
     def shortfall(x: np.ndarray) -> np.ndarray:
@@ -83,14 +87,13 @@ def _nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
         active = short > TENSION_SLACK_N
         if not active.any():
             break
-        weighted = null * active[:, None, :]
-        gradient = -np.einsum("bij,bj->bi", null, short)
-        step = -np.einsum("bij,bj->bi", null, np.einsum(
-            "bij,bj->bi", np.linalg.pinv(np.einsum("bij,bjk->bik", weighted, null),
-                                         hermitian=True), gradient))
+        reduced = np.einsum("bia,bic->bac", basis * active[:, :, None], basis)
+        along = np.einsum("bia,bi->ba", basis, short)         # -Z^T gradient
+        coords = _pinv_solve(reduced, along)
+        step = np.einsum("bia,ba->bi", basis, coords)
         now = shortfall(t)
         trial = shortfall(t[None] + fractions[:, None, None] * step[None])     # (k, B)
-        slope = np.einsum("bi,bi->b", gradient, step)
+        slope = -np.einsum("ba,ba->b", along, coords)
         good = trial <= now + 1e-4 * fractions[:, None] * slope
         first = np.where(good.any(axis=0), good.argmax(axis=0), -1)
         alpha = np.where(first >= 0, fractions[np.maximum(first, 0)], 0.0)
@@ -100,6 +103,17 @@ def _nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
     # the steps' rounding off the force (the projector is one to ~1e-16): taken back
     return t - np.einsum("bni,bi->bn", units, np.linalg.solve(
         gram, np.einsum("bni,bn->bi", units, t - t_force)[..., None])[..., 0])
+
+
+def _pinv_solve(matrix: np.ndarray, rhs: np.ndarray, rcond: float = 1e-15) -> np.ndarray:
+    """``pinv(matrix) @ rhs`` (B, k) of symmetric ``matrix`` (B, k, k) and ``rhs``
+    (B, k), by its eigenvalues: those below ``rcond`` times the largest count as zero
+    (:func:`numpy.linalg.pinv`'s default cut-off, hermitian)."""
+    w, v = np.linalg.eigh(matrix)
+    s = np.abs(w)
+    large = s > rcond * s.max(axis=-1, keepdims=True)
+    inv = np.where(large, 1.0 / np.where(large, w, 1.0), 0.0)
+    return np.einsum("bij,bj->bi", v, inv * np.einsum("bji,bj->bi", v, rhs))
 
 
 #: Newton steps of :func:`_nearest_to_bound` at most, and halvings of a step

@@ -109,6 +109,33 @@ def test_rows_by_linearity_match_the_direct_rows_where_winches_mix(redundant):
                         [type(e).__name__ for e in effects], c)
 
 
+def test_every_winchs_own_column_from_one_evaluation(redundant):
+    """Where winches mix, what a per-winch effect on each winch alone adds to that
+    winch's own residual (an evaluation per winch) is what one evaluation with the
+    effect on every winch gives through the projection's diagonal
+    (``own_extra_rows``), a lag on the drives included; a model whose effect changes
+    more than the torques gets None."""
+    data, sigs = redundant
+    nominal = R.nominal_model(data.rig, sigs[0].settings.sign_sharpness)
+    for base in (nominal, nominal.with_effects([ActuatorLag(time_constant_s=0.006)])):
+        velocity, extra = [3.0, 5.0, 4.0, 6.0], [0.2, 0.1, 0.3, 0.15]
+        every = StribeckFriction(static_ratio=None, stribeck_velocity=velocity,
+                                 cables=[1, 2, 3, 4], extra_static=extra)
+        own = R.own_extra_rows(base.with_effects([every]), base, sigs)
+        r0 = R.residuals(base, nominal, sigs).stacked("torque")
+        for i in range(4):
+            alone = StribeckFriction(static_ratio=None, stribeck_velocity=[velocity[i]],
+                                     cables=[i + 1], extra_static=[extra[i]])
+            unit = r0 - R.residuals(base.with_effects([alone]), nominal, sigs
+                                    ).stacked("torque")
+            # the unit is a difference of residuals: rounding of the residual's size
+            size = float(np.max(np.abs(r0[:, i])))
+            assert np.max(np.abs(unit[:, i])) > 1e-3 * size
+            np.testing.assert_allclose(own[:, i], unit[:, i], rtol=0, atol=1e-9 * size)
+    lagged = nominal.with_effects([ActuatorLag(time_constant_s=0.006)])
+    assert R.own_extra_rows(lagged, nominal, sigs) is None
+
+
 def test_an_internal_force_leaves_the_residual_as_it_was(redundant):
     """A pretension the rig never states, added to the recorded torques (a few newtons,
     varying in time), moves the unprojected residual by far more than the noise and the

@@ -148,3 +148,31 @@ def test_internal_force_std_scale_matches_the_spread_over_noise_draws():
     np.testing.assert_allclose(np.mean(reported, axis=0), spread, rtol=0.2)
     # the unscaled figure understates it
     assert np.mean(spread / (np.mean(reported, axis=0) / reg.std_scale)) > 1.05
+
+
+@pytest.mark.parametrize("kind", ["cdpr", "axes"])
+def test_rotated_targets_are_the_rotated_runs_own_targets(tmp_path, kind):
+    """The targets of a run's torque columns rotated (the check for exchanged columns)
+    take the motion's part once: each is exactly what the regression of the rotated run
+    has, and the regression is the run's own."""
+    from dataclasses import replace
+
+    from cdpr_pipeline.data.reading import resolve_settings
+    from cdpr_pipeline.identification.regressors import rotated_targets
+    from cdpr_pipeline.testing.foreign_cases import foreign_case, foreign_settings
+
+    case = foreign_case(tmp_path, kind, [], 5, n_runs=1, duration_s=4.0, n=4)
+    data = case.dataset
+    settings = resolve_settings(foreign_settings().regression, data.trajectories, data.rig)
+    tr = data.trajectories[0]
+    reg, targets = rotated_targets(tr, data.rig, settings)
+    own = build_regression(tr, data.rig, settings)
+    np.testing.assert_array_equal(reg.phi, own.phi)
+    np.testing.assert_array_equal(reg.target, own.target)
+    assert len(targets) == data.rig.n
+    for s, target in enumerate(targets):
+        rotated = build_regression(replace(tr, torques=np.roll(tr.torques, -s, axis=1)),
+                                   data.rig, settings)
+        np.testing.assert_array_equal(target, rotated.target)
+        if s:
+            assert np.max(np.abs(target - targets[0])) > 0

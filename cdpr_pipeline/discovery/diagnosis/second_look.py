@@ -43,7 +43,12 @@ def applies(state: DiagnosisState) -> bool:
 
 
 def run(state: DiagnosisState) -> Diagnosis | None:
-    """:func:`after_no_cause` or :func:`after_causes`."""
+    """:func:`after_no_cause` or :func:`after_causes`. The first look's memoised rows and
+    full-rate solutions are let go first: the wider look keeps its own, and the two
+    together were the command's peak memory (8 cables at 1 kHz); a later step that asks
+    for them again recomputes them."""
+    for sig in (*state.train, *state.held):
+        sig.cache.clear()
     return after_causes(state) if state.causes else after_no_cause(state)
 
 

@@ -114,6 +114,10 @@ class ShapeFilter:
         return bool(norm > 0 and np.max(np.abs(self._basis @ col)) >= SHAPE_MATCH * norm)
 
 
+#: bytes of full-rate term values viewed and filtered at once (:func:`_term_rows`)
+_VIEW_BYTES = 32 * 2 ** 20
+
+
 def _term_rows(expressions: Sequence[str], signals: Sequence[RunSignals],
                view: Callable[[RunSignals, np.ndarray], np.ndarray]) -> np.ndarray:
     """Each expression evaluated per winch on the winch state, passed through ``view``
@@ -124,11 +128,16 @@ def _term_rows(expressions: Sequence[str], signals: Sequence[RunSignals],
     for sig in signals:
         known = sig.cache.setdefault(f"term_{view.__name__}", {})
         missing = [e for e in dict.fromkeys(expressions) if e not in known]
-        if missing:
+        # a few terms at a time: the spread view of every term at once held (N, n, n,
+        # terms) at the full rate, and the filter two copies of it (a 400 MB peak on 8
+        # cables at 1 kHz); each column is filtered on its own, so the rows are the same
+        chunk = max(1, _VIEW_BYTES // (8 * len(sig.t) * sig.n ** 2))
+        for start in range(0, len(missing), chunk):
+            part = missing[start:start + chunk]
             cols = np.stack([evaluate(e, {"omega": sig.omega, "theta": sig.theta})
-                             for e in missing], axis=-1)
+                             for e in part], axis=-1)
             rows = sig.rows(view(sig, cols))
-            for e, col in zip(missing, np.moveaxis(rows, -1, 0), strict=True):
+            for e, col in zip(part, np.moveaxis(rows, -1, 0), strict=True):
                 known[e] = col
         out.append(np.stack([known[e] for e in expressions], axis=-1))
     return np.concatenate(out)
