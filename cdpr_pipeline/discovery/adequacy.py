@@ -119,7 +119,7 @@ def is_material(column: UnexplainedColumn, noise_ratio: float, min_error_pct: fl
 
 def unexplained_residual(columns: Sequence[UnexplainedColumn], noise_ratio: float,
                          min_error_pct: float, alpha: float, analysed_hz: float,
-                         channel: str = "torque", quiet: bool = False) -> Unexplained | None:
+                         channel: str = "torque") -> Unexplained | None:
     """``unexplained``: where at least one column fails validity, an RMS error at a size
     no effect-free dataset reached (:func:`is_material`, the calibrated gate); None
     otherwise (the verdict is ``none``).
@@ -134,8 +134,6 @@ def unexplained_residual(columns: Sequence[UnexplainedColumn], noise_ratio: floa
         return None
     found = Unexplained(channel, material, min_error_pct, validity_alpha(alpha, len(columns)),
                         noise_ratio, analysed_hz)
-    if quiet:
-        return found
     log.warning("no cause found, but the held-out %s residual of %s fails the calibrated "
                 "validity test (statistical tests failed: %s) with %s of the measured signal "
                 "(%s times the noise): verdict unexplained", channel,

@@ -11,9 +11,12 @@ payload error beside a wrong winch parameter must name both with few joint fits 
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
+from cdpr_pipeline.data.reading import motion_bandwidth_hz
 from cdpr_pipeline.discovery import cause_search
 from cdpr_pipeline.discovery.candidates import candidates_for
 from cdpr_pipeline.discovery.cause_search import (
@@ -24,6 +27,8 @@ from cdpr_pipeline.discovery.cause_search import (
 from cdpr_pipeline.discovery.diagnosis import diagnosis_split
 from cdpr_pipeline.discovery.fitting import fit_candidate
 from cdpr_pipeline.sim.effects import make_effect
+from cdpr_pipeline.testing.foreign_cases import FAST, foreign_case
+from cdpr_pipeline.testing.independent_sim import draw_effect
 from cdpr_pipeline.testing.lab_cases import (
     fast_settings,
     heldout_signals,
@@ -107,3 +112,38 @@ def test_few_joint_fits_per_step_and_a_payload_beside_a_winch_error_is_named(
         # those passed their full joint fit
         assert len(passed) <= limit or not any(passed[:-1]), case
         assert len(passed) < len(cands), case
+
+
+def test_a_force_above_the_band_is_not_taken_for_a_re_identification_with_a_lag(tmp_path):
+    """Seed 58 of ``test_a_periodic_torque_above_the_motion_band_is_never_none``
+    (independent drive axes; docs/method.md 3.3): a force periodic in each axis's
+    position at 10-40 times the motion's bandwidth reaches the rows only near reversals.
+    A re-identification of axis 2 with a lag joined first by BIC (held-out gain 22.8 %),
+    though it added nothing beyond a passing candidate of fewer parameters on the
+    held-out runs; with the step's parsimony rule (``CauseSearch.fewest_that_suffice``)
+    the free-form terms name the force with the generator's wavenumbers."""
+    kind, seed = "axes", 58
+    runs, duration = FAST[kind]
+    quiet = foreign_case(tmp_path / "quiet", kind, [], seed, n_runs=runs, duration_s=duration)
+    bandwidth = motion_bandwidth_hz(quiet.dataset.trajectories)
+
+    def draw(rig, rng):
+        eff = draw_effect("periodic_torque", rig, rng,
+                          frequency_hz=(10.0 * bandwidth, 40.0 * bandwidth))
+        idx = list(eff.channels)
+        amplitude = np.array(eff.params["amplitude"], float)
+        amplitude[idx] = rng.uniform(0.55, 0.8, len(idx)) * rig.coulomb[idx]
+        return type(eff)(eff.name, eff.channels, {**eff.params, "amplitude": amplitude})
+
+    case = foreign_case(tmp_path, kind, [draw], quiet.seed, n_runs=runs, duration_s=duration)
+    record = case.diagnose()
+    assert record["verdict"] == "unnamed", case.describe()
+    assert [c["effect"] for c in record["causes"]] == ["unnamed"], case.describe()
+    # the wavenumbers the generator used, in the terms found
+    truth = case.truth.effects[0].params["wavenumber"]
+    terms = " ".join(t["expression"] for c in record["causes"] for t in c["params"]["terms"])
+    found = [float(w) for w in re.findall(r"(?:sin|cos)_k\(theta, ([\d.]+)\)", terms)]
+    assert found, terms
+    for k in np.atleast_1d(truth):
+        assert any(abs(w / k - 1) < 0.02 for w in found), (k, terms)
+    assert record["gain"]["ci95"][0] > 0.5

@@ -83,9 +83,6 @@ class DiagnosisState:
     held_columns: tuple[UnexplainedColumn, ...] = ()
     failing: list[str] = field(default_factory=list)
     unexplained: Unexplained | None = None
-    #: the extended model's held-out residual failing the calibrated validity test
-    #: (causes found, and still a residual no effect-free dataset reaches)
-    left_unexplained: Unexplained | None = None
     band: dict[str, Any] = field(default_factory=dict)
     # second look
     again: Diagnosis | None = None

@@ -52,12 +52,6 @@ def run(state: DiagnosisState) -> None:
     state.unexplained = None if state.causes else unexplained_residual(
         state.held_columns, settings.unexplained_noise_ratio,
         settings.unexplained_min_error_pct, settings.selection.alpha, analysed_hz)
-    if state.causes:
-        state.left_unexplained = unexplained_residual(
-            heldout_columns(state.after_held, held, state.validity.after,
-                            settings.selection.alpha, channel),
-            settings.unexplained_noise_ratio, settings.unexplained_min_error_pct,
-            settings.selection.alpha, analysed_hz, quiet=True)
     log.info("never worse and validity: %.1f s",
              state.clock["never worse"] + time.perf_counter() - state.step_start)
     state.band = {"analysed_hz": analysed_hz,
