@@ -59,6 +59,12 @@ def test_default_identification_of_foreign_cable_robots(tmp_path, n_cables, new_
         tol = np.maximum(FLOOR, 4 * spread)
         assert np.all(np.abs(err) <= tol), \
             f"{key}: {what}: errors {np.round(100 * err, 2)} %, allowed {np.round(100 * tol, 2)} %"
+    # the offset (no scale of its own: held relative to the winch's Coulomb friction) by
+    # the same rule: FLOOR of F_c or four spreads (it had FLOOR alone; seed 1610843616,
+    # a winch of F_c 0.071 N m: 2.9 % of F_c off, 2.8 spreads)
     offset_err = np.abs(np.asarray(out["params"]["offset"]) - model.offset)
-    assert np.all(offset_err <= FLOOR * np.asarray(model.coulomb)), \
-        f"offset: {what}: errors {np.round(offset_err / np.asarray(model.coulomb), 3)} F_c"
+    offset_tol = np.maximum(FLOOR * np.asarray(model.coulomb),
+                            4 * STD_UNDERSTATEMENT * np.asarray(out["std"]["offset"]))
+    assert np.all(offset_err <= offset_tol), \
+        f"offset: {what}: errors {np.round(offset_err / np.asarray(model.coulomb), 3)} F_c, " \
+        f"allowed {np.round(offset_tol / np.asarray(model.coulomb), 3)} F_c"

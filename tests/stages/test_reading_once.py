@@ -113,7 +113,7 @@ def test_diagnose_resolves_its_reading_once(lab, tmp_path, new_mlflow_store, res
 def test_identify_resolves_its_reading_once(small_lab, tmp_path, new_mlflow_store,
                                             resolutions, monkeypatch):
     regressions = spy(monkeypatch, pipeline, "dataset_regression", 2)
-    labels = spy(monkeypatch, pipeline, "build_regression", 2)
+    labels = spy(monkeypatch, pipeline, "rotated_targets", 2)
     identify(compose_config("identify", [
         f"data.path={small_lab}", "method=lsm", f"out_dir={tmp_path}", "holdout=[spiral]",
         f"tracking.uri={new_mlflow_store(tmp_path / 'mlflow.db')}"]))
