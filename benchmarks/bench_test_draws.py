@@ -187,7 +187,7 @@ def _draw_span(results: dict) -> str:
         if k + 1 == len(indices) or indices[k + 1] != index + 1:
             spans.append(f"{start}-{index}" if index > start else f"{start}")
             start = None
-    return f"draw_seeds(0, {indices[-1] + 1 if indices else 0})`, draws {', '.join(spans)}`"
+    return f"draw_seeds(0, {indices[-1] + 1 if indices else 0})`, draws `{', '.join(spans)}"
 
 
 def markdown(summary: dict[str, dict], results: dict) -> str:
@@ -198,7 +198,11 @@ def markdown(summary: dict[str, dict], results: dict) -> str:
              and s["pass_rate"] < TARGET]
     lines = [f"{len(summary)} random-draw tests, {each} "
              f"(`CDPR_TEST_SEED` from the fixed sequence `{_draw_span(results)}`), "
-             f"pytest `-n {results['workers']}`; pass rate = passed / (passed + "
+             f"pytest `-n {results['workers']}`"
+             + (f" in each of {results['shards']} shards run side by side on the machine "
+                "named above (one process per core), counted together by `--merge`"
+                if results.get("shards") else "")
+             + "; pass rate = passed / (passed + "
              f"failed + xfail), target at least {100 * TARGET:.1f} %. "
              f"{len(below)} below it. Replay a failing seed with "
              "`CDPR_TEST_SEED=<seed> python -m pytest -n 0 '<test>'`.", "",
@@ -236,7 +240,8 @@ def merge(shards: list[dict]) -> dict:
     machine, commit = where.pop()
     return {"first_draw": index[order[0]] if order else 0,
             "indices": [index[s] for s in order], "seeds": order,
-            "workers": max(r["workers"] for r in shards), "machine": machine,
+            "workers": max(r["workers"] for r in shards), "shards": len(shards),
+            "machine": machine,
             "commit": commit, "load": max(r.get("load", 0.0) for r in shards),
             "tests": {t: tests[t] for t in sorted(tests)}}
 
@@ -264,7 +269,7 @@ def main() -> None:
                         help="the commit measured, where the checkout cannot tell (no git)")
     parser.add_argument("--merge", nargs="+", type=Path, default=None,
                         help="count the draws of these shards' --out files together and "
-                             "record them (no test is run)")
+                             "record them (no test is run; --tests keeps the tests named)")
     args = parser.parse_args()
     section = ("test-draws", "Pass rate of every random-draw test")
     if args.part:
@@ -272,6 +277,9 @@ def main() -> None:
 
     if args.merge:
         results = merge([json.loads(p.read_text()) for p in args.merge])
+        if args.tests:      # the shards' tests that these name (node ids or their prefixes)
+            results["tests"] = {t: d for t, d in results["tests"].items()
+                                if any(t.startswith(prefix) for prefix in args.tests)}
         text = markdown(summarise(results), results)
         print(text)
         if args.record:
