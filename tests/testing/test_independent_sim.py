@@ -19,6 +19,7 @@ from cdpr_pipeline.testing.independent_sim import (
     EFFECT_KINDS,
     AxesPlant,
     Effect,
+    SlackCableError,
     draw_effect,
     random_axes_rig,
     random_rig,
@@ -706,3 +707,21 @@ def test_draw_effect_ranges_and_kinds():
                 draw_effect(name, axes, rng)
     assert draw_effect("cable_elasticity", rig, rng, channels=[2]).labels() == ["l3"]
     assert Path(truth_path("x/ds")).name == "ds.truth.yaml"
+
+
+def test_an_unstable_closed_loop_is_refused_not_written():
+    """A drawn rig whose joint PD (tuned on the rigid inertia) is unstable on soft cables
+    (158 Hz, a light winch alone above its cable's mode): a cable slackens within tens of
+    milliseconds and the loop then overflows to NaN; the draw is refused
+    (:class:`SlackCableError`, which ``foreign_case`` redraws), never written as NaN and
+    1e10 N m torques (bench_test_draws seed 62254056, test_sizes' kind cases)."""
+    rig = random_rig(62254056)
+    assert rig.n == 3 and rig.rate_hz == 158.0
+    effect = Effect("cable_elasticity", (1, 2), {"ea_n": [0.0, 21843.08, 12122.96]})
+    with pytest.raises(SlackCableError, match=r"run 0 \(flat_circle\) at t = 0\.0"):
+        simulate_runs(rig, [effect], ["flat_circle"], 8.0, seed=62254056, noise=False)
+    # the same rig with a slower loop (2 Hz, not 3.95) is stable: the refusal is the
+    # loop's, not the cables'
+    _, runs, _ = simulate_runs(rig.replace(bandwidth_hz=2.0), [effect], ["flat_circle"], 2.0,
+                               seed=62254056, noise=False)
+    assert np.all(runs[0].states["min_tension"] > 0.5 * rig.min_tension_n)
