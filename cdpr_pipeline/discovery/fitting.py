@@ -225,6 +225,7 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
         positions = np.concatenate([s.theta[s.row_index()] for s in ctx.train])
         speeds = np.concatenate([s.omega[s.row_index()] for s in ctx.train])
         band_hz = analysed_band_hz(ctx.train[0].settings, ctx.train[0].fs)
+        weights = np.concatenate([s.rows(s.own_torque_weights()) for s in ctx.train])
 
     mixes = any(s.mixes for s in ctx.train)
 
@@ -280,7 +281,7 @@ def fit_winches(template: Candidate, ctx: FitContext, current: Sequence[Effect],
         """The variants to try: per round one per winch, and the winches it is tried on."""
         if form.screen is None:
             return [([v] * n, winches) for v in form.variants]
-        proposed = form.screen(positions, speeds, target, band_hz)
+        proposed = form.screen(positions, speeds, target, band_hz, weights)
         depth = max((len(proposed[i]) for i in winches), default=0)
         out = []
         for j in range(depth):

@@ -258,6 +258,15 @@ class RunSignals:
         d = np.einsum("kii->ki", self.torque_projection)
         return d.reshape(d.shape + (1,) * (np.ndim(x) - 2)) * x
 
+    def own_torque_weights(self) -> np.ndarray:
+        """(N, n) what the torque residual keeps of each winch's own torque: the
+        diagonal of :attr:`torque_projection`, else :attr:`friction_known`, else 1."""
+        if self.torque_projection is not None:
+            return np.diagonal(self.torque_projection, axis1=1, axis2=2).copy()
+        if self.friction_known is not None:
+            return np.asarray(self.friction_known, float)
+        return np.ones_like(self.theta)
+
     def torque_masked(self, x: np.ndarray) -> np.ndarray:
         """``x`` (N, n, ...) times :attr:`friction_known` only (what a measured torque is
         compared with in a relative error)."""

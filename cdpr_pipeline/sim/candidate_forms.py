@@ -45,7 +45,7 @@ SLOW_SHARE = 0.01
 
 
 #: a screen of variants (:attr:`WinchForm.screen`)
-Screen = Callable[[np.ndarray, np.ndarray, np.ndarray, float], list[list[Any]]]
+Screen = Callable[[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray], list[list[Any]]]
 
 
 class WinchPart(NamedTuple):
@@ -86,10 +86,11 @@ class WinchForm:
         quadrature`, bounded like the magnitude): a sine and a cosine of one angle,
         whose amplitude and phase the two give in closed form.
     screen : callable or None
-        ``(positions, speeds, residual, band_hz) -> per winch a list of variants`` worth
-        fitting, best first (an empty list: the effect cannot act on that winch), from
-        the statistics rows' channel positions and speeds, the residual to explain (all
-        (rows, n)) and the band the rows keep (Hz): for a variant chosen among many (a
+        ``(positions, speeds, residual, band_hz, weights) -> per winch a list of
+        variants`` worth fitting, best first (an empty list: the effect cannot act on
+        that winch), from the statistics rows' channel positions and speeds, the
+        residual to explain, what the residual keeps of each winch's own torque on each
+        row (all (rows, n)) and the band the rows keep (Hz): for a variant chosen among many (a
         period count), where fitting each would cost a model evaluation. Replaces
         :attr:`variants`; the choice counts as a parameter.
     quadrature_name : str
