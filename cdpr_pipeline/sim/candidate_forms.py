@@ -90,8 +90,9 @@ class WinchForm:
         variants`` worth fitting, best first (an empty list: the effect cannot act on
         that winch), from the statistics rows' channel positions and speeds, the
         residual to explain, what the residual keeps of each winch's own torque on each
-        row (all (rows, n)) and the band the rows keep (Hz): for a variant chosen among many (a
-        period count), where fitting each would cost a model evaluation. Replaces
+        row (all (rows, n); None: all of it) and the band the rows keep (Hz): for a
+        variant chosen among many (a period count), where fitting each would cost a
+        model evaluation. Replaces
         :attr:`variants`; the choice counts as a parameter.
     quadrature_name : str
         Name of the quadrature component, for reports.

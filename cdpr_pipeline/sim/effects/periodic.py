@@ -226,14 +226,15 @@ class CoggingTorque(Effect):
                         cables=cables)]
 
         def screen(positions: np.ndarray, speeds: np.ndarray, residual: np.ndarray,
-                   band_hz: float, weights: np.ndarray) -> list[list[int]]:
+                   band_hz: float, weights: np.ndarray | None = None) -> list[list[int]]:
             out: list[list[int]] = []
             for i, grid in enumerate(counts):
                 if len(grid) <= 1:
                     out.append(list(grid))
                     continue
                 shares = harmonic_shares(per_unit[i] * positions[:, i], residual[:, i],
-                                         np.asarray(grid, float), weights[:, i])
+                                         np.asarray(grid, float),
+                                         None if weights is None else weights[:, i])
                 top = in_band(speeds[:, i], per_unit[i], band_hz)
                 material = material_share(len(residual))
                 out.append([grid[k] for k in np.argsort(-shares, kind="stable")
