@@ -70,7 +70,8 @@ PEAK_GRID = 8
 
 
 def periodic_peaks(state: dict[str, np.ndarray], residual: np.ndarray,
-                   periodicity: Periodicity) -> list[str]:
+                   periodicity: Periodicity, weights: np.ndarray | None = None
+                   ) -> list[str]:
     """Per channel, the position harmonic that explains most of its residual, as the
     library terms ``sin_k``/``cos_k``: a scan of wavenumbers from one unit to
     :attr:`Periodicity.most` (a periodogram against position, :data:`PEAK_GRID` points
@@ -81,7 +82,9 @@ def periodic_peaks(state: dict[str, np.ndarray], residual: np.ndarray,
     most of all on a light axis beside heavy ones (found: a force periodic in a wrist
     axis's position never reached the library, and the base harmonics' nearest whole
     multiples came out 3-15 % off). Whether a peak is a term is the sparse regression's
-    and the held-out runs' call, as for every library term."""
+    and the held-out runs' call, as for every library term. ``weights`` (rows, n): what
+    the residual keeps of each channel's own torque on each row, taken on the harmonics
+    as on the residual (:func:`~cdpr_pipeline.sim.effects.periodic.harmonic_shares`)."""
     theta = state["theta"]
     if periodicity.integer:
         grid = np.arange(1.0, np.floor(periodicity.most) + 1.0)
@@ -92,13 +95,14 @@ def periodic_peaks(state: dict[str, np.ndarray], residual: np.ndarray,
         r = residual[:, i]
         if not np.any(r) or grid.size == 0:
             continue
-        shares = harmonic_shares(theta[:, i], r, periodicity.unit * grid)
+        w = None if weights is None else weights[:, i]
+        shares = harmonic_shares(theta[:, i], r, periodicity.unit * grid, w)
         m = float(grid[int(np.argmax(shares))])
         if not periodicity.integer:
             fine = m + np.linspace(-1.0, 1.0, 2 * int(100 / PEAK_GRID) + 1) / PEAK_GRID
             fine = fine[fine > 0]
             m = float(fine[int(np.argmax(harmonic_shares(theta[:, i], r,
-                                                            periodicity.unit * fine)))])
+                                                            periodicity.unit * fine, w)))])
         k = Harmonic(periodicity.wavenumber(m))
         terms += [f"sin_k(theta, {k})", f"cos_k(theta, {k})"]
     return list(dict.fromkeys(terms))

@@ -163,7 +163,8 @@ class FreeFormSearch:
              ) -> FreeFormResult:
         library = base_library(speed_rms, periodicity, self.harmonics)
         if periodicity is not None:
-            peaks = periodic_peaks(row_state(signals), residual, periodicity)
+            weights = np.concatenate([s.rows(s.own_torque_weights()) for s in signals])
+            peaks = periodic_peaks(row_state(signals), residual, periodicity, weights)
             library += [e for e in peaks if e not in library]
         library += [e for e in self.extra_terms if e not in library]
         found: list[tuple[str, float]] = []
