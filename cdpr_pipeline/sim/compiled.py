@@ -184,3 +184,92 @@ def distribute_tensions(units: np.ndarray, force: np.ndarray,
         _nearest_to_bound(units[rows], grams[rows], part, min_tension)
         t[rows] = part
     return t
+
+
+@numba.njit(cache=True)
+def rigid_motion(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
+                 position: np.ndarray, velocity: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rigid cables' lengths (B, n), unit vectors (B, n, 3), winch speeds, the ``k'.v``
+    term and winch angles (B, n) at platform ``position`` and ``velocity`` (B, 3):
+    :func:`~cdpr_pipeline.sim.kinematics.cable_geometry`,
+    :func:`~cdpr_pipeline.sim.kinematics.winch_rates` and
+    :meth:`~cdpr_pipeline.sim.plant.Plant.winch_angle_from_length` in one loop."""
+    batch, n = position.shape[0], anchors.shape[0]
+    lengths = np.empty((batch, n))
+    units = np.empty((batch, n, 3))
+    omega = np.empty((batch, n))
+    curvature = np.empty((batch, n))
+    theta = np.empty((batch, n))
+    for b in range(batch):
+        speed2 = velocity[b, 0] ** 2 + velocity[b, 1] ** 2 + velocity[b, 2] ** 2
+        for i in range(n):
+            d0 = anchors[i, 0] - position[b, 0]
+            d1 = anchors[i, 1] - position[b, 1]
+            d2 = anchors[i, 2] - position[b, 2]
+            length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            k0, k1, k2 = d0 / length, d1 / length, d2 / length
+            units[b, i, 0], units[b, i, 1], units[b, i, 2] = k0, k1, k2
+            kv = k0 * velocity[b, 0] + k1 * velocity[b, 1] + k2 * velocity[b, 2]
+            lengths[b, i] = length
+            curvature[b, i] = (kv * kv - speed2) / length
+            omega[b, i] = kv / radius[i]
+            theta[b, i] = (home_lengths[i] - length) / radius[i]
+    return lengths, units, omega, curvature, theta
+
+
+@numba.njit(cache=True)
+def _solve3(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``a^-1 rhs`` of a 3x3 ``a`` by Gaussian elimination with partial pivoting."""
+    m = a.copy()
+    x = rhs.copy()
+    for col in range(3):
+        pivot = col
+        for row in range(col + 1, 3):
+            if abs(m[row, col]) > abs(m[pivot, col]):
+                pivot = row
+        if pivot != col:
+            for c in range(3):
+                m[col, c], m[pivot, c] = m[pivot, c], m[col, c]
+            x[col], x[pivot] = x[pivot], x[col]
+        for row in range(col + 1, 3):
+            factor = m[row, col] / m[col, col]
+            for c in range(col, 3):
+                m[row, c] -= factor * m[col, c]
+            x[row] -= factor * x[col]
+    for row in range(2, -1, -1):
+        total = x[row]
+        for c in range(row + 1, 3):
+            total -= m[row, c] * x[c]
+        x[row] = total / m[row, row]
+    return x
+
+
+@numba.njit(cache=True)
+def rigid_acceleration(units: np.ndarray, torque: np.ndarray, resist: np.ndarray,
+                       curvature: np.ndarray, radius: np.ndarray, inertia: np.ndarray,
+                       reflected: np.ndarray, mass: float, gravity_vector: np.ndarray
+                       ) -> np.ndarray:
+    """Platform acceleration (B, 3) of the reduced rigid model,
+    ``(m I + K^T diag(I/R^2) K) p'' = K^T (u - F - I c / R) / R + m g``
+    (:meth:`~cdpr_pipeline.sim.plant.Plant.rigid_acceleration`'s arithmetic), from unit
+    vectors (B, n, 3), drum torques, resisting torques and ``k'.v`` terms (B, n)."""
+    batch, n = units.shape[0], units.shape[1]
+    out = np.empty((batch, 3))
+    matrix = np.empty((3, 3))
+    force = np.empty(3)
+    for b in range(batch):
+        for a in range(3):
+            force[a] = mass * gravity_vector[a]
+            for c in range(3):
+                matrix[a, c] = mass if a == c else 0.0
+        for i in range(n):
+            pull = (torque[b, i] - resist[b, i] - inertia[i] * curvature[b, i] / radius[i]) \
+                / radius[i]
+            for a in range(3):
+                force[a] += units[b, i, a] * pull
+                weighted = units[b, i, a] * reflected[i]
+                for c in range(3):
+                    matrix[a, c] += weighted * units[b, i, c]
+        out[b] = _solve3(matrix, force)
+    return out
