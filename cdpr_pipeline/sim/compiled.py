@@ -47,17 +47,46 @@ def _gram(units: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
-                      min_tension: float) -> None:
-    """:func:`~cdpr_pipeline.sim.controller._nearest_to_bound` on the runs of ``t``
-    (R, n), in place; the Newton loop stops for all runs at once, as the reference's
-    batched loop does."""
-    runs, n = t.shape
+def _solve3(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``a^-1 rhs`` of a 3x3 ``a`` by Gaussian elimination with partial pivoting."""
+    m = a.copy()
+    x = rhs.copy()
+    for col in range(3):
+        pivot = col
+        for row in range(col + 1, 3):
+            if abs(m[row, col]) > abs(m[pivot, col]):
+                pivot = row
+        if pivot != col:
+            for c in range(3):
+                m[col, c], m[pivot, c] = m[pivot, c], m[col, c]
+            x[col], x[pivot] = x[pivot], x[col]
+        for row in range(col + 1, 3):
+            factor = m[row, col] / m[col, col]
+            for c in range(col, 3):
+                m[row, c] -= factor * m[col, c]
+            x[row] -= factor * x[col]
+    for row in range(2, -1, -1):
+        total = x[row]
+        for c in range(row + 1, 3):
+            total -= m[row, c] * x[c]
+        x[row] = total / m[row, row]
+    return x
+
+
+@numba.njit(cache=True)
+def nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
+                     short: np.ndarray, min_tension: float) -> None:
+    """:func:`~cdpr_pipeline.sim.controller._nearest_to_bound` on the ``short`` runs
+    (B,) of ``t`` (B, n), in place; the Newton loop stops for all of them at once, as
+    the reference's batched loop does."""
+    rows = np.flatnonzero(short)
+    runs, n = rows.size, t.shape[1]
     k = n - 3
-    t_force = t.copy()
+    t_force = np.empty((runs, n))
     basis = np.empty((runs, n, k))
     for r in range(runs):
-        left = np.linalg.svd(np.ascontiguousarray(units[r]), full_matrices=True)[0]
+        t_force[r] = t[rows[r]]
+        left = np.linalg.svd(np.ascontiguousarray(units[rows[r]]), full_matrices=True)[0]
         basis[r] = left[:, 3:]
     alpha = np.zeros(runs)
     step = np.zeros((runs, n))
@@ -65,20 +94,20 @@ def _nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
         any_active = False
         for r in range(runs):
             for i in range(n):
-                if min_tension - t[r, i] > TENSION_SLACK_N:
+                if min_tension - t[rows[r], i] > TENSION_SLACK_N:
                     any_active = True
         if not any_active:
             break
         progress = False
         for r in range(runs):
             z = basis[r]
-            short = np.maximum(min_tension - t[r], 0.0)
+            gaps = np.maximum(min_tension - t[rows[r]], 0.0)
             reduced = np.zeros((k, k))
             along = np.zeros(k)
             for i in range(n):
-                active = short[i] > TENSION_SLACK_N
+                active = gaps[i] > TENSION_SLACK_N
                 for a in range(k):
-                    along[a] += z[i, a] * short[i]
+                    along[a] += z[i, a] * gaps[i]
                     if active:
                         for c in range(k):
                             reduced[a, c] += z[i, a] * z[i, c]
@@ -104,14 +133,14 @@ def _nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
                     s += z[i, a] * coords[a]
                 step[r, i] = s
                 biggest = max(biggest, abs(s))
-            now = _shortfall(t[r], min_tension)
+            now = _shortfall(t[rows[r]], min_tension)
             slope = 0.0
             for a in range(k):
                 slope -= along[a] * coords[a]
             alpha[r] = 0.0
             fraction = 1.0
             for _h in range(HALVINGS + 1):
-                if _shortfall(t[r] + fraction * step[r], min_tension) <= \
+                if _shortfall(t[rows[r]] + fraction * step[r], min_tension) <= \
                         now + 1e-4 * fraction * slope:
                     alpha[r] = fraction
                     break
@@ -122,27 +151,30 @@ def _nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
             break
         for r in range(runs):
             for i in range(n):
-                t[r, i] += alpha[r] * step[r, i]
+                t[rows[r], i] += alpha[r] * step[r, i]
     # the steps' rounding off the force: taken back
     for r in range(runs):
         moved = np.zeros(3)
         for i in range(n):
             for a in range(3):
-                moved[a] += units[r, i, a] * (t[r, i] - t_force[r, i])
-        back = np.linalg.solve(gram[r], moved)
+                moved[a] += units[rows[r], i, a] * (t[rows[r], i] - t_force[r, i])
+        back = np.linalg.solve(gram[rows[r]], moved)
         for i in range(n):
             s = 0.0
             for a in range(3):
-                s += units[r, i, a] * back[a]
-            t[r, i] -= s
+                s += units[rows[r], i, a] * back[a]
+            t[rows[r], i] -= s
 
 
 @numba.njit(cache=True)
-def distribute_tensions(units: np.ndarray, force: np.ndarray,
-                        min_tension: float) -> np.ndarray:
-    """:func:`~cdpr_pipeline.sim.controller.distribute_tensions_numpy`, compiled: cable
-    tensions (B, n) with ``K^T t = force`` (B, 3) and ``t >= min_tension`` where
-    possible, from unit vectors ``units`` (B, n, 3)."""
+def shifted_tensions(units: np.ndarray, force: np.ndarray, min_tension: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The first part of :func:`~cdpr_pipeline.sim.controller.distribute_tensions_numpy`:
+    the least-norm tensions (B, n) of ``K^T t = force`` (B, 3), clipped at the bound
+    (3 cables) or shifted along the null-space direction nearest "all cables equally";
+    with the Gram matrices ``K^T K`` (B, 3, 3) and which runs still hold a cable below
+    the bound (B,), for :func:`nearest_to_bound` (kept apart so that a rig that never
+    needs it never compiles its eigen-decompositions)."""
     batch, n = units.shape[0], units.shape[1]
     t = np.empty((batch, n))
     grams = np.empty((batch, 3, 3))
@@ -178,12 +210,7 @@ def distribute_tensions(units: np.ndarray, force: np.ndarray,
             t[b, i] += shift * null_dir[i]
             if t[b, i] < min_tension - TENSION_SLACK_N:
                 short[b] = True
-    if n > 3 and short.any():
-        rows = np.flatnonzero(short)
-        part = t[rows]
-        _nearest_to_bound(units[rows], grams[rows], part, min_tension)
-        t[rows] = part
-    return t
+    return t, grams, short
 
 
 @numba.njit(cache=True)
@@ -219,33 +246,6 @@ def rigid_motion(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarr
 
 
 @numba.njit(cache=True)
-def _solve3(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """``a^-1 rhs`` of a 3x3 ``a`` by Gaussian elimination with partial pivoting."""
-    m = a.copy()
-    x = rhs.copy()
-    for col in range(3):
-        pivot = col
-        for row in range(col + 1, 3):
-            if abs(m[row, col]) > abs(m[pivot, col]):
-                pivot = row
-        if pivot != col:
-            for c in range(3):
-                m[col, c], m[pivot, c] = m[pivot, c], m[col, c]
-            x[col], x[pivot] = x[pivot], x[col]
-        for row in range(col + 1, 3):
-            factor = m[row, col] / m[col, col]
-            for c in range(col, 3):
-                m[row, c] -= factor * m[col, c]
-            x[row] -= factor * x[col]
-    for row in range(2, -1, -1):
-        total = x[row]
-        for c in range(row + 1, 3):
-            total -= m[row, c] * x[c]
-        x[row] = total / m[row, row]
-    return x
-
-
-@numba.njit(cache=True)
 def rigid_acceleration(units: np.ndarray, torque: np.ndarray, resist: np.ndarray,
                        curvature: np.ndarray, radius: np.ndarray, inertia: np.ndarray,
                        reflected: np.ndarray, mass: float, gravity_vector: np.ndarray
@@ -259,10 +259,9 @@ def rigid_acceleration(units: np.ndarray, torque: np.ndarray, resist: np.ndarray
     matrix = np.empty((3, 3))
     force = np.empty(3)
     for b in range(batch):
-        for a in range(3):
-            force[a] = mass * gravity_vector[a]
-            for c in range(3):
-                matrix[a, c] = mass if a == c else 0.0
+        # the cables' sums first, then the platform's terms (as the numpy reference)
+        force[:] = 0.0
+        matrix[:] = 0.0
         for i in range(n):
             pull = (torque[b, i] - resist[b, i] - inertia[i] * curvature[b, i] / radius[i]) \
                 / radius[i]
@@ -271,5 +270,8 @@ def rigid_acceleration(units: np.ndarray, torque: np.ndarray, resist: np.ndarray
                 weighted = units[b, i, a] * reflected[i]
                 for c in range(3):
                     matrix[a, c] += weighted * units[b, i, c]
+        for a in range(3):
+            force[a] += mass * gravity_vector[a]
+            matrix[a, a] += mass
         out[b] = _solve3(matrix, force)
     return out
