@@ -90,6 +90,12 @@ def nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
         basis[r] = left[:, 3:]
     alpha = np.zeros(runs)
     step = np.zeros((runs, n))
+    # each run's last active set and the eigen-decomposition of its reduced matrix,
+    # which depends on nothing else: taken again while the set stays (most steps)
+    last_active = np.zeros((runs, n), dtype=np.bool_)
+    known = np.zeros(runs, dtype=np.bool_)
+    values = np.zeros((runs, k))
+    vectors = np.zeros((runs, k, k))
     for _ in range(NEWTON_STEPS):
         any_active = False
         for r in range(runs):
@@ -102,16 +108,24 @@ def nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
         for r in range(runs):
             z = basis[r]
             gaps = np.maximum(min_tension - t[rows[r]], 0.0)
-            reduced = np.zeros((k, k))
             along = np.zeros(k)
+            same = known[r]
             for i in range(n):
                 active = gaps[i] > TENSION_SLACK_N
+                same = same and active == last_active[r, i]
+                last_active[r, i] = active
                 for a in range(k):
                     along[a] += z[i, a] * gaps[i]
-                    if active:
-                        for c in range(k):
-                            reduced[a, c] += z[i, a] * z[i, c]
-            w, v = np.linalg.eigh(reduced)
+            if not same:
+                reduced = np.zeros((k, k))
+                for i in range(n):
+                    if last_active[r, i]:
+                        for a in range(k):
+                            for c in range(k):
+                                reduced[a, c] += z[i, a] * z[i, c]
+                values[r], vectors[r] = np.linalg.eigh(reduced)
+                known[r] = True
+            w, v = values[r], vectors[r]
             largest = 0.0
             for a in range(k):
                 largest = max(largest, abs(w[a]))
@@ -274,4 +288,62 @@ def rigid_acceleration(units: np.ndarray, torque: np.ndarray, resist: np.ndarray
             force[a] += mass * gravity_vector[a]
             matrix[a, a] += mass
         out[b] = _solve3(matrix, force)
+    return out
+
+
+@numba.njit(cache=True)
+def winch_paths(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
+                position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Unit vectors (B, n, 3), winch speeds, accelerations and angles (B, n) of rigid
+    cables at a platform's position, velocity and acceleration (B, 3):
+    :func:`~cdpr_pipeline.sim.kinematics.winch_rates` with its geometry."""
+    _, units, omega, curvature, theta = rigid_motion(anchors, home_lengths, radius,
+                                                     position, velocity)
+    alpha = np.empty_like(omega)
+    for b in range(units.shape[0]):
+        for i in range(units.shape[1]):
+            ka = (units[b, i, 0] * acceleration[b, 0] + units[b, i, 1] * acceleration[b, 1]
+                  + units[b, i, 2] * acceleration[b, 2])
+            alpha[b, i] = (ka + curvature[b, i]) / radius[i]
+    return units, omega, alpha, theta
+
+
+@numba.njit(cache=True)
+def implicit_matrices(units: np.ndarray, reflected: np.ndarray, slope: np.ndarray,
+                      mass: float, factor: float) -> tuple[np.ndarray, np.ndarray]:
+    """The reduced mass matrices ``M = m I + K^T diag(I / R^2) K`` (B, 3, 3) and
+    ``W = M + factor K^T diag(slope) K`` of the linearly implicit step, ``slope`` (B, n)
+    the friction's slope over ``R^2``."""
+    batch, n = units.shape[0], units.shape[1]
+    masses = np.zeros((batch, 3, 3))
+    damped = np.zeros((batch, 3, 3))
+    for b in range(batch):
+        for i in range(n):
+            for a in range(3):
+                weighted = units[b, i, a] * reflected[i]
+                damping = units[b, i, a] * slope[b, i]
+                for c in range(3):
+                    masses[b, a, c] += weighted * units[b, i, c]
+                    damped[b, a, c] += damping * units[b, i, c]
+        for a in range(3):
+            masses[b, a, a] += mass
+        for a in range(3):
+            for c in range(3):
+                damped[b, a, c] = masses[b, a, c] + factor * damped[b, a, c]
+    return masses, damped
+
+
+@numba.njit(cache=True)
+def implicit_solve(damped: np.ndarray, masses: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """``W^-1 f`` of the linearly implicit step on every run's state rates ``f`` (B, S),
+    ``W = I - gamma dt J`` with ``J`` nonzero only in ``dv'/dv = -M^-1 D``: the velocity
+    rates become ``(M + gamma dt D)^-1 M f_v``, the others stay."""
+    out = rates.copy()
+    moved = np.empty(3)
+    for b in range(rates.shape[0]):
+        for a in range(3):
+            moved[a] = (masses[b, a, 0] * rates[b, 3] + masses[b, a, 1] * rates[b, 4]
+                        + masses[b, a, 2] * rates[b, 5])
+        out[b, 3:6] = _solve3(damped[b], moved)
     return out
