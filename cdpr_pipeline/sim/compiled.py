@@ -347,3 +347,125 @@ def implicit_solve(damped: np.ndarray, masses: np.ndarray, rates: np.ndarray) ->
                         + masses[b, a, 2] * rates[b, 5])
         out[b, 3:6] = _solve3(damped[b], moved)
     return out
+
+
+@numba.njit(cache=True)
+def _log1p_over(x: float) -> float:
+    if abs(x) < 1e-6:
+        return 1.0 - 0.5 * x
+    return np.log1p(x) / x
+
+
+@numba.njit(cache=True)
+def _expm1_over(y: float) -> float:
+    if abs(y) < 1e-6:
+        return 1.0 + 0.5 * y
+    return np.expm1(y) / y
+
+
+@numba.njit(cache=True)
+def _time_weight(x: float) -> float:
+    if abs(x) < 1e-4:
+        return 1.0 - x / 3.0 + x * x / 6.0
+    return 2.0 * ((1.0 + x) * np.log1p(x) - x) / (x * x)
+
+
+@numba.njit(cache=True)
+def path_nodes(omega: np.ndarray, alpha: np.ndarray, beta: np.ndarray, h: np.ndarray,
+               reach: np.ndarray, g0: np.ndarray, offsets: np.ndarray, even: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The speeds (Q, D) at which :func:`~cdpr_pipeline.sim.friction_path.
+    friction_over_step` reads the law along each of D drives' paths (sorted, the first
+    the start), and the paths' directions (D,): the numpy reference's ``w`` and
+    ``direction``; every input (D,) but the node shares ``offsets`` about zero speed
+    and ``even`` along the path."""
+    drives = omega.size
+    nodes = even.size + offsets.size
+    w = np.empty((nodes, drives))
+    direction = np.empty(drives)
+    share = np.empty(nodes)
+    for d in range(drives):
+        sense = 1.0 if g0[d] >= 0.0 else -1.0
+        direction[d] = sense
+        span = h[d] * (abs(alpha[d]) + beta[d] * reach[d]) * sense
+        if span == 0.0:
+            span = sense * 1e-300
+        zero = -omega[d] / span
+        for q in range(even.size):
+            share[q] = even[q]
+        for q in range(offsets.size):
+            share[even.size + q] = min(max(zero + offsets[q], 0.0), 1.0)
+        share.sort()
+        for q in range(nodes):
+            w[q, d] = omega[d] + span * share[q]
+    return w, direction
+
+
+@numba.njit(cache=True)
+def path_friction(w: np.ndarray, g: np.ndarray, direction: np.ndarray, omega: np.ndarray,
+                  alpha: np.ndarray, beta: np.ndarray, h: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The friction over the step, ``c0 + c1 (t - h / 2)``, of D drives from their
+    paths' nodes ``w`` (Q, D) and the speed's rates ``g`` there (``g[0]`` at the start):
+    the arithmetic of :func:`~cdpr_pipeline.sim.friction_path.friction_over_step`
+    after the law's call, drive by drive."""
+    nodes, drives = w.shape
+    c0 = np.empty(drives)
+    c1 = np.empty(drives)
+    t = np.empty(nodes)
+    full = np.empty(nodes)
+    blocked = np.empty(nodes, dtype=np.bool_)
+    for d in range(drives):
+        sense = direction[d]
+        stop = False
+        for q in range(nodes):
+            stop = stop or not (g[q, d] * sense > 0.0)
+            blocked[q] = stop
+        t[0] = 0.0
+        full[0] = 0.0
+        for q in range(nodes - 1):
+            if blocked[q + 1]:
+                t[q + 1] = t[q] + np.inf
+                full[q + 1] = full[q]
+                continue
+            stretch = w[q + 1, d] - w[q, d]
+            x = g[q + 1, d] / g[q, d] - 1.0
+            t[q + 1] = t[q] + stretch / g[q, d] * _log1p_over(x)
+            moment = stretch ** 2 / (2.0 * g[q, d]) * _time_weight(x)
+            full[q + 1] = full[q] + (t[q] * stretch + moment)
+        count = 0
+        for q in range(nodes):
+            if t[q] <= h[d]:
+                count += 1
+        last = max(count - 1, 0)
+        nxt = min(last + 1, nodes - 1)
+        w_a, g_a, t_a = w[last, d], g[last, d], t[last]
+        w_n, g_n = w[nxt, d], g[nxt, d]
+        inside = last + 1 < nodes
+        at_root = blocked[nxt] and inside
+        if at_root:
+            w_b = w_a + (w_n - w_a) * g_a / (g_a - g_n)
+            g_b = 0.0
+        else:
+            w_b, g_b = w_n, g_n
+        u = w_b - w_a
+        sigma = (g_b - g_a) / u if inside and u != 0.0 else 0.0
+        tau = h[d] - t_a
+        w1 = w_a + g_a * tau * _expm1_over(sigma * tau)
+        if at_root and (w1 - w_b) * sense > 0.0:
+            w1 = w_b
+        x1 = sigma * (w1 - w_a) / g_a
+        if x1 < -1.0 + 1e-15:
+            x1 = -1.0 + 1e-15
+        partial = t_a * (w1 - w_a) + (w1 - w_a) ** 2 / (2.0 * g_a) * _time_weight(x1)
+        if not np.isfinite(partial):
+            partial = 0.0
+        time_integral = full[last] + partial
+        if g[0, d] == 0.0:          # a drive already at a root of g stays there
+            w1 = omega[d]
+            time_integral = 0.0
+        impulse = (alpha[d] * h[d] - (w1 - omega[d])) / beta[d]
+        first = (0.5 * alpha[d] * h[d] * h[d] - time_integral) / beta[d] - 0.5 * h[d] * impulse
+        c0[d] = impulse / h[d]
+        c1[d] = 12.0 * first / h[d] ** 3
+    return c0, c1
