@@ -17,6 +17,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+#: compiled once, cached beside this module; floating-point errors as numpy has them
+#: (a division by zero gives inf or nan, as in the numpy reference, not an exception)
+_kernel = numba.njit(cache=True, error_model="numpy")
+
 #: how far below the bound a tension may stay (N): rounding, not a choice
 TENSION_SLACK_N = 1e-9
 #: Newton steps of the nearest-to-bound search at most, and halvings of a step
@@ -26,7 +30,7 @@ NEWTON_STEPS, HALVINGS = 100, 30
 PINV_RCOND = 1e-15
 
 
-@numba.njit(cache=True)
+@_kernel
 def _shortfall(t: np.ndarray, min_tension: float) -> float:
     total = 0.0
     for i in range(t.shape[0]):
@@ -36,7 +40,7 @@ def _shortfall(t: np.ndarray, min_tension: float) -> float:
     return 0.5 * total
 
 
-@numba.njit(cache=True)
+@_kernel
 def _gram(units: np.ndarray) -> np.ndarray:
     out = np.zeros((3, 3))
     for i in range(units.shape[0]):
@@ -46,7 +50,7 @@ def _gram(units: np.ndarray) -> np.ndarray:
     return out
 
 
-@numba.njit(cache=True)
+@_kernel
 def _solve3(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """``a^-1 rhs`` of a 3x3 ``a`` by Gaussian elimination with partial pivoting."""
     m = a.copy()
@@ -73,7 +77,7 @@ def _solve3(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     return x
 
 
-@numba.njit(cache=True)
+@_kernel
 def nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
                      short: np.ndarray, min_tension: float) -> None:
     """:func:`~cdpr_pipeline.sim.controller._nearest_to_bound` on the ``short`` runs
@@ -180,7 +184,7 @@ def nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
             t[rows[r], i] -= s
 
 
-@numba.njit(cache=True)
+@_kernel
 def shifted_tensions(units: np.ndarray, force: np.ndarray, min_tension: float
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The first part of :func:`~cdpr_pipeline.sim.controller.distribute_tensions_numpy`:
@@ -227,7 +231,7 @@ def shifted_tensions(units: np.ndarray, force: np.ndarray, min_tension: float
     return t, grams, short
 
 
-@numba.njit(cache=True)
+@_kernel
 def rigid_motion(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
                  position: np.ndarray, velocity: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -259,7 +263,7 @@ def rigid_motion(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarr
     return lengths, units, omega, curvature, theta
 
 
-@numba.njit(cache=True)
+@_kernel
 def rigid_acceleration(units: np.ndarray, torque: np.ndarray, resist: np.ndarray,
                        curvature: np.ndarray, radius: np.ndarray, inertia: np.ndarray,
                        reflected: np.ndarray, mass: float, gravity_vector: np.ndarray
@@ -291,7 +295,7 @@ def rigid_acceleration(units: np.ndarray, torque: np.ndarray, resist: np.ndarray
     return out
 
 
-@numba.njit(cache=True)
+@_kernel
 def winch_paths(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
                 position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -309,7 +313,7 @@ def winch_paths(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarra
     return units, omega, alpha, theta
 
 
-@numba.njit(cache=True)
+@_kernel
 def implicit_matrices(units: np.ndarray, reflected: np.ndarray, slope: np.ndarray,
                       mass: float, factor: float) -> tuple[np.ndarray, np.ndarray]:
     """The reduced mass matrices ``M = m I + K^T diag(I / R^2) K`` (B, 3, 3) and
@@ -334,7 +338,7 @@ def implicit_matrices(units: np.ndarray, reflected: np.ndarray, slope: np.ndarra
     return masses, damped
 
 
-@numba.njit(cache=True)
+@_kernel
 def implicit_solve(damped: np.ndarray, masses: np.ndarray, rates: np.ndarray) -> np.ndarray:
     """``W^-1 f`` of the linearly implicit step on every run's state rates ``f`` (B, S),
     ``W = I - gamma dt J`` with ``J`` nonzero only in ``dv'/dv = -M^-1 D``: the velocity
@@ -349,28 +353,28 @@ def implicit_solve(damped: np.ndarray, masses: np.ndarray, rates: np.ndarray) ->
     return out
 
 
-@numba.njit(cache=True)
+@_kernel
 def _log1p_over(x: float) -> float:
     if abs(x) < 1e-6:
         return 1.0 - 0.5 * x
     return np.log1p(x) / x
 
 
-@numba.njit(cache=True)
+@_kernel
 def _expm1_over(y: float) -> float:
     if abs(y) < 1e-6:
         return 1.0 + 0.5 * y
     return np.expm1(y) / y
 
 
-@numba.njit(cache=True)
+@_kernel
 def _time_weight(x: float) -> float:
     if abs(x) < 1e-4:
         return 1.0 - x / 3.0 + x * x / 6.0
     return 2.0 * ((1.0 + x) * np.log1p(x) - x) / (x * x)
 
 
-@numba.njit(cache=True)
+@_kernel
 def path_nodes(omega: np.ndarray, alpha: np.ndarray, beta: np.ndarray, h: np.ndarray,
                reach: np.ndarray, g0: np.ndarray, offsets: np.ndarray, even: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray]:
@@ -401,7 +405,7 @@ def path_nodes(omega: np.ndarray, alpha: np.ndarray, beta: np.ndarray, h: np.nda
     return w, direction
 
 
-@numba.njit(cache=True)
+@_kernel
 def path_friction(w: np.ndarray, g: np.ndarray, direction: np.ndarray, omega: np.ndarray,
                   alpha: np.ndarray, beta: np.ndarray, h: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
