@@ -13,6 +13,7 @@ import numpy as np
 from cdpr_pipeline.data.rig import ControllerSpec
 from cdpr_pipeline.sim import compiled
 from cdpr_pipeline.sim.compiled import HALVINGS, NEWTON_STEPS, PINV_RCOND, TENSION_SLACK_N
+from cdpr_pipeline.sim.kinematics import cable_geometry, winch_rates
 from cdpr_pipeline.sim.model_rows import plant_of_rows
 from cdpr_pipeline.sim.plant import Plant
 
@@ -162,12 +163,12 @@ class ComputedTorquePD:
             + self.spec.kd * (desired_velocity - velocity)
             + self.spec.kp * (desired - position)
         )
-        R = plant.drum_radius
-        # the geometry, winch speeds, accelerations and angles in one compiled call
-        units, omega, alpha, theta = compiled.winch_paths(
-            plant.anchors, plant.home_lengths, R, position, velocity, a_cmd)
+        g, units = cable_geometry(plant.anchors, position)
         force = plant.mass * (a_cmd - plant.gravity_vector)
         tension = distribute_tensions(units, force, self.spec.min_tension_n)
+        R = plant.drum_radius
+        omega, alpha, _ = winch_rates(units, g, velocity, a_cmd, R)
+        theta = plant.winch_angle_from_length(g)
         return R * tension + plant.winch.inertia * alpha + plant.friction_torque(theta, omega)
 
 
