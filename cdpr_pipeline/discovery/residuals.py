@@ -263,6 +263,13 @@ def _extra_rows(sig: RunSignals, effect, model: Model, key: tuple | None
         extra = effect.winch_torque(sig.theta, sig.omega, model)
         if extra is None:
             return None
+        if key is not None:
+            # the same effect on a model changed elsewhere (a winch parameter, a lag, an
+            # anchor a candidate moves beside a kept cause) mostly puts the same torque:
+            # its rows as they are (a function of the torque alone), not filtered again
+            same = _same_extra(sig, key[0], extra)
+            if same is not None:
+                return same
         # the block this effect's last value made on the run: its unchanged columns
         # are not filtered again
         last_key = ("residuals", "last extra", type(effect))
@@ -272,9 +279,34 @@ def _extra_rows(sig: RunSignals, effect, model: Model, key: tuple | None
             # (where winches mix, every column is filtered again: the full-rate block,
             # 1 MB per effect a run on 8 cables at 1 kHz, would be kept for nothing)
             sig.cache[last_key] = (extra, block)
+        if key is not None:
+            _memo(sig, "extra by torque", key[0], lambda: (extra, block),
+                  size=_SAME_EXTRA_SIZE)
         return block
 
     return make() if key is None else _memo(sig, "extra", key, make, size=64)
+
+
+#: effects per run whose full-rate extra torque is kept to be recognised on another
+#: model (:func:`_same_extra`): the kept causes of a forward step, and the trial value a
+#: fit moves through (1 MB each a run on 8 cables at 1 kHz)
+_SAME_EXTRA_SIZE = 3
+
+
+def _same_extra(sig: RunSignals, effect_key: bytes, extra: np.ndarray) -> _Filtered | None:
+    """The filtered block of an effect of these parameters (``effect_key``) made on
+    another model of the run, when its extra torque was exactly ``extra``; else None.
+    Where the memo of :func:`_extra_rows` misses only because the model's own parameters
+    changed (a screen of a later step fitting a winch parameter beside a kept Stribeck
+    bump re-filtered the bump at every evaluation: 8 cables at 1 kHz)."""
+    store = sig.cache.get(("residuals", "extra by torque"), {})
+    if effect_key not in store:
+        return None
+    before, block = store[effect_key]
+    if before.shape != extra.shape or not np.array_equal(before, extra):
+        return None
+    store[effect_key] = store.pop(effect_key)       # now the most recent
+    return block
 
 
 def own_extra_rows(model: Model, before: Model, signals: Sequence[RunSignals]
