@@ -290,9 +290,10 @@ def _extra_rows(sig: RunSignals, effect, model: Model, key: tuple | None
 
 
 #: effects per run whose full-rate extra torque is kept to be recognised on another
-#: model (:func:`_same_extra`): the kept causes of a forward step, and the trial value a
-#: fit moves through (1 MB each a run on 8 cables at 1 kHz)
-_SAME_EXTRA_SIZE = 3
+#: model (:func:`_same_extra`): the last one made, 1 MB a run on 8 cables at 1 kHz (a
+#: screen's evaluations alternate between the kept cause's trial value and the
+#: candidate's steps around it; three caught 33 more of 9600 filterings there)
+_SAME_EXTRA_SIZE = 1
 
 
 def _same_extra(sig: RunSignals, effect_key: bytes, extra: np.ndarray) -> _Filtered | None:
