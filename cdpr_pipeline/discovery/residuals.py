@@ -265,13 +265,15 @@ def _extra_rows(sig: RunSignals, effect, model: Model, key: tuple | None
         extra = effect.winch_torque(sig.theta, sig.omega, model)
         if extra is None:
             return None
-        if key is not None:
-            # the same effect on a model changed elsewhere (a winch parameter, a lag, an
-            # anchor a candidate moves beside a kept cause) mostly puts the same torque:
-            # its rows as they are (a function of the torque alone), not filtered again
-            same = _same_extra(sig, key[0], extra)
-            if same is not None:
-                return same
+        # the same effect on a model changed elsewhere (a winch parameter, a lag, an
+        # anchor a candidate moves beside a kept cause: a later step's screen) mostly
+        # puts the same torque, whose rows are taken as they are, not filtered again;
+        # the last effect's torque is kept per run (1 MB on 8 cables at 1 kHz; three
+        # caught 33 more of 9600 filterings there)
+        same = sig.cache.get(("residuals", "same extra"))
+        if key is not None and same is not None and same[0] == key[0] \
+                and same[1].shape == extra.shape and np.array_equal(same[1], extra):
+            return same[2]
         # the block this effect's last value made on the run: its unchanged columns
         # are not filtered again
         last_key = ("residuals", "last extra", type(effect))
@@ -282,34 +284,10 @@ def _extra_rows(sig: RunSignals, effect, model: Model, key: tuple | None
             # 1 MB per effect a run on 8 cables at 1 kHz, would be kept for nothing)
             sig.cache[last_key] = (extra, block)
         if key is not None:
-            _memo(sig, "extra by torque", key[0], lambda: (extra, block),
-                  size=_SAME_EXTRA_SIZE)
+            sig.cache[("residuals", "same extra")] = (key[0], extra, block)
         return block
 
     return make() if key is None else _memo(sig, "extra", key, make, size=64)
-
-
-#: effects per run whose full-rate extra torque is kept to be recognised on another
-#: model (:func:`_same_extra`): the last one made, 1 MB a run on 8 cables at 1 kHz (a
-#: screen's evaluations alternate between the kept cause's trial value and the
-#: candidate's steps around it; three caught 33 more of 9600 filterings there)
-_SAME_EXTRA_SIZE = 1
-
-
-def _same_extra(sig: RunSignals, effect_key: bytes, extra: np.ndarray) -> _Filtered | None:
-    """The filtered block of an effect of these parameters (``effect_key``) made on
-    another model of the run, when its extra torque was exactly ``extra``; else None.
-    Where the memo of :func:`_extra_rows` misses only because the model's own parameters
-    changed (a screen of a later step fitting a winch parameter beside a kept Stribeck
-    bump re-filtered the bump at every evaluation: 8 cables at 1 kHz)."""
-    store = sig.cache.get(("residuals", "extra by torque"), {})
-    if effect_key not in store:
-        return None
-    before, block = store[effect_key]
-    if before.shape != extra.shape or not np.array_equal(before, extra):
-        return None
-    store[effect_key] = store.pop(effect_key)       # now the most recent
-    return block
 
 
 def own_extra_rows(model: Model, before: Model, signals: Sequence[RunSignals]
