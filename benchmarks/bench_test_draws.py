@@ -18,8 +18,10 @@ seeds are listed, each replayed by ``CDPR_TEST_SEED=<seed> python -m pytest -n 0
 cores runs shards side by side instead, each a process with its own ``--first-draw``,
 ``--draws`` and ``--out`` (and ``--measured COMMIT`` where the checkout has no git);
 ``--merge A.json B.json ...`` then counts the shards' draws together and records them
-with the machine and commit the shards ran on. A shard stopped early keeps the draws it
-finished; a test's row says how many draws it got. Results go to JSON
+with the machine and commit the shards ran on. ``--shards N [--stop-after S]`` does both
+in one command: N shard processes side by side, each ``-n`` as given (0 on a machine
+with a core per shard), stopped after S seconds where given. A shard stopped early keeps
+the draws it finished; a test's row says how many draws it got. Results go to JSON
 after every draw (``--resume`` continues an interrupted run from it) and, at the end,
 into this benchmark's section of docs/measurements.md (``test-draws``; ``--no-record``
 leaves it alone, as for a trial on a few tests). Draws are costly, so the tests are
@@ -187,7 +189,7 @@ def _draw_span(results: dict) -> str:
         if k + 1 == len(indices) or indices[k + 1] != index + 1:
             spans.append(f"{start}-{index}" if index > start else f"{start}")
             start = None
-    return f"draw_seeds(0, {indices[-1] + 1 if indices else 0})`, draws {', '.join(spans)}`"
+    return f"draw_seeds(0, {indices[-1] + 1 if indices else 0})`, draws `{', '.join(spans)}"
 
 
 def markdown(summary: dict[str, dict], results: dict) -> str:
@@ -198,7 +200,11 @@ def markdown(summary: dict[str, dict], results: dict) -> str:
              and s["pass_rate"] < TARGET]
     lines = [f"{len(summary)} random-draw tests, {each} "
              f"(`CDPR_TEST_SEED` from the fixed sequence `{_draw_span(results)}`), "
-             f"pytest `-n {results['workers']}`; pass rate = passed / (passed + "
+             f"pytest `-n {results['workers']}`"
+             + (f" in each of {results['shards']} shards run side by side on the machine "
+                "named above (one process per core), counted together by `--merge`"
+                if results.get("shards") else "")
+             + "; pass rate = passed / (passed + "
              f"failed + xfail), target at least {100 * TARGET:.1f} %. "
              f"{len(below)} below it. Replay a failing seed with "
              "`CDPR_TEST_SEED=<seed> python -m pytest -n 0 '<test>'`.", "",
@@ -236,9 +242,48 @@ def merge(shards: list[dict]) -> dict:
     machine, commit = where.pop()
     return {"first_draw": index[order[0]] if order else 0,
             "indices": [index[s] for s in order], "seeds": order,
-            "workers": max(r["workers"] for r in shards), "machine": machine,
+            "workers": max(r["workers"] for r in shards), "shards": len(shards),
+            "machine": machine,
             "commit": commit, "load": max(r.get("load", 0.0) for r in shards),
             "tests": {t: tests[t] for t in sorted(tests)}}
+
+
+def shard_ranges(first: int, draws: int, shards: int) -> list[tuple[int, int]]:
+    """``(first draw, count)`` of each of ``shards`` contiguous ranges covering draws
+    ``first .. first + draws - 1``, their counts within one of each other."""
+    cuts = [first + k * draws // shards for k in range(shards + 1)]
+    return [(a, b - a) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+
+
+def run_shards(args: argparse.Namespace) -> list[Path]:
+    """Draws ``first .. first + draws - 1`` cut into ``args.shards`` contiguous ranges, each
+    run by this script as its own process (``-n`` as given, usually 0) into its own
+    ``--out`` file; stopped after ``args.stop_after`` seconds where given (each shard
+    keeps the draws it finished). The shards' files, for :func:`merge`."""
+    commit = args.measured or measurements.commit()
+    outs, procs = [], []
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    for k, (first, count) in enumerate(shard_ranges(args.first_draw, args.draws,
+                                                    args.shards)):
+        out = args.out.with_name(f"{args.out.stem}.shard{k:02d}.json")
+        cmd = [sys.executable, "-m", "benchmarks.bench_test_draws", "--first-draw", str(first),
+               "--draws", str(count), "-n", str(args.workers), "--out", str(out),
+               "--no-record", "--measured", commit,
+               *(["--resume"] if args.resume else []), *(["--slow"] if args.slow else []),
+               *(["-k", args.keyword] if args.keyword else []),
+               *(["--tests", *args.tests] if args.tests else [])]
+        log = out.with_suffix(".log").open("w")
+        procs.append(subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT))
+        outs.append(out)
+    deadline = None if args.stop_after is None else time.monotonic() + args.stop_after
+    for proc in procs:
+        try:
+            proc.wait(None if deadline is None else max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            proc.terminate()
+            proc.wait()
+    print(f"{args.shards} shards done; their draws in {args.out.parent}", flush=True)
+    return outs
 
 
 def main() -> None:
@@ -264,14 +309,28 @@ def main() -> None:
                         help="the commit measured, where the checkout cannot tell (no git)")
     parser.add_argument("--merge", nargs="+", type=Path, default=None,
                         help="count the draws of these shards' --out files together and "
-                             "record them (no test is run)")
+                             "record them (no test is run; --tests keeps the tests named)")
+    parser.add_argument("--shards", type=int, default=1,
+                        help="run the draws as this many processes side by side (a "
+                             "many-core machine), each its own --out, then count them "
+                             "together")
+    parser.add_argument("--stop-after", type=float, default=None,
+                        help="with --shards: stop the shards after this many seconds and "
+                             "count the draws they finished (a lent machine's time)")
     args = parser.parse_args()
     section = ("test-draws", "Pass rate of every random-draw test")
     if args.part:
         section = (f"test-draws-{args.part}", f"Pass rate of random-draw tests: {args.part}")
 
+    if args.shards > 1:
+        args.merge = run_shards(args)
     if args.merge:
-        results = merge([json.loads(p.read_text()) for p in args.merge])
+        results = merge([json.loads(p.read_text()) for p in args.merge if p.exists()])
+        if args.tests:      # the shards' tests that these name (node ids or their prefixes)
+            results["tests"] = {t: d for t, d in results["tests"].items()
+                                if any(t.startswith(prefix) for prefix in args.tests)}
+        if args.shards > 1:
+            args.out.write_text(json.dumps(results, indent=1))
         text = markdown(summarise(results), results)
         print(text)
         if args.record:

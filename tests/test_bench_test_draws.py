@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import pytest
 
-from benchmarks.bench_test_draws import draw_seeds, markdown, merge, outcomes, summarise
+from benchmarks.bench_test_draws import (
+    draw_seeds,
+    markdown,
+    merge,
+    outcomes,
+    shard_ranges,
+    summarise,
+)
 
 A = "tests/discovery/test_x.py::test_a[cdpr]"
 B = "tests/discovery/test_x.py::test_b"
@@ -66,6 +73,14 @@ def test_shards_of_one_measurement_are_counted_together_in_the_sequences_order()
     assert summary[A]["draws"] == 4 and summary[B]["draws"] == 3
     assert summary[B]["failing_seeds"] == [seeds[0]]
     text = markdown(summary, merged)
-    assert "3-4 draws each" in text and "draws 0-1, 3, 5" in text
+    assert "3-4 draws each" in text and "draws `0-1, 3, 5`" in text
     with pytest.raises(SystemExit, match="different machines"):
         merge([first, {**second, "commit": "def5678"}])
+
+
+def test_shards_cover_the_draws_once_in_near_equal_ranges():
+    ranges = shard_ranges(10, 200, 16)
+    assert ranges[0] == (10, 12) and sum(n for _, n in ranges) == 200
+    covered = [k for first, n in ranges for k in range(first, first + n)]
+    assert covered == list(range(10, 210))
+    assert max(n for _, n in ranges) - min(n for _, n in ranges) <= 1
