@@ -14,7 +14,14 @@ seeds are listed, each replayed by ``CDPR_TEST_SEED=<seed> python -m pytest -n 0
     python -m benchmarks.bench_test_draws [--draws 200] [-n 2] [-k EXPR] [--slow]
         [--tests NODEID ...] [--first-draw 0] [--out results/test_draws.json] [--resume]
 
-``-n`` runs each draw's tests on that many pytest-xdist processes. Results go to JSON
+``-n`` runs each draw's tests on that many pytest-xdist processes. A machine with many
+cores runs shards side by side instead, each a process with its own ``--first-draw``,
+``--draws`` and ``--out`` (and ``--measured COMMIT`` where the checkout has no git);
+``--merge A.json B.json ...`` then counts the shards' draws together and records them
+with the machine and commit the shards ran on. ``--shards N [--stop-after S]`` does both
+in one command: N shard processes side by side, each ``-n`` as given (0 on a machine
+with a core per shard), stopped after S seconds where given. A shard stopped early keeps
+the draws it finished; a test's row says how many draws it got. Results go to JSON
 after every draw (``--resume`` continues an interrupted run from it) and, at the end,
 into this benchmark's section of docs/measurements.md (``test-draws``; ``--no-record``
 leaves it alone, as for a trial on a few tests). Draws are costly, so the tests are
@@ -63,6 +70,13 @@ ROOT = measurements.ROOT
 #: the base of the benchmark's seed sequence (not a commit: the same draws everywhere)
 SEED_BASE = "bench_test_draws"
 TARGET = 0.995
+
+
+def _load() -> float:
+    try:
+        return os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return 0.0
 
 
 def draw_seeds(first: int, count: int) -> list[int]:
@@ -163,13 +177,34 @@ def summarise(results: dict[str, dict]) -> dict[str, dict]:
     return out
 
 
+def _draw_span(results: dict) -> str:
+    """Which draws of the fixed sequence a run holds: ``draw_seeds(first, n)`` for one run,
+    index ranges for merged shards."""
+    indices = results.get("indices")
+    if indices is None:
+        return f"draw_seeds({results['first_draw']}, {len(results['seeds'])})"
+    spans, start = [], None
+    for k, index in enumerate(indices):
+        start = index if start is None else start
+        if k + 1 == len(indices) or indices[k + 1] != index + 1:
+            spans.append(f"{start}-{index}" if index > start else f"{start}")
+            start = None
+    return f"draw_seeds(0, {indices[-1] + 1 if indices else 0})`, draws `{', '.join(spans)}"
+
+
 def markdown(summary: dict[str, dict], results: dict) -> str:
-    n_draws = len(results["seeds"])
+    counts = sorted({s["draws"] for s in summary.values()})
+    each = (f"{counts[0]} draws each" if len(counts) == 1
+            else f"{counts[0]}-{counts[-1]} draws each (per test in the table)")
     below = [t for t, s in summary.items() if s["pass_rate"] is not None
              and s["pass_rate"] < TARGET]
-    lines = [f"{len(summary)} random-draw tests, {n_draws} draws each "
-             f"(`CDPR_TEST_SEED` from the fixed sequence `draw_seeds({results['first_draw']}, "
-             f"{n_draws})`), pytest `-n {results['workers']}`; pass rate = passed / (passed + "
+    lines = [f"{len(summary)} random-draw tests, {each} "
+             f"(`CDPR_TEST_SEED` from the fixed sequence `{_draw_span(results)}`), "
+             f"pytest `-n {results['workers']}`"
+             + (f" in each of {results['shards']} shards run side by side on the machine "
+                "named above (one process per core), counted together by `--merge`"
+                if results.get("shards") else "")
+             + "; pass rate = passed / (passed + "
              f"failed + xfail), target at least {100 * TARGET:.1f} %. "
              f"{len(below)} below it. Replay a failing seed with "
              "`CDPR_TEST_SEED=<seed> python -m pytest -n 0 '<test>'`.", "",
@@ -185,6 +220,70 @@ def markdown(summary: dict[str, dict], results: dict) -> str:
         lines.append(f"| `{nodeid}` | {s['draws']} | {s['passed']} | {s['failed']} | "
                      f"{s['xfail']} | {rate} | {s['mean_s']:.2f} | {seeds} |")
     return "\n".join(lines)
+
+
+def merge(shards: list[dict]) -> dict:
+    """The draws of several runs (shards of one measurement) counted together: the seeds
+    of every shard in the order of the fixed sequence, each test's outcomes joined. The
+    shards must share the machine and commit they ran on."""
+    where = {(r.get("machine"), r.get("commit")) for r in shards}
+    if len(where) != 1:
+        raise SystemExit(f"shards from different machines or commits: {sorted(map(str, where))}")
+    index = {}
+    for r in shards:
+        for k, seed in enumerate(r["seeds"], start=r.get("first_draw", 0)):
+            index[seed] = k
+    tests: dict[str, dict] = {}
+    for r in shards:
+        for nodeid, draws in r["tests"].items():
+            tests.setdefault(nodeid, {}).update(
+                {seed: outcome for seed, outcome in draws.items() if int(seed) in index})
+    order = sorted(index, key=index.get)
+    machine, commit = where.pop()
+    return {"first_draw": index[order[0]] if order else 0,
+            "indices": [index[s] for s in order], "seeds": order,
+            "workers": max(r["workers"] for r in shards), "shards": len(shards),
+            "machine": machine,
+            "commit": commit, "load": max(r.get("load", 0.0) for r in shards),
+            "tests": {t: tests[t] for t in sorted(tests)}}
+
+
+def shard_ranges(first: int, draws: int, shards: int) -> list[tuple[int, int]]:
+    """``(first draw, count)`` of each of ``shards`` contiguous ranges covering draws
+    ``first .. first + draws - 1``, their counts within one of each other."""
+    cuts = [first + k * draws // shards for k in range(shards + 1)]
+    return [(a, b - a) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+
+
+def run_shards(args: argparse.Namespace) -> list[Path]:
+    """Draws ``first .. first + draws - 1`` cut into ``args.shards`` contiguous ranges, each
+    run by this script as its own process (``-n`` as given, usually 0) into its own
+    ``--out`` file; stopped after ``args.stop_after`` seconds where given (each shard
+    keeps the draws it finished). The shards' files, for :func:`merge`."""
+    commit = args.measured or measurements.commit()
+    outs, procs = [], []
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    for k, (first, count) in enumerate(shard_ranges(args.first_draw, args.draws,
+                                                    args.shards)):
+        out = args.out.with_name(f"{args.out.stem}.shard{k:02d}.json")
+        cmd = [sys.executable, "-m", "benchmarks.bench_test_draws", "--first-draw", str(first),
+               "--draws", str(count), "-n", str(args.workers), "--out", str(out),
+               "--no-record", "--measured", commit,
+               *(["--resume"] if args.resume else []), *(["--slow"] if args.slow else []),
+               *(["-k", args.keyword] if args.keyword else []),
+               *(["--tests", *args.tests] if args.tests else [])]
+        log = out.with_suffix(".log").open("w")
+        procs.append(subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT))
+        outs.append(out)
+    deadline = None if args.stop_after is None else time.monotonic() + args.stop_after
+    for proc in procs:
+        try:
+            proc.wait(None if deadline is None else max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            proc.terminate()
+            proc.wait()
+    print(f"{args.shards} shards done; their draws in {args.out.parent}", flush=True)
+    return outs
 
 
 def main() -> None:
@@ -206,11 +305,45 @@ def main() -> None:
     parser.add_argument("--part", default=None,
                         help="record into section test-draws-PART (a run over some tests "
                              "beside the others' sections) instead of test-draws")
+    parser.add_argument("--measured", default=None,
+                        help="the commit measured, where the checkout cannot tell (no git)")
+    parser.add_argument("--merge", nargs="+", type=Path, default=None,
+                        help="count the draws of these shards' --out files together and "
+                             "record them (no test is run; --tests keeps the tests named)")
+    parser.add_argument("--shards", type=int, default=1,
+                        help="run the draws as this many processes side by side (a "
+                             "many-core machine), each its own --out, then count them "
+                             "together")
+    parser.add_argument("--stop-after", type=float, default=None,
+                        help="with --shards: stop the shards after this many seconds and "
+                             "count the draws they finished (a lent machine's time)")
     args = parser.parse_args()
+    section = ("test-draws", "Pass rate of every random-draw test")
+    if args.part:
+        section = (f"test-draws-{args.part}", f"Pass rate of random-draw tests: {args.part}")
+
+    if args.shards > 1:
+        args.merge = run_shards(args)
+    if args.merge:
+        results = merge([json.loads(p.read_text()) for p in args.merge if p.exists()])
+        if args.tests:      # the shards' tests that these name (node ids or their prefixes)
+            results["tests"] = {t: d for t, d in results["tests"].items()
+                                if any(t.startswith(prefix) for prefix in args.tests)}
+        if args.shards > 1:
+            args.out.write_text(json.dumps(results, indent=1))
+        text = markdown(summarise(results), results)
+        print(text)
+        if args.record:
+            measurements.record(*section, text, command=measurements.invoked_as(),
+                                measured=results["commit"],
+                                on=f"{results['machine']}, load average {results['load']:.1f}")
+        return
 
     ids = random_draw_tests(args.slow, args.keyword, args.tests)
     marker = "random_draw" if args.slow else "random_draw and not slow"
     results = {"first_draw": args.first_draw, "workers": args.workers, "seeds": [],
+               "machine": measurements.machine(),
+               "commit": args.measured or measurements.commit(),
                "tests": {i: {} for i in ids}}
     if args.resume and args.out.exists():
         results = json.loads(args.out.read_text())
@@ -226,6 +359,7 @@ def main() -> None:
         for nodeid, outcome in got.items():
             results["tests"][nodeid][str(seed)] = outcome
         results["seeds"].append(seed)
+        results["load"] = max(results.get("load", 0.0), _load())
         args.out.write_text(json.dumps(results, indent=1))
         failed = [i for i, (o, _) in got.items() if o == "failed"]
         print(f"draw {k}/{args.draws} seed {seed}: {len(ids) - len(failed)} of {len(ids)} "
@@ -235,10 +369,8 @@ def main() -> None:
     text = markdown(summary, results)
     print(text)
     if args.record:
-        name, title = "test-draws", "Pass rate of every random-draw test"
-        if args.part:
-            name, title = f"test-draws-{args.part}", f"Pass rate of random-draw tests: {args.part}"
-        measurements.record(name, title, text, command=measurements.invoked_as())
+        measurements.record(*section, text, command=measurements.invoked_as(),
+                            measured=results.get("commit"))
 
 
 if __name__ == "__main__":

@@ -90,7 +90,8 @@ def invoked_as(argv: Sequence[str] | None = None) -> str:
 
 
 def record(name: str, title: str, body: str, command: str,
-           document: Path = DOCUMENT, measured: str | None = None) -> Path:
+           document: Path = DOCUMENT, measured: str | None = None,
+           on: str | None = None) -> Path:
     """Replace section ``name`` of ``document`` by ``body`` (markdown) and its provenance.
 
     Parameters
@@ -105,12 +106,15 @@ def record(name: str, title: str, body: str, command: str,
         The command that produced them, as a user would type it.
     measured : str, optional
         The commit measured, where not the checkout's at the end (a clone taken before).
+    on : str, optional
+        The machine (and load) measured on, where not this one (results of another
+        machine recorded here).
     """
     if not re.fullmatch(r"[\w-]+", name):
         raise ValueError(f"section name {name!r}: letters, digits, '-' and '_' only")
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     section = (f"<!-- begin {name} -->\n## {title}\n\n"
-               f"`{command}` on {machine()}{load_average()}, {stamp}, commit "
+               f"`{command}` on {on or machine() + load_average()}, {stamp}, commit "
                f"{measured or commit()}.\n\n"
                f"{body.rstrip()}\n<!-- end {name} -->\n")
     text = document.read_text() if document.exists() else HEADER

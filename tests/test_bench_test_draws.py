@@ -2,7 +2,16 @@
 
 from __future__ import annotations
 
-from benchmarks.bench_test_draws import draw_seeds, markdown, outcomes, summarise
+import pytest
+
+from benchmarks.bench_test_draws import (
+    draw_seeds,
+    markdown,
+    merge,
+    outcomes,
+    shard_ranges,
+    summarise,
+)
 
 A = "tests/discovery/test_x.py::test_a[cdpr]"
 B = "tests/discovery/test_x.py::test_b"
@@ -44,3 +53,34 @@ def test_pass_rates_count_failures_and_known_gaps_against_a_test():
     text = markdown(summary, results)
     assert "2 below it" in text and f"| `{B}` | 4 | 3 | 1 | 0 | 75.0 % | 2.50 | {seeds[0]} |" \
         in text
+
+
+def test_shards_of_one_measurement_are_counted_together_in_the_sequences_order():
+    seeds = draw_seeds(0, 6)
+    where = {"machine": "M, 16 cores", "commit": "abc1234", "workers": 0}
+    first = {**where, "first_draw": 0, "seeds": seeds[:2], "load": 3.0, "tests": {
+        A: {str(s): ["passed", 1.0] for s in seeds[:2]},
+        B: {str(seeds[0]): ["failed", 2.0], str(seeds[1]): ["passed", 2.0]}}}
+    # a shard stopped after one of its draws; another whose tests were A only
+    second = {**where, "first_draw": 3, "seeds": seeds[3:4], "load": 5.0, "tests": {
+        A: {str(seeds[3]): ["passed", 1.0]}, B: {str(seeds[3]): ["passed", 2.0]}}}
+    third = {**where, "first_draw": 5, "seeds": seeds[5:], "tests": {
+        A: {str(seeds[5]): ["passed", 1.0]}}}
+    merged = merge([third, first, second])
+    assert merged["seeds"] == [seeds[0], seeds[1], seeds[3], seeds[5]]
+    assert merged["indices"] == [0, 1, 3, 5] and merged["load"] == 5.0
+    summary = summarise(merged)
+    assert summary[A]["draws"] == 4 and summary[B]["draws"] == 3
+    assert summary[B]["failing_seeds"] == [seeds[0]]
+    text = markdown(summary, merged)
+    assert "3-4 draws each" in text and "draws `0-1, 3, 5`" in text
+    with pytest.raises(SystemExit, match="different machines"):
+        merge([first, {**second, "commit": "def5678"}])
+
+
+def test_shards_cover_the_draws_once_in_near_equal_ranges():
+    ranges = shard_ranges(10, 200, 16)
+    assert ranges[0] == (10, 12) and sum(n for _, n in ranges) == 200
+    covered = [k for first, n in ranges for k in range(first, first + n)]
+    assert covered == list(range(10, 210))
+    assert max(n for _, n in ranges) - min(n for _, n in ranges) <= 1

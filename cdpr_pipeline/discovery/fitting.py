@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, lsq_linear
 from scipy.optimize._numdiff import approx_derivative
 
 from cdpr_pipeline.discovery.adequacy import analysed_band_hz
@@ -105,6 +105,38 @@ class FitContext:
         if self.columns.ndim == 4:
             return (self._pinv[0] @ torque_residual.ravel()).reshape(-1, 4)
         return np.stack([p @ torque_residual[:, i] for i, p in enumerate(self._pinv)])
+
+    def physical_winch_refit(self, torque_residual: np.ndarray) -> np.ndarray:
+        """:meth:`winch_refit` within a winch's physical range: viscous and Coulomb
+        friction non-negative (the bounds of a winch's re-identification candidate), the
+        offset free, and the inertia positive. Unbounded least squares gives a negative
+        inertia where a position-proportional force imitates one (a load ``k q`` along a
+        periodic motion is ``-k/w^2`` times its acceleration): another effect imitated,
+        and a model no simulator can run. Where the data ask for an inertia of zero or
+        less, the stated inertia stays (the data do not determine it beside the effect
+        they imitate) and the other parameters are re-fitted around it."""
+        delta = self.winch_refit(torque_residual)
+        if np.all(delta[:, :3] > -1.0):
+            return delta
+        n = delta.shape[0]
+        lower = np.tile([-1.0, -1.0, -1.0, -np.inf], n)
+        upper = np.full(4 * n, np.inf)
+        for _ in range(2):      # the second pass: inertia held where the first put it at zero
+            if self.columns.ndim == 4:
+                rows = self.columns.shape[0] * self.columns.shape[1]
+                delta = lsq_linear(self.columns.reshape(rows, -1), torque_residual.ravel(),
+                                   bounds=(lower, upper), method="bvls").x.reshape(n, 4)
+            else:
+                delta = np.stack([lsq_linear(self.columns[:, i, :], torque_residual[:, i],
+                                             bounds=(lower[4 * i:4 * i + 4],
+                                                     upper[4 * i:4 * i + 4]),
+                                             method="bvls").x for i in range(n)])
+            held = delta[:, 0] <= -1.0 + 1e-12
+            if not held.any():
+                break
+            lower[0::4] = np.where(held, -1e-15, lower[0::4])
+            upper[0::4] = np.where(held, 1e-15, upper[0::4])
+        return delta
 
     def winch_explained(self, delta: np.ndarray) -> np.ndarray:
         """What winch parameter changes ``delta`` (n, 4) add to the stacked torque

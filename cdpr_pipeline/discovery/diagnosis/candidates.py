@@ -43,7 +43,7 @@ def reidentify_if_unusable(nominal: Model, train: list[RunSignals], held: list[R
         return None, None
     ctx = FitContext(nominal, train, [], {})
     base = ctx.residuals([])
-    effects = refit_effects(ctx.winch_refit(base.stacked("torque")))
+    effects = refit_effects(ctx.physical_winch_refit(base.stacked("torque")))
     weights = fit_weights(base, signal_scales(train, base.channels))
     judge = Judge(FitContext(nominal, train, [], weights, ctx.columns), held,
                   settings.selection)
