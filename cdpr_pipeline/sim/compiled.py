@@ -382,7 +382,7 @@ def path_nodes(omega: np.ndarray, alpha: np.ndarray, beta: np.ndarray, h: np.nda
     friction_over_step` reads the law along each of D drives' paths (sorted, the first
     the start), and the paths' directions (D,): the numpy reference's ``w`` and
     ``direction``; every input (D,) but the node shares ``offsets`` about zero speed
-    and ``even`` along the path."""
+    and ``even`` along the path, each ascending."""
     drives = omega.size
     nodes = even.size + offsets.size
     w = np.empty((nodes, drives))
@@ -395,11 +395,19 @@ def path_nodes(omega: np.ndarray, alpha: np.ndarray, beta: np.ndarray, h: np.nda
         if span == 0.0:
             span = sense * 1e-300
         zero = -omega[d] / span
-        for q in range(even.size):
-            share[q] = even[q]
-        for q in range(offsets.size):
-            share[even.size + q] = min(max(zero + offsets[q], 0.0), 1.0)
-        share.sort()
+        # both share lists ascending (``offsets`` sorted, the clip keeps their order):
+        # merged, they are the reference's sorted nodes
+        a = 0
+        c = 0
+        for q in range(nodes):
+            if c < offsets.size:
+                clipped = min(max(zero + offsets[c], 0.0), 1.0)
+                if a >= even.size or clipped < even[a]:
+                    share[q] = clipped
+                    c += 1
+                    continue
+            share[q] = even[a]
+            a += 1
         for q in range(nodes):
             w[q, d] = omega[d] + span * share[q]
     return w, direction

@@ -42,6 +42,7 @@ _SIDE = 1e-13
 #: the nodes about zero speed (shares of the path's length from it) and the even ones
 _OFFSETS = np.concatenate([-_GRADING, _GRADING, [-_SIDE, _SIDE]])
 _EVEN = np.linspace(0.0, 1.0, EVEN_NODES)
+_SORTED_OFFSETS = np.sort(_OFFSETS)
 
 
 def _log1p_over(x: np.ndarray) -> np.ndarray:
@@ -84,7 +85,7 @@ def friction_over_step(friction: Callable[[np.ndarray], np.ndarray], omega: np.n
     omega, alpha, beta = (np.asarray(a, dtype=float) for a in (omega, alpha, beta))
     g0 = alpha - beta * (friction(omega[None])[0] if at_start is None else at_start)
     drives = [flat(a) for a in (omega, alpha, beta, h, reach, g0)]
-    w, direction = compiled.path_nodes(*drives, _OFFSETS, _EVEN)
+    w, direction = compiled.path_nodes(*drives, _SORTED_OFFSETS, _EVEN)
     g = alpha[None] - beta[None] * friction(w.reshape(len(w), *shape))
     g = np.array(np.broadcast_to(g, (len(w), *shape)), dtype=float).reshape(len(w), -1)
     g[0] = drives[5]
