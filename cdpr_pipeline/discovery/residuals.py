@@ -97,12 +97,14 @@ def _load(model: Plant, sig: RunSignals, acceleration: np.ndarray):
     # tensions are linear in the mass: cache them per unit mass, so fitting a payload
     # error does not repeat the per-sample solves
     key = (model.anchors.tobytes(), float(model.gravity), id(acceleration))
-    # full-rate arrays, 4.8 MB a run each on 8 cables at 1 kHz: four per run (the
+    # full-rate arrays, 1.9 MB a run each on 8 cables at 1 kHz: four per run (the
     # nominal geometry and the few a fit comes back to; sixteen held 380 MB there, for
-    # the same evaluations; two cost anchor fits a third more CPU)
-    unit, g, units = _memo(sig, "load", key, lambda: model.replace(mass=1.0).load_tensions(
-        sig.position, acceleration), size=4)
-    return float(model.mass) * unit, g, units
+    # the same evaluations; two cost anchor fits a third more CPU). The cable unit
+    # vectors load_tensions also returns are not kept: nothing here reads them, and
+    # they were 60 % of the memo (58 MB on five 15-s runs)
+    unit, g = _memo(sig, "load", key, lambda: model.replace(mass=1.0).load_tensions(
+        sig.position, acceleration)[:2], size=4)
+    return float(model.mass) * unit, g, None
 
 
 # ---------------------------------------------------------------- residual rows
@@ -263,6 +265,15 @@ def _extra_rows(sig: RunSignals, effect, model: Model, key: tuple | None
         extra = effect.winch_torque(sig.theta, sig.omega, model)
         if extra is None:
             return None
+        # the same effect on a model changed elsewhere (a winch parameter, a lag, an
+        # anchor a candidate moves beside a kept cause: a later step's screen) mostly
+        # puts the same torque, whose rows are taken as they are, not filtered again;
+        # the last effect's torque is kept per run (1 MB on 8 cables at 1 kHz; three
+        # caught 33 more of 9600 filterings there)
+        same = sig.cache.get(("residuals", "same extra"))
+        if key is not None and same is not None and same[0] == key[0] \
+                and same[1].shape == extra.shape and np.array_equal(same[1], extra):
+            return same[2]
         # the block this effect's last value made on the run: its unchanged columns
         # are not filtered again
         last_key = ("residuals", "last extra", type(effect))
@@ -272,6 +283,8 @@ def _extra_rows(sig: RunSignals, effect, model: Model, key: tuple | None
             # (where winches mix, every column is filtered again: the full-rate block,
             # 1 MB per effect a run on 8 cables at 1 kHz, would be kept for nothing)
             sig.cache[last_key] = (extra, block)
+        if key is not None:
+            sig.cache[("residuals", "same extra")] = (key[0], extra, block)
         return block
 
     return make() if key is None else _memo(sig, "extra", key, make, size=64)

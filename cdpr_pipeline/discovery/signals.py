@@ -46,12 +46,7 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 from scipy.fft import next_fast_len
-from scipy.signal import butter, cheby1, sosfilt, sosfilt_zi, sosfreqz
-
-try:  # the compiled kernel of scipy.signal.sosfilt
-    from scipy.signal._sosfilt import _sosfilt
-except ImportError:     # pragma: no cover - another SciPy layout
-    _sosfilt = None
+from scipy.signal import butter, cheby1, sosfilt_zi, sosfreqz
 
 from cdpr_pipeline.data.reading import (
     DerivativeFilter,
@@ -62,6 +57,7 @@ from cdpr_pipeline.data.reading import (
 )
 from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.discovery.sections import forward_backward
 from cdpr_pipeline.sim.kinematics import cable_geometry, internal_force_directions
 from cdpr_pipeline.sim.plant import Drives, Plant, nominal_plant
 
@@ -109,17 +105,6 @@ def _decimation_filter(q: int) -> tuple[np.ndarray, np.ndarray, int]:
     return sos, sosfilt_zi(sos), 3 * ntaps
 
 
-def _sections(sos: np.ndarray, x: np.ndarray, zi: np.ndarray) -> None:
-    """:func:`scipy.signal.sosfilt` along the last axis of ``x`` (signals, samples),
-    in place, from the initial state ``zi`` (signals, sections, 2): its compiled kernel
-    without the argument checks and axis moves (a fit filters thousands of small
-    blocks), or the public function where the kernel is not found."""
-    if _sosfilt is not None:
-        _sosfilt(sos, x, zi)
-    else:       # pragma: no cover - another SciPy layout
-        x[...] = sosfilt(sos, x, axis=-1, zi=np.moveaxis(zi, 0, 1))[0]
-
-
 def zero_phase_decimate(x: np.ndarray, q: int) -> np.ndarray:
     """``scipy.signal.decimate(x, q, axis=0, zero_phase=True)`` written out with the
     filter designed once (several times faster, which matters because every model
@@ -144,19 +129,18 @@ def zero_phase_decimate(x: np.ndarray, q: int) -> np.ndarray:
     # first row does not start from one sample held constant
     pad = min(max(pad, 2 * int(q)), length - 1)
     shape = x.shape[1:]
-    # (signals, samples): each signal a contiguous row, as the kernel filters them
-    xt = x.reshape(length, -1).T
-    ext = np.empty((len(xt), length + 2 * pad))
-    ext[:, pad:pad + length] = xt
-    ext[:, :pad] = xt[:, pad:0:-1]
-    ext[:, pad + length:] = xt[:, -2:-pad - 2:-1]
-    _sections(sos, ext, zi[None] * ext[:, :1, None])
-    back = np.ascontiguousarray(ext[:, ::-1])
-    _sections(sos, back, zi[None] * back[:, :1, None])
-    rows = back[:, ::-1][:, pad:pad + length:q]
+    # (samples, signals): the signals of a block side by side, as the compiled sections
+    # filter them (discovery.sections)
+    flat = x.reshape(length, -1)
+    ext = np.empty((length + 2 * pad, flat.shape[1]))
+    ext[pad:pad + length] = flat
+    ext[:pad] = flat[pad:0:-1]
+    ext[pad + length:] = flat[-2:-pad - 2:-1]
+    forward_backward(sos, ext, zi)
+    rows = ext[pad:pad + length:q]
     # a copy: a view would keep the whole full-rate buffer alive for as long as the rows
     # are (fits memoise thousands of row blocks: 3 GB on a 4-cable 500 Hz set)
-    return rows.T.reshape((rows.shape[1], *shape)).copy()
+    return rows.reshape((len(rows), *shape)).copy()
 
 
 @dataclass

@@ -28,6 +28,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from cdpr_pipeline.sim import compiled
+
 #: nodes per halving of the distance to zero speed (both sides), over GRADED_OCTAVES:
 #: a ``tanh`` transition spans about two octaves, a hard sign none
 NODES_PER_OCTAVE = 2
@@ -40,6 +42,7 @@ _SIDE = 1e-13
 #: the nodes about zero speed (shares of the path's length from it) and the even ones
 _OFFSETS = np.concatenate([-_GRADING, _GRADING, [-_SIDE, _SIDE]])
 _EVEN = np.linspace(0.0, 1.0, EVEN_NODES)
+_SORTED_OFFSETS = np.sort(_OFFSETS)
 
 
 def _log1p_over(x: np.ndarray) -> np.ndarray:
@@ -70,6 +73,31 @@ def friction_over_step(friction: Callable[[np.ndarray], np.ndarray], omega: np.n
                        alpha: np.ndarray, beta: np.ndarray, h: float | np.ndarray,
                        reach: np.ndarray, at_start: np.ndarray | None = None
                        ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`friction_over_step_numpy` (same arguments and results) with its
+    arithmetic compiled (:func:`~cdpr_pipeline.sim.compiled.path_nodes`,
+    :func:`~cdpr_pipeline.sim.compiled.path_friction`, drive by drive); the law is
+    read by the same two calls of ``friction``."""
+    shape = np.shape(omega)
+
+    def flat(a: np.ndarray | float) -> np.ndarray:
+        return np.ascontiguousarray(np.broadcast_to(a, shape), dtype=float).reshape(-1)
+
+    omega, alpha, beta = (np.asarray(a, dtype=float) for a in (omega, alpha, beta))
+    g0 = alpha - beta * (friction(omega[None])[0] if at_start is None else at_start)
+    drives = [flat(a) for a in (omega, alpha, beta, h, reach, g0)]
+    w, direction = compiled.path_nodes(*drives, _SORTED_OFFSETS, _EVEN)
+    g = alpha[None] - beta[None] * friction(w.reshape(len(w), *shape))
+    g = np.array(np.broadcast_to(g, (len(w), *shape)), dtype=float).reshape(len(w), -1)
+    g[0] = drives[5]
+    c0, c1 = compiled.path_friction(w, g, direction, *drives[:4])
+    return c0.reshape(shape), c1.reshape(shape)
+
+
+def friction_over_step_numpy(friction: Callable[[np.ndarray], np.ndarray],
+                             omega: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
+                             h: float | np.ndarray, reach: np.ndarray,
+                             at_start: np.ndarray | None = None
+                             ) -> tuple[np.ndarray, np.ndarray]:
     """The friction of every drive over a step of ``h``, linear in time:
     ``c0 + c1 (t - h / 2)``, with the impulse and first moment of the scalar path
     ``w' = alpha - beta friction(w)`` from ``omega`` (each array (B, n)).

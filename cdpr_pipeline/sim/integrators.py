@@ -12,8 +12,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from cdpr_pipeline.sim import compiled
 from cdpr_pipeline.sim.friction_path import friction_over_step
-from cdpr_pipeline.sim.kinematics import cable_geometry, winch_rates
 from cdpr_pipeline.sim.model_rows import runs_of
 from cdpr_pipeline.sim.plant import Plant
 
@@ -136,10 +136,9 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
     """
     if plant.elastic:
         raise ValueError("rosenbrock_step integrates rigid plants only")
-    p, v = state[:, 0:3], state[:, 3:6]
-    g, units = cable_geometry(plant.anchors, p)
     R = plant.drum_radius
-    omega = np.einsum("bnk,bk->bn", units, v) / R
+    _, units, omega, _, theta = compiled.rigid_motion(plant.anchors, plant.home_lengths, R,
+                                                      state[:, 0:3], state[:, 3:6])
     lag = slice(state.shape[1] - plant.n, None)
     if plant.lagged:
         start = state[:, lag]
@@ -152,17 +151,15 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
         k1 = plant.derivative(state, u)
     # the speeds an explicit step would reach: the friction's secant slope up to them
     omega_end = omega + dt * np.einsum("bnk,bk->bn", units, k1[:, 3:6]) / R
-    c = friction_slope(plant, plant.winch_angle_from_length(g), omega, omega_end)
-    mass = plant.mass * np.eye(3) + np.einsum("bni,n,bnj->bij", units,
-                                              plant.winch.inertia / R ** 2, units)
-    w = mass + ROS2_GAMMA * dt * np.einsum("bni,bn,bnj->bij", units, c / R ** 2, units)
+    c = friction_slope(plant, theta, omega, omega_end)
+    # W = M + gamma dt D (compiled: the matrices and solves of a few runs were the
+    # numpy calls' overhead)
+    mass, w = compiled.implicit_matrices(units, plant.winch.inertia / R ** 2, c / R ** 2,
+                                         float(plant.mass), ROS2_GAMMA * dt)
 
     def solve(f: np.ndarray) -> np.ndarray:
         # W^-1 f with W = I - gamma dt J, J nonzero only in dv'/dv = -M^-1 D
-        out = f.copy()
-        out[:, 3:6] = np.linalg.solve(w, np.einsum("bij,bj->bi", mass, f[:, 3:6])[..., None]
-                                      )[..., 0]
-        return out
+        return compiled.implicit_solve(w, mass, f)
 
     if not plant.lagged:
         k1 = solve(k1)
@@ -208,10 +205,9 @@ def _steep_winches(plant: Plant, state: np.ndarray, k1: np.ndarray, dt: float,
     """Which winches (B, n) meet the friction law's steep part within a step of ``dt``
     (see :func:`friction_path_step`), and what that took: unit vectors, drum radii,
     speeds, their rates, winch angles and the friction at the probed speeds."""
-    g, units = cable_geometry(plant.anchors, state[:, 0:3])
     R = plant.drum_radius
-    omega, rate, _ = winch_rates(units, g, state[:, 3:6], k1[:, 3:6], R)
-    theta = plant.winch_angle_from_length(g)
+    units, omega, rate, theta = compiled.winch_paths(plant.anchors, plant.home_lengths, R,
+                                                     state[:, 0:3], state[:, 3:6], k1[:, 3:6])
     end = omega + dt * rate
     spread = 1e-3 * np.abs(end - omega) + 1e-12
     tiny = np.full_like(omega, 1e-12)

@@ -40,6 +40,7 @@ import numpy as np
 
 from cdpr_pipeline.data.rig import CdprRig, Rig, WinchParams
 from cdpr_pipeline.data.units import JOINT_UNITS, WINCH_UNITS, ChannelUnits
+from cdpr_pipeline.sim import compiled
 from cdpr_pipeline.sim.kinematics import (
     cable_geometry,
     default_home,
@@ -398,8 +399,7 @@ class Plant:
             p, v = state[:, 0:3], state[:, 3:6]
             out = np.empty_like(state)
             out[:, 0:3] = v
-            out[:, 3:6] = self.rigid_acceleration(p, v, u_cmd,
-                                                  *cable_geometry(self.anchors, p), friction)
+            out[:, 3:6] = self.rigid_acceleration(p, v, u_cmd, friction)
             return out
         s = self.split_state(state)
         p, v = s["p"], s["v"]
@@ -417,7 +417,7 @@ class Plant:
             resist = self.friction_torque(s["theta"], s["omega"])
             out[:, 6 + n:6 + 2 * n] = (u - R * tension - resist) / I_m
         else:
-            out[:, 3:6] = self.rigid_acceleration(p, v, u, g, units, friction)
+            out[:, 3:6] = self.rigid_acceleration(p, v, u, friction)
         if self.lagged:
             tau = self.lags
             # a drive without lag keeps its (unused) state still instead of dividing by 0
@@ -425,12 +425,33 @@ class Plant:
                                         / np.where(tau > 0.0, tau, 1.0), 0.0)
         return out
 
-    def rigid_acceleration(self, p: np.ndarray, v: np.ndarray, u: np.ndarray, g: np.ndarray,
-                           units: np.ndarray, friction: tuple | None = None) -> np.ndarray:
+    def rigid_acceleration(self, p: np.ndarray, v: np.ndarray, u: np.ndarray,
+                           friction: tuple | None = None) -> np.ndarray:
         """Platform acceleration of the reduced rigid model (equation (1) of the paper);
-        ``friction`` as in :meth:`derivative`."""
+        ``friction`` as in :meth:`derivative`. The geometry and the mass matrix's solve
+        are compiled (:mod:`~cdpr_pipeline.sim.compiled`: five of these a step, each
+        was mostly numpy's per-call overhead); the friction is the model's own call."""
+        R = self.drum_radius
+        _, units, omega, curvature, theta = compiled.rigid_motion(
+            self.anchors, self.home_lengths, R, p, v)
+        resist = self.friction_torque(theta, omega)
+        if friction is not None:
+            resist = np.where(friction[0], friction[1], resist)
+        if resist.shape != omega.shape:     # a law constant over the batch
+            resist = np.broadcast_to(resist, omega.shape)
+        if u.shape != omega.shape:
+            u = np.broadcast_to(u, omega.shape)
+        return compiled.rigid_acceleration(
+            units, u, resist, curvature, R, self.winch.inertia, self._reflected_inertia,
+            float(self.mass), self.gravity_vector)
+
+    def rigid_acceleration_numpy(self, p: np.ndarray, v: np.ndarray, u: np.ndarray,
+                                 friction: tuple | None = None) -> np.ndarray:
+        """:meth:`rigid_acceleration` in numpy calls over the batch: the reference the
+        compiled one is tested against."""
         R = self.drum_radius
         I_m = self.winch.inertia
+        g, units = cable_geometry(self.anchors, p)
         omega, _, curvature = winch_rates(units, g, v, None, R)
         resist = self.friction_torque(self.winch_angle_from_length(g), omega)
         if friction is not None:

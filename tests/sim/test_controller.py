@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from cdpr_pipeline.data.rig import CdprRig, ControllerSpec, WinchParams
-from cdpr_pipeline.sim.controller import distribute_tensions
+from cdpr_pipeline.sim.controller import distribute_tensions, distribute_tensions_numpy
 from cdpr_pipeline.sim.kinematics import cable_geometry, forward_kinematics
 from cdpr_pipeline.sim.lab import simulate_lab
 
@@ -100,3 +100,25 @@ def test_eight_cables_give_the_force_and_come_nearest_the_bound(min_tension):
         np.testing.assert_allclose(np.einsum("bij,bj->bi", null, shortfall), 0.0,
                                    atol=1e-9 * min_tension)
         assert shortfall.max() > 0.0
+
+
+@pytest.mark.parametrize(("cables", "min_tension"), [(3, 1.0), (4, 5.0), (8, 2.0), (8, 12.0)])
+def test_the_compiled_tensions_are_the_numpy_reference(cables, min_tension):
+    """The controller's compiled tension distribution against its numpy reference, on
+    poses where the least-norm shift meets the bound and where Newton steps must move the
+    tensions within the null space (8 cables, 12 N: no pose gives them all): equal to
+    rounding (1e-12 of the tensions)."""
+    rng = np.random.default_rng(5)
+    if cables == 8:
+        units = octagon_units(rng, 60)
+    else:
+        anchors = square_rig().anchors_m[:cables] if cables == 4 else \
+            np.array([[0, 0, 2], [3, 0, 2], [1.5, 3, 2]], float)
+        p = np.array([1.5, 1.2, 1.0]) + rng.uniform(-0.4, 0.4, (60, 3))
+        units = cable_geometry(anchors, p)[1]
+    force = np.array([0, 0, 29.43]) + rng.normal(0, 4, (60, 3))
+    reference = distribute_tensions_numpy(units, force, min_tension)
+    if cables == 8 and min_tension == 12.0:
+        assert (reference < min_tension - 1e-6).any()     # the Newton steps were taken
+    np.testing.assert_allclose(distribute_tensions(units, force, min_tension), reference,
+                               rtol=0.0, atol=1e-12 * np.abs(reference).max())

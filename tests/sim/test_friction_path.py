@@ -14,7 +14,7 @@ from cdpr_pipeline.sim import integrators
 from cdpr_pipeline.sim.axes_loop import AxesLoop, AxesReferences
 from cdpr_pipeline.sim.axis_references import AxisReferenceSet
 from cdpr_pipeline.sim.effects import EFFECTS
-from cdpr_pipeline.sim.friction_path import friction_over_step
+from cdpr_pipeline.sim.friction_path import friction_over_step, friction_over_step_numpy
 from cdpr_pipeline.sim.plant import Drives, Plant
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import BatchSimulator
@@ -166,3 +166,28 @@ def test_coupled_runs_take_a_floor_of_steps_per_control_tick(substeps):
         or substeps * (smooth - 1) < integrators.COUPLED_PER_TICK
     assert integrators.coupled_substeps(substeps, smooth_law=False) \
         == integrators.COUPLED_SUBSTEPS
+
+
+@pytest.mark.parametrize("law", ["sign", "tanh500", "stribeck", "gentle"])
+def test_the_compiled_friction_over_a_step_is_the_numpy_reference(law):
+    """:func:`friction_over_step` (compiled arithmetic) against
+    :func:`friction_over_step_numpy`, on drives (B, n) at, near and away from zero speed
+    with accelerations either way, some held at rest, steps of one size and per run:
+    equal to rounding."""
+    phi = {"sign": lambda w: 0.3 * np.sign(w) + 0.02 * w + 0.01,
+           "tanh500": lambda w: 0.3 * np.tanh(500 * w) + 0.02 * w,
+           "stribeck": lambda w: (0.3 + 0.3 * np.exp(-(w / 0.05) ** 2)) * np.sign(w),
+           "gentle": lambda w: 0.3 * np.tanh(20 * w)}[law]
+    rng = np.random.default_rng(9)
+    omega = rng.normal(0.0, 0.05, (30, 4)) * rng.choice([1.0, 1e-4, 0.0], (30, 4))
+    alpha = rng.normal(0.0, 60.0, (30, 4))
+    beta = rng.uniform(20.0, 200.0, (30, 4))
+    reach = np.full((30, 4), 1.2)
+    # drives already at a root of the path's rate (at rest, held by the law): a zero
+    # division in the quadrature there, which must give numpy's inf/nan, then be dropped
+    alpha[:3, 0] = beta[:3, 0] * phi(omega[:3, 0])
+    for h in (1e-3, rng.uniform(5e-4, 2e-3, (30, 1))):
+        expected = friction_over_step_numpy(phi, omega, alpha, beta, h, reach)
+        for got, want in zip(friction_over_step(phi, omega, alpha, beta, h, reach), expected,
+                             strict=True):
+            np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())

@@ -5,7 +5,7 @@ import pytest
 
 from cdpr_pipeline.data.rig import ControllerSpec, WinchParams
 from cdpr_pipeline.identification.regressors import WinchRegression, winch_regression
-from cdpr_pipeline.sim.effects import CableElasticity
+from cdpr_pipeline.sim.effects import EFFECTS, CableElasticity
 from cdpr_pipeline.sim.kinematics import cable_geometry, static_tensions
 from cdpr_pipeline.sim.lab import simulate_lab
 from cdpr_pipeline.sim.plant import Plant, smooth_sign
@@ -134,3 +134,24 @@ def test_nominal_closed_loop_tracks_within_a_millimetre(paper_rig):
     err = np.linalg.norm(res.truth["position"] - res.measured["desired"], axis=-1)
     assert err.max() < 1e-3
     assert res.truth["tension"].min() > 0.0
+
+
+@pytest.mark.parametrize("law", ["hard", "tanh", "stribeck"])
+def test_the_compiled_rigid_acceleration_is_the_numpy_reference(paper_rig, nominal_plant,
+                                                                law):
+    """The compiled rigid dynamics against their numpy reference, with the friction law
+    the model's own call (an effect's extra torque included) and with the integrator's
+    replaced friction on some winches: equal to rounding (1e-12 of the accelerations)."""
+    rng = np.random.default_rng(6)
+    plant = nominal_plant.replace(sign_sharpness=np.inf if law == "hard" else 500.0)
+    if law == "stribeck":
+        plant = plant.with_effects([EFFECTS["stribeck_friction"](static_ratio=2.0,
+                                                                 stribeck_velocity=0.1)])
+    p = np.array([1.5, 1.2, 1.0]) + rng.uniform(-0.3, 0.3, (7, 3))
+    v = rng.normal(0.0, 0.3, (7, 3))
+    u = rng.normal(0.5, 0.3, (7, plant.n))
+    mask = rng.random((7, plant.n)) < 0.3
+    for friction in (None, (mask, rng.normal(0.0, 0.2, (7, plant.n)))):
+        reference = plant.rigid_acceleration_numpy(p, v, u, friction)
+        np.testing.assert_allclose(plant.rigid_acceleration(p, v, u, friction), reference,
+                                   rtol=0.0, atol=1e-12 * np.abs(reference).max())

@@ -1,0 +1,483 @@
+"""Compiled (numba) kernels of the closed loop's control tick.
+
+A control tick of the batched simulator (:mod:`~cdpr_pipeline.sim.simulator`) works on
+a handful of runs and on matrices of 3 to 8 rows; as numpy calls over the batch its cost
+is the calls' own (an 8-cable rig at 1 kHz: about 0.35 ms a tick in the controller's
+tension distribution alone, for five runs). Here the same arithmetic runs as one
+compiled loop over the runs. Each kernel has a numpy twin, the reference a test
+compares it against (:func:`~cdpr_pipeline.sim.controller.distribute_tensions_numpy`);
+the kernels are compiled on first use and cached beside this module (``cache=True``).
+
+Only the model's fixed arithmetic is compiled; the friction law and a model's extra
+torques (an effect's callable) stay numpy calls of their own.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+#: compiled once, cached beside this module; floating-point errors as numpy has them
+#: (a division by zero gives inf or nan, as in the numpy reference, not an exception)
+_kernel = numba.njit(cache=True, error_model="numpy")
+
+#: how far below the bound a tension may stay (N): rounding, not a choice
+TENSION_SLACK_N = 1e-9
+#: Newton steps of the nearest-to-bound search at most, and halvings of a step
+NEWTON_STEPS, HALVINGS = 100, 30
+#: eigenvalues below this share of the largest count as zero in the Newton step's
+#: pseudo-inverse (:func:`numpy.linalg.pinv`'s default cut-off)
+PINV_RCOND = 1e-15
+
+
+@_kernel
+def _shortfall(t: np.ndarray, min_tension: float) -> float:
+    total = 0.0
+    for i in range(t.shape[0]):
+        gap = min_tension - t[i]
+        if gap > 0.0:
+            total += gap * gap
+    return 0.5 * total
+
+
+@_kernel
+def _gram(units: np.ndarray) -> np.ndarray:
+    out = np.zeros((3, 3))
+    for i in range(units.shape[0]):
+        for a in range(3):
+            for c in range(3):
+                out[a, c] += units[i, a] * units[i, c]
+    return out
+
+
+@_kernel
+def _solve3(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``a^-1 rhs`` of a 3x3 ``a`` by Gaussian elimination with partial pivoting."""
+    m = a.copy()
+    x = rhs.copy()
+    for col in range(3):
+        pivot = col
+        for row in range(col + 1, 3):
+            if abs(m[row, col]) > abs(m[pivot, col]):
+                pivot = row
+        if pivot != col:
+            for c in range(3):
+                m[col, c], m[pivot, c] = m[pivot, c], m[col, c]
+            x[col], x[pivot] = x[pivot], x[col]
+        for row in range(col + 1, 3):
+            factor = m[row, col] / m[col, col]
+            for c in range(col, 3):
+                m[row, c] -= factor * m[col, c]
+            x[row] -= factor * x[col]
+    for row in range(2, -1, -1):
+        total = x[row]
+        for c in range(row + 1, 3):
+            total -= m[row, c] * x[c]
+        x[row] = total / m[row, row]
+    return x
+
+
+@_kernel
+def nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
+                     short: np.ndarray, min_tension: float) -> None:
+    """:func:`~cdpr_pipeline.sim.controller._nearest_to_bound` on the ``short`` runs
+    (B,) of ``t`` (B, n), in place; the Newton loop stops for all of them at once, as
+    the reference's batched loop does."""
+    rows = np.flatnonzero(short)
+    runs, n = rows.size, t.shape[1]
+    k = n - 3
+    t_force = np.empty((runs, n))
+    basis = np.empty((runs, n, k))
+    for r in range(runs):
+        t_force[r] = t[rows[r]]
+        left = np.linalg.svd(np.ascontiguousarray(units[rows[r]]), full_matrices=True)[0]
+        basis[r] = left[:, 3:]
+    alpha = np.zeros(runs)
+    step = np.zeros((runs, n))
+    # each run's last active set and the eigen-decomposition of its reduced matrix,
+    # which depends on nothing else: taken again while the set stays (most steps)
+    last_active = np.zeros((runs, n), dtype=np.bool_)
+    known = np.zeros(runs, dtype=np.bool_)
+    values = np.zeros((runs, k))
+    vectors = np.zeros((runs, k, k))
+    for _ in range(NEWTON_STEPS):
+        any_active = False
+        for r in range(runs):
+            for i in range(n):
+                if min_tension - t[rows[r], i] > TENSION_SLACK_N:
+                    any_active = True
+        if not any_active:
+            break
+        progress = False
+        for r in range(runs):
+            z = basis[r]
+            gaps = np.maximum(min_tension - t[rows[r]], 0.0)
+            along = np.zeros(k)
+            same = known[r]
+            for i in range(n):
+                active = gaps[i] > TENSION_SLACK_N
+                same = same and active == last_active[r, i]
+                last_active[r, i] = active
+                for a in range(k):
+                    along[a] += z[i, a] * gaps[i]
+            if not same:
+                reduced = np.zeros((k, k))
+                for i in range(n):
+                    if last_active[r, i]:
+                        for a in range(k):
+                            for c in range(k):
+                                reduced[a, c] += z[i, a] * z[i, c]
+                values[r], vectors[r] = np.linalg.eigh(reduced)
+                known[r] = True
+            w, v = values[r], vectors[r]
+            largest = 0.0
+            for a in range(k):
+                largest = max(largest, abs(w[a]))
+            projected = np.zeros(k)
+            for a in range(k):
+                if abs(w[a]) > PINV_RCOND * largest:
+                    dot = 0.0
+                    for c in range(k):
+                        dot += v[c, a] * along[c]
+                    projected[a] = dot / w[a]
+            coords = np.zeros(k)
+            for c in range(k):
+                for a in range(k):
+                    coords[c] += v[c, a] * projected[a]
+            biggest = 0.0
+            for i in range(n):
+                s = 0.0
+                for a in range(k):
+                    s += z[i, a] * coords[a]
+                step[r, i] = s
+                biggest = max(biggest, abs(s))
+            now = _shortfall(t[rows[r]], min_tension)
+            slope = 0.0
+            for a in range(k):
+                slope -= along[a] * coords[a]
+            alpha[r] = 0.0
+            fraction = 1.0
+            for _h in range(HALVINGS + 1):
+                if _shortfall(t[rows[r]] + fraction * step[r], min_tension) <= \
+                        now + 1e-4 * fraction * slope:
+                    alpha[r] = fraction
+                    break
+                fraction *= 0.5
+            if alpha[r] * biggest > 1e-12 * min_tension:
+                progress = True
+        if not progress:
+            break
+        for r in range(runs):
+            for i in range(n):
+                t[rows[r], i] += alpha[r] * step[r, i]
+    # the steps' rounding off the force: taken back
+    for r in range(runs):
+        moved = np.zeros(3)
+        for i in range(n):
+            for a in range(3):
+                moved[a] += units[rows[r], i, a] * (t[rows[r], i] - t_force[r, i])
+        back = np.linalg.solve(gram[rows[r]], moved)
+        for i in range(n):
+            s = 0.0
+            for a in range(3):
+                s += units[rows[r], i, a] * back[a]
+            t[rows[r], i] -= s
+
+
+@_kernel
+def shifted_tensions(units: np.ndarray, force: np.ndarray, min_tension: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The first part of :func:`~cdpr_pipeline.sim.controller.distribute_tensions_numpy`:
+    the least-norm tensions (B, n) of ``K^T t = force`` (B, 3), clipped at the bound
+    (3 cables) or shifted along the null-space direction nearest "all cables equally";
+    with the Gram matrices ``K^T K`` (B, 3, 3) and which runs still hold a cable below
+    the bound (B,), for :func:`nearest_to_bound` (kept apart so that a rig that never
+    needs it never compiles its eigen-decompositions)."""
+    batch, n = units.shape[0], units.shape[1]
+    t = np.empty((batch, n))
+    grams = np.empty((batch, 3, 3))
+    short = np.zeros(batch, dtype=np.bool_)
+    for b in range(batch):
+        u = units[b]
+        gram = _gram(u)
+        grams[b] = gram
+        rhs = np.empty((3, 2))
+        for a in range(3):
+            rhs[a, 0] = force[b, a]
+            total = 0.0
+            for i in range(n):
+                total += u[i, a]
+            rhs[a, 1] = total
+        x = np.linalg.solve(gram, rhs)
+        null_dir = np.empty(n)
+        for i in range(n):
+            t[b, i] = u[i, 0] * x[0, 0] + u[i, 1] * x[1, 0] + u[i, 2] * x[2, 0]
+            null_dir[i] = 1.0 - (u[i, 0] * x[0, 1] + u[i, 1] * x[1, 1] + u[i, 2] * x[2, 1])
+        if n == 3:
+            for i in range(n):
+                t[b, i] = max(t[b, i], min_tension)
+            continue
+        need = -np.inf
+        for i in range(n):
+            if null_dir[i] > 1e-9:
+                need = max(need, (min_tension - t[b, i]) / null_dir[i])
+        shift = max(need, 0.0)
+        if not np.isfinite(shift):
+            shift = 0.0
+        for i in range(n):
+            t[b, i] += shift * null_dir[i]
+            if t[b, i] < min_tension - TENSION_SLACK_N:
+                short[b] = True
+    return t, grams, short
+
+
+@_kernel
+def rigid_motion(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
+                 position: np.ndarray, velocity: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rigid cables' lengths (B, n), unit vectors (B, n, 3), winch speeds, the ``k'.v``
+    term and winch angles (B, n) at platform ``position`` and ``velocity`` (B, 3):
+    :func:`~cdpr_pipeline.sim.kinematics.cable_geometry`,
+    :func:`~cdpr_pipeline.sim.kinematics.winch_rates` and
+    :meth:`~cdpr_pipeline.sim.plant.Plant.winch_angle_from_length` in one loop."""
+    batch, n = position.shape[0], anchors.shape[0]
+    lengths = np.empty((batch, n))
+    units = np.empty((batch, n, 3))
+    omega = np.empty((batch, n))
+    curvature = np.empty((batch, n))
+    theta = np.empty((batch, n))
+    for b in range(batch):
+        speed2 = velocity[b, 0] ** 2 + velocity[b, 1] ** 2 + velocity[b, 2] ** 2
+        for i in range(n):
+            d0 = anchors[i, 0] - position[b, 0]
+            d1 = anchors[i, 1] - position[b, 1]
+            d2 = anchors[i, 2] - position[b, 2]
+            length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            k0, k1, k2 = d0 / length, d1 / length, d2 / length
+            units[b, i, 0], units[b, i, 1], units[b, i, 2] = k0, k1, k2
+            kv = k0 * velocity[b, 0] + k1 * velocity[b, 1] + k2 * velocity[b, 2]
+            lengths[b, i] = length
+            curvature[b, i] = (kv * kv - speed2) / length
+            omega[b, i] = kv / radius[i]
+            theta[b, i] = (home_lengths[i] - length) / radius[i]
+    return lengths, units, omega, curvature, theta
+
+
+@_kernel
+def rigid_acceleration(units: np.ndarray, torque: np.ndarray, resist: np.ndarray,
+                       curvature: np.ndarray, radius: np.ndarray, inertia: np.ndarray,
+                       reflected: np.ndarray, mass: float, gravity_vector: np.ndarray
+                       ) -> np.ndarray:
+    """Platform acceleration (B, 3) of the reduced rigid model,
+    ``(m I + K^T diag(I/R^2) K) p'' = K^T (u - F - I c / R) / R + m g``
+    (:meth:`~cdpr_pipeline.sim.plant.Plant.rigid_acceleration`'s arithmetic), from unit
+    vectors (B, n, 3), drum torques, resisting torques and ``k'.v`` terms (B, n)."""
+    batch, n = units.shape[0], units.shape[1]
+    out = np.empty((batch, 3))
+    matrix = np.empty((3, 3))
+    force = np.empty(3)
+    for b in range(batch):
+        # the cables' sums first, then the platform's terms (as the numpy reference)
+        force[:] = 0.0
+        matrix[:] = 0.0
+        for i in range(n):
+            pull = (torque[b, i] - resist[b, i] - inertia[i] * curvature[b, i] / radius[i]) \
+                / radius[i]
+            for a in range(3):
+                force[a] += units[b, i, a] * pull
+                weighted = units[b, i, a] * reflected[i]
+                for c in range(3):
+                    matrix[a, c] += weighted * units[b, i, c]
+        for a in range(3):
+            force[a] += mass * gravity_vector[a]
+            matrix[a, a] += mass
+        out[b] = _solve3(matrix, force)
+    return out
+
+
+@_kernel
+def winch_paths(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
+                position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Unit vectors (B, n, 3), winch speeds, accelerations and angles (B, n) of rigid
+    cables at a platform's position, velocity and acceleration (B, 3):
+    :func:`~cdpr_pipeline.sim.kinematics.winch_rates` with its geometry."""
+    _, units, omega, curvature, theta = rigid_motion(anchors, home_lengths, radius,
+                                                     position, velocity)
+    alpha = np.empty_like(omega)
+    for b in range(units.shape[0]):
+        for i in range(units.shape[1]):
+            ka = (units[b, i, 0] * acceleration[b, 0] + units[b, i, 1] * acceleration[b, 1]
+                  + units[b, i, 2] * acceleration[b, 2])
+            alpha[b, i] = (ka + curvature[b, i]) / radius[i]
+    return units, omega, alpha, theta
+
+
+@_kernel
+def implicit_matrices(units: np.ndarray, reflected: np.ndarray, slope: np.ndarray,
+                      mass: float, factor: float) -> tuple[np.ndarray, np.ndarray]:
+    """The reduced mass matrices ``M = m I + K^T diag(I / R^2) K`` (B, 3, 3) and
+    ``W = M + factor K^T diag(slope) K`` of the linearly implicit step, ``slope`` (B, n)
+    the friction's slope over ``R^2``."""
+    batch, n = units.shape[0], units.shape[1]
+    masses = np.zeros((batch, 3, 3))
+    damped = np.zeros((batch, 3, 3))
+    for b in range(batch):
+        for i in range(n):
+            for a in range(3):
+                weighted = units[b, i, a] * reflected[i]
+                damping = units[b, i, a] * slope[b, i]
+                for c in range(3):
+                    masses[b, a, c] += weighted * units[b, i, c]
+                    damped[b, a, c] += damping * units[b, i, c]
+        for a in range(3):
+            masses[b, a, a] += mass
+        for a in range(3):
+            for c in range(3):
+                damped[b, a, c] = masses[b, a, c] + factor * damped[b, a, c]
+    return masses, damped
+
+
+@_kernel
+def implicit_solve(damped: np.ndarray, masses: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """``W^-1 f`` of the linearly implicit step on every run's state rates ``f`` (B, S),
+    ``W = I - gamma dt J`` with ``J`` nonzero only in ``dv'/dv = -M^-1 D``: the velocity
+    rates become ``(M + gamma dt D)^-1 M f_v``, the others stay."""
+    out = rates.copy()
+    moved = np.empty(3)
+    for b in range(rates.shape[0]):
+        for a in range(3):
+            moved[a] = (masses[b, a, 0] * rates[b, 3] + masses[b, a, 1] * rates[b, 4]
+                        + masses[b, a, 2] * rates[b, 5])
+        out[b, 3:6] = _solve3(damped[b], moved)
+    return out
+
+
+@_kernel
+def _log1p_over(x: float) -> float:
+    if abs(x) < 1e-6:
+        return 1.0 - 0.5 * x
+    return np.log1p(x) / x
+
+
+@_kernel
+def _expm1_over(y: float) -> float:
+    if abs(y) < 1e-6:
+        return 1.0 + 0.5 * y
+    return np.expm1(y) / y
+
+
+@_kernel
+def _time_weight(x: float) -> float:
+    if abs(x) < 1e-4:
+        return 1.0 - x / 3.0 + x * x / 6.0
+    return 2.0 * ((1.0 + x) * np.log1p(x) - x) / (x * x)
+
+
+@_kernel
+def path_nodes(omega: np.ndarray, alpha: np.ndarray, beta: np.ndarray, h: np.ndarray,
+               reach: np.ndarray, g0: np.ndarray, offsets: np.ndarray, even: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The speeds (Q, D) at which :func:`~cdpr_pipeline.sim.friction_path.
+    friction_over_step` reads the law along each of D drives' paths (sorted, the first
+    the start), and the paths' directions (D,): the numpy reference's ``w`` and
+    ``direction``; every input (D,) but the node shares ``offsets`` about zero speed
+    and ``even`` along the path, each ascending."""
+    drives = omega.size
+    nodes = even.size + offsets.size
+    w = np.empty((nodes, drives))
+    direction = np.empty(drives)
+    share = np.empty(nodes)
+    for d in range(drives):
+        sense = 1.0 if g0[d] >= 0.0 else -1.0
+        direction[d] = sense
+        span = h[d] * (abs(alpha[d]) + beta[d] * reach[d]) * sense
+        if span == 0.0:
+            span = sense * 1e-300
+        zero = -omega[d] / span
+        # both share lists ascending (``offsets`` sorted, the clip keeps their order):
+        # merged, they are the reference's sorted nodes
+        a = 0
+        c = 0
+        for q in range(nodes):
+            if c < offsets.size:
+                clipped = min(max(zero + offsets[c], 0.0), 1.0)
+                if a >= even.size or clipped < even[a]:
+                    share[q] = clipped
+                    c += 1
+                    continue
+            share[q] = even[a]
+            a += 1
+        for q in range(nodes):
+            w[q, d] = omega[d] + span * share[q]
+    return w, direction
+
+
+@_kernel
+def path_friction(w: np.ndarray, g: np.ndarray, direction: np.ndarray, omega: np.ndarray,
+                  alpha: np.ndarray, beta: np.ndarray, h: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The friction over the step, ``c0 + c1 (t - h / 2)``, of D drives from their
+    paths' nodes ``w`` (Q, D) and the speed's rates ``g`` there (``g[0]`` at the start):
+    the arithmetic of :func:`~cdpr_pipeline.sim.friction_path.friction_over_step`
+    after the law's call, drive by drive."""
+    nodes, drives = w.shape
+    c0 = np.empty(drives)
+    c1 = np.empty(drives)
+    t = np.empty(nodes)
+    full = np.empty(nodes)
+    blocked = np.empty(nodes, dtype=np.bool_)
+    for d in range(drives):
+        sense = direction[d]
+        stop = False
+        for q in range(nodes):
+            stop = stop or not (g[q, d] * sense > 0.0)
+            blocked[q] = stop
+        t[0] = 0.0
+        full[0] = 0.0
+        for q in range(nodes - 1):
+            if blocked[q + 1]:
+                t[q + 1] = t[q] + np.inf
+                full[q + 1] = full[q]
+                continue
+            stretch = w[q + 1, d] - w[q, d]
+            x = g[q + 1, d] / g[q, d] - 1.0
+            t[q + 1] = t[q] + stretch / g[q, d] * _log1p_over(x)
+            moment = stretch ** 2 / (2.0 * g[q, d]) * _time_weight(x)
+            full[q + 1] = full[q] + (t[q] * stretch + moment)
+        count = 0
+        for q in range(nodes):
+            if t[q] <= h[d]:
+                count += 1
+        last = max(count - 1, 0)
+        nxt = min(last + 1, nodes - 1)
+        w_a, g_a, t_a = w[last, d], g[last, d], t[last]
+        w_n, g_n = w[nxt, d], g[nxt, d]
+        inside = last + 1 < nodes
+        at_root = blocked[nxt] and inside
+        if at_root:
+            w_b = w_a + (w_n - w_a) * g_a / (g_a - g_n)
+            g_b = 0.0
+        else:
+            w_b, g_b = w_n, g_n
+        u = w_b - w_a
+        sigma = (g_b - g_a) / u if inside and u != 0.0 else 0.0
+        tau = h[d] - t_a
+        w1 = w_a + g_a * tau * _expm1_over(sigma * tau)
+        if at_root and (w1 - w_b) * sense > 0.0:
+            w1 = w_b
+        x1 = sigma * (w1 - w_a) / g_a
+        if x1 < -1.0 + 1e-15:
+            x1 = -1.0 + 1e-15
+        partial = t_a * (w1 - w_a) + (w1 - w_a) ** 2 / (2.0 * g_a) * _time_weight(x1)
+        if not np.isfinite(partial):
+            partial = 0.0
+        time_integral = full[last] + partial
+        if g[0, d] == 0.0:          # a drive already at a root of g stays there
+            w1 = omega[d]
+            time_integral = 0.0
+        impulse = (alpha[d] * h[d] - (w1 - omega[d])) / beta[d]
+        first = (0.5 * alpha[d] * h[d] * h[d] - time_integral) / beta[d] - 0.5 * h[d] * impulse
+        c0[d] = impulse / h[d]
+        c1[d] = 12.0 * first / h[d] ** 3
+    return c0, c1
