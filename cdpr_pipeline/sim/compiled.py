@@ -14,12 +14,47 @@ torques (an effect's callable) stay numpy calls of their own.
 
 from __future__ import annotations
 
-import numba
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
-#: compiled once, cached beside this module; floating-point errors as numpy has them
-#: (a division by zero gives inf or nan, as in the numpy reference, not an exception)
-_kernel = numba.njit(cache=True, error_model="numpy")
+#: the kernels' Python functions, by name, until :func:`_compile_all` swaps them in
+_PYTHON: dict[str, Callable[..., Any]] = {}
+
+
+def _compile_all() -> None:
+    """Every kernel of this module made a numba dispatcher, in the module's namespace
+    (a kernel calling another resolves its name here when compiled): compiled once,
+    cached beside this module, floating-point errors as numpy has them (a division by
+    zero gives inf or nan, as in the numpy reference, not an exception). numba is
+    imported here, on the first kernel called, not with the module: a process that
+    never simulates (the black box's helper unpickles regression rows, whose module
+    imports the plant) does not load it (about 115 MB and 0.2 s)."""
+    import numba
+
+    namespace = globals()
+    for name, function in _PYTHON.items():
+        namespace[name] = numba.njit(cache=True, error_model="numpy")(function)
+    _PYTHON.clear()
+
+
+class _Pending:
+    """A kernel before the first call of any: that call compiles them all."""
+
+    def __init__(self, function: Callable[..., Any]) -> None:
+        self.name = function.__name__
+        self.__doc__ = function.__doc__
+
+    def __call__(self, *args: Any) -> Any:
+        if _PYTHON:
+            _compile_all()
+        return globals()[self.name](*args)
+
+
+def _kernel(function: Callable[..., Any]) -> _Pending:
+    _PYTHON[function.__name__] = function
+    return _Pending(function)
 
 #: how far below the bound a tension may stay (N): rounding, not a choice
 TENSION_SLACK_N = 1e-9

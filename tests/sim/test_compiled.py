@@ -2,6 +2,9 @@
 (the tension distribution and the rigid acceleration have their own tests beside their
 numpy references, in test_controller.py and test_plant.py)."""
 
+import subprocess
+import sys
+
 import numpy as np
 
 from cdpr_pipeline.sim import compiled
@@ -56,3 +59,14 @@ def test_the_implicit_step_kernels_are_numpys():
                                        )[..., 0]
     np.testing.assert_allclose(compiled.implicit_solve(damped, masses, rates), expected,
                                rtol=1e-12, atol=1e-14)
+
+
+def test_numba_loads_with_the_first_kernel_not_with_the_plant():
+    # the black box's helper imports the plant's module (to unpickle regression rows)
+    # and never simulates: it must not pay numba's memory (about 115 MB)
+    code = ("import sys; import cdpr_pipeline.sim.plant, cdpr_pipeline.sim.controller; "
+            "assert 'numba' not in sys.modules; "
+            "import numpy as np; from cdpr_pipeline.sim import compiled; "
+            "compiled._shortfall(np.array([1.0, -2.0]), 0.0); "
+            "assert 'numba' in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True)
