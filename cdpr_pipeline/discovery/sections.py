@@ -25,8 +25,10 @@ try:  # the compiled kernel of scipy.signal.sosfilt
 except ImportError:     # pragma: no cover - another SciPy layout
     _sosfilt = None
 
+from cdpr_pipeline.jit import numba_module
+
 try:
-    import numba
+    numba = numba_module()
 except ImportError:     # pragma: no cover - numba is a dependency; SciPy's kernel serves
     numba = None
 

@@ -6,7 +6,7 @@ is the calls' own (an 8-cable rig at 1 kHz: about 0.35 ms a tick in the controll
 tension distribution alone, for five runs). Here the same arithmetic runs as one
 compiled loop over the runs. Each kernel has a numpy twin, the reference a test
 compares it against (:func:`~cdpr_pipeline.sim.controller.distribute_tensions_numpy`);
-the kernels are compiled on first use and cached beside this module (``cache=True``).
+the kernels are compiled on first use and cached (``cache=True``) in the user's cache folder (:mod:`cdpr_pipeline.jit`).
 
 Only the model's fixed arithmetic is compiled; the friction law and a model's extra
 torques (an effect's callable) stay numpy calls of their own.
@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from cdpr_pipeline.jit import numba_module
+
 #: the kernels' Python functions, by name, until :func:`_compile_all` swaps them in
 _PYTHON: dict[str, Callable[..., Any]] = {}
 
@@ -26,13 +28,13 @@ _PYTHON: dict[str, Callable[..., Any]] = {}
 def _compile_all() -> None:
     """Every kernel of this module made a numba dispatcher, in the module's namespace
     (a kernel calling another resolves its name here when compiled): compiled once,
-    cached beside this module, floating-point errors as numpy has them (a division by
-    zero gives inf or nan, as in the numpy reference, not an exception). numba is
+    cached, floating-point errors as numpy has them (a division by
+    zero gives inf or nan, as in the numpy reference, not an exception; the cache in
+    the user's cache folder, :mod:`cdpr_pipeline.jit`). numba is
     imported here, on the first kernel called, not with the module: a process that
     never simulates (the black box's helper unpickles regression rows, whose module
     imports the plant) does not load it (about 115 MB and 0.2 s)."""
-    import numba
-
+    numba = numba_module()
     namespace = globals()
     for name, function in _PYTHON.items():
         namespace[name] = numba.njit(cache=True, error_model="numpy")(function)
