@@ -6,7 +6,8 @@ is the calls' own (an 8-cable rig at 1 kHz: about 0.35 ms a tick in the controll
 tension distribution alone, for five runs). Here the same arithmetic runs as one
 compiled loop over the runs. Each kernel has a numpy twin, the reference a test
 compares it against (:func:`~cdpr_pipeline.sim.controller.distribute_tensions_numpy`);
-the kernels are compiled on first use and cached (``cache=True``) in the user's cache folder (:mod:`cdpr_pipeline.jit`).
+the kernels are compiled on first use and cached (``cache=True``) in the user's cache
+folder (:mod:`cdpr_pipeline.jit`).
 
 Only the model's fixed arithmetic is compiled; the friction law and a model's extra
 torques (an effect's callable) stay numpy calls of their own.
