@@ -28,7 +28,7 @@ import numpy as np
 
 from cdpr_pipeline.data.rig import WINCH_KEYS
 from cdpr_pipeline.evolution import MinVector, deap_random
-from cdpr_pipeline.identification.regressors import WinchRegression
+from cdpr_pipeline.identification.regression_data import WinchRegression
 
 log = logging.getLogger(__name__)
 

@@ -18,7 +18,8 @@ from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.data.reading import RegressionSettings
 from cdpr_pipeline.identification.identifiers import LeastSquares
 from cdpr_pipeline.identification.pipeline import lowpass_regression
-from cdpr_pipeline.identification.regressors import WinchRegression, build_regression
+from cdpr_pipeline.identification.regression_data import WinchRegression
+from cdpr_pipeline.identification.regressors import build_regression
 from cdpr_pipeline.wavelet import WaveletSplit
 
 

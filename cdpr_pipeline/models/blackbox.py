@@ -17,7 +17,7 @@ import numpy as np
 from hydra.utils import instantiate
 
 from cdpr_pipeline.helper_process import HelperProcess, serve
-from cdpr_pipeline.identification.regressors import WinchRegression
+from cdpr_pipeline.identification.regression_data import WinchRegression
 
 
 class LazyNet:

@@ -25,11 +25,14 @@ resolve it from the two columns, and the closed loop's motion is driven by it.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cdpr_pipeline.data.rig import Rig
-from cdpr_pipeline.data.trajectory import Trajectory
+if TYPE_CHECKING:  # annotations only: the networks (and the black box's helper process,
+    # which builds them) read no data, and the data package loads pandas and SciPy
+    from cdpr_pipeline.data.rig import Rig
+    from cdpr_pipeline.data.trajectory import Trajectory
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from functools import partial
 import numpy as np
 import torch
 
-from cdpr_pipeline.identification.regressors import WinchRegression
+from cdpr_pipeline.identification.regression_data import WinchRegression
 from cdpr_pipeline.metrics import mae, mse, ppl
 from cdpr_pipeline.models.features import ChannelLayout
 from cdpr_pipeline.models.window_fit import fit_windows

@@ -20,7 +20,8 @@ from cdpr_pipeline.command import hydra_command
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.reading import resolve_settings
 from cdpr_pipeline.identification.pipeline import split_regression
-from cdpr_pipeline.identification.regressors import COLUMNS, dataset_regression
+from cdpr_pipeline.identification.regression_data import COLUMNS
+from cdpr_pipeline.identification.regressors import dataset_regression
 from cdpr_pipeline.wavelet import WaveletSplit, band_energies
 
 log = logging.getLogger(__name__)

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import pickle
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from omegaconf import OmegaConf
@@ -48,3 +52,21 @@ def test_a_fit_that_fails_in_the_helper_is_raised_in_the_command(net, seed):
     with BlackBoxApart(_blackbox(bad)) as helper, \
             pytest.raises(RuntimeError, match="the black box failed: .*NoSuchNet"):
         helper.fit_predict(_regression(rng, 2, 100), _regression(rng, 1, 100))
+
+
+def test_the_helper_loads_neither_pandas_nor_scipy(net, seed):
+    # the helper is alive with the command to its end: SciPy and pandas (the data
+    # package's, the regressors' filters) would add about 130 MB to the command's peak.
+    # The helper's own module run as `python -m` does, fed one fit, then its modules listed
+    rng = np.random.default_rng(seed)
+    request = (_blackbox(net), _regression(rng, 2, 100), _regression(rng, 1, 100))
+    code = ("import runpy, sys\n"
+            "runpy.run_module('cdpr_pipeline.models.blackbox', run_name='__main__')\n"
+            "print(' '.join(sorted({m.split('.')[0] for m in sys.modules})), file=sys.stderr)")
+    out = subprocess.run([sys.executable, "-c", code], input=pickle.dumps(request),
+                         capture_output=True, check=True)
+    ok, prediction = pickle.loads(out.stdout)
+    assert ok and prediction.shape == (100, 2)
+    loaded = set(out.stderr.decode().split())
+    assert "torch" in loaded
+    assert not loaded & {"pandas", "scipy", "numba"}, sorted(loaded & {"pandas", "scipy", "numba"})

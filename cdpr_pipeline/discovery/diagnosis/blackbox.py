@@ -14,7 +14,7 @@ from cdpr_pipeline.discovery.diagnosis.state import DiagnosisState
 from cdpr_pipeline.discovery.residuals import Model, residuals
 from cdpr_pipeline.discovery.results import BlackBoxShare
 from cdpr_pipeline.discovery.signals import RunSignals
-from cdpr_pipeline.identification.regressors import WinchRegression
+from cdpr_pipeline.identification.regression_data import WinchRegression
 
 log = logging.getLogger(__name__)
 

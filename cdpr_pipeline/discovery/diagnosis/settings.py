@@ -11,7 +11,7 @@ import numpy as np
 from cdpr_pipeline.data.reading import RegressionSettings
 from cdpr_pipeline.discovery.freeform.search import FreeFormSearch
 from cdpr_pipeline.discovery.judge import SelectionSettings
-from cdpr_pipeline.identification.regressors import WinchRegression
+from cdpr_pipeline.identification.regression_data import WinchRegression
 from cdpr_pipeline.wavelet.split import WaveletSplit
 
 
