@@ -34,6 +34,11 @@ class HelperProcess:
             [sys.executable, "-m", module], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
             stderr=self._stderr, start_new_session=True)
 
+    @property
+    def is_open(self) -> bool:
+        """Whether the helper takes requests (not closed yet)."""
+        return self._proc is not None
+
     def send(self, request: Any) -> None:
         """Send ``request`` without waiting for a reply."""
         try:

@@ -4,6 +4,7 @@ The order, lowest first (a layer may import its own and any lower one, never a h
 
 1. leaves: ``errors``, ``config``, ``progress``, ``metrics``, ``tables``, ``evolution``,
    ``helper_process`` (a helper process started early), ``jit`` (numba and its cache),
+   ``heap`` (freed memory handed back to the OS),
    ``resources`` (no project imports but ``errors``, which ``config`` reports with);
 2. ``data``: reading and checking datasets (how a run is read: ``data.reading``), rigs,
    splits;
@@ -43,7 +44,7 @@ PACKAGE = Path(cdpr_pipeline.__file__).parent
 
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("errors", "config", "progress", "metrics", "tables", "evolution", "resources",
-     "helper_process", "jit"),
+     "helper_process", "jit", "heap"),
     ("data",),
     ("wavelet",),
     ("sim",),

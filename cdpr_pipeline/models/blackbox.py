@@ -83,7 +83,11 @@ class BlackBoxApart:
     fit itself is the same, on the same rows, so its figures are the same. Where torch
     is already loaded in the process, :func:`apart` fits in the process instead.
 
-    Used as a context manager (the helper ends with the block).
+    The helper fits once and ends with its reply: a diagnosis fits one black box, and
+    the helper's 200-300 MB would otherwise count in the command's memory while it
+    writes its outputs. A later fit runs in the process.
+
+    Used as a context manager (the helper ends with the block at the latest).
     """
 
     def __init__(self, blackbox: NetworkBlackBox) -> None:
@@ -93,9 +97,20 @@ class BlackBoxApart:
         self._fitted = False
 
     def fit_predict(self, train: WinchRegression, held: WinchRegression) -> np.ndarray:
-        """:meth:`NetworkBlackBox.fit_predict`, in the helper."""
+        """:meth:`NetworkBlackBox.fit_predict`, in the helper (which then ends); in the
+        process once the helper has ended."""
+        if self._fitted:
+            return self.blackbox.fit_predict(train, held)
         self._fitted = True
-        return self._helper.request((self.blackbox, train, held))
+        try:
+            return self._helper.request((self.blackbox, train, held))
+        finally:
+            self.close()
+
+    @property
+    def helper_open(self) -> bool:
+        """Whether the helper process is still there (before its fit)."""
+        return self._helper.is_open
 
     def close(self) -> None:
         """The helper ends: at once if it has not fitted (a diagnosis that ended before

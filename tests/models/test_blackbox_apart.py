@@ -40,10 +40,15 @@ def test_the_helper_predicts_exactly_what_the_process_does(net, seed):
     train, held = _regression(rng, 2, 300), _regression(rng, 1, 200)
     here = _blackbox(net).fit_predict(train, held)
     with BlackBoxApart(_blackbox(net)) as helper:
-        assert helper.window == 8 and helper.epochs == 1
+        assert helper.window == 8 and helper.epochs == 1 and helper.helper_open
         there = helper.fit_predict(train, held)
+        # the helper ends with its one fit (its memory is the command's no longer); a
+        # later fit runs in the process, the same
+        assert not helper.helper_open
+        again = helper.fit_predict(train, held)
     assert there.shape == (len(held), 2) and np.any(there != 0)
     np.testing.assert_array_equal(there, here)
+    np.testing.assert_array_equal(again, here)
 
 
 def test_a_fit_that_fails_in_the_helper_is_raised_in_the_command(net, seed):

@@ -39,6 +39,7 @@ from cdpr_pipeline.discovery.diagnosis.state import DiagnosisState
 from cdpr_pipeline.discovery.plots import BeforeAfterPlot, HeldoutRunPlot, Plots
 from cdpr_pipeline.discovery.residuals import measured_rows
 from cdpr_pipeline.discovery.summary import summary_sentence
+from cdpr_pipeline.heap import trim_heap
 
 
 def always(state: DiagnosisState) -> bool:
@@ -102,6 +103,9 @@ def diagnose(dataset: Dataset, settings: DiagnosisSettings | None = None) -> Dia
         finished = step.run(state)
         if finished is not None:
             return finished
+        # what the step made and dropped goes back to the OS: the black box's helper
+        # process fits beside this one, and the command's peak memory is their sum
+        trim_heap()
         state.clock[step.name] = time.perf_counter() - state.step_start
     state.clock["total"] = time.perf_counter() - state.start
     return _diagnosis(state)
