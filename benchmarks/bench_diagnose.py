@@ -174,7 +174,7 @@ def main() -> None:
         for case in args.cases:
             r = run_case(case, Path(tmp))
             order = ["startup", "loading", "signals", "candidates", "free_form", "selection",
-                     "never_worse", "validity", "second_look", "closed_loop", "black_box",
+                     "never_worse", "validity", "second_look", "black_box", "closed_loop",
                      "sizes", "writing", "mlflow", "other", "total"]
             parts = ", ".join(f"{k.replace('_', ' ')} {r['phases'][k]:.1f}" for k in order
                               if k in r["phases"])

@@ -47,7 +47,7 @@ SEED = 11
 RUNS, DURATION_S = 5, 15.0
 #: the phases in the order the table lists them
 PHASES = ("startup", "loading", "admission", "signals", "candidates", "free_form", "selection",
-          "never_worse", "validity", "second_look", "closed_loop", "black_box", "sizes",
+          "never_worse", "validity", "second_look", "black_box", "closed_loop", "sizes",
           "writing", "mlflow", "other")
 
 

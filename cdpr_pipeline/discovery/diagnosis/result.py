@@ -36,7 +36,7 @@ class Diagnosis:
     """Result of :func:`diagnose` (see :meth:`as_json` for the file layout).
 
     ``timings`` holds the seconds per phase (signals, candidates, free-form, validity,
-    closed loop, black box, sizes, total); it is not part of ``diagnosis.json``, which depends
+    black box, closed loop, sizes, total); it is not part of ``diagnosis.json``, which depends
     only on the data and the settings, but of ``metrics.json`` (``time_<phase>_s``,
     with the command's start-up CPU seconds and loading beside them). ``plots`` holds
     the arrays of the report's figures (:class:`~cdpr_pipeline.discovery.plots.Plots`).

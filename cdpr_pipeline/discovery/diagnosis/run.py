@@ -68,8 +68,11 @@ STEPS: tuple[Step, ...] = (
     Step("never worse", never_worse.run),
     Step("validity", validity.run),
     Step("second look", second_look.run, second_look.applies),
-    Step("closed loop", closed_loop.run, closed_loop.applies),
+    # the black box before the closed loop (neither reads the other): its helper process
+    # ends with its fit, so the closed loop, the diagnosis's largest transient memory,
+    # runs without it beside
     Step("black box", blackbox.run, blackbox.applies),
+    Step("closed loop", closed_loop.run, closed_loop.applies),
     Step("sizes", sizes.run),
 )
 
