@@ -25,46 +25,87 @@ from cdpr_pipeline.sim.effects import EFFECTS
 
 #: a held-out row retraces the training motion when some training sample has every
 #: channel's position and speed within this share of that signal's spread (its standard
-#: deviation over the training runs): the same place, passed the same way at the same
-#: speed. Retraced rows of a repeated motion lie within the sampling step (1e-3 to 1e-2
-#: of the spread); rows of another motion lie at 0.1 or more (docs/method.md 3.3)
+#: deviation over the training samples), and so have the samples up to :data:`PATH_S`
+#: before and after both: the same place, passed the same way at the same speed, along
+#: the same path. Rows of a repeated motion match within the sampling step (below 1 %
+#: of the spread); rows of another motion lie at 10 % or more (docs/method.md 3.3)
 RETRACE_TOLERANCE = 0.05
+#: how far (s) on either side of a held-out row its path is compared, at every
+#: statistics row's time (the rows resolve the analysed band): on a single axis a long
+#: training run passes near almost every (position, speed) pair and shares short
+#: stretches with another program (EMPS's pulses file against its bang-bang run: 90 % of
+#: the rows matched over 0.02 s, 19 % over 0.2 s, none over 0.5 s), while a repeated
+#: motion matches over its whole period (the lab's circles: 3-8 s)
+PATH_S = 1.0
+#: training samples (nearest first) whose path is compared with a held-out row's
+NEIGHBOURS = 8
 #: the held-out rows cannot confirm a function of position when more than this share of
 #: them retraces the training motion
 RETRACED_SHARE = 0.5
 
 
-def _states(runs: Sequence[RunSignals], rows: bool) -> np.ndarray:
-    """Every channel's position and speed, at the statistics rows or at every sample
-    (samples, 2 n)."""
-    parts = []
-    for s in runs:
-        idx = s.row_index() if rows else slice(None)
-        parts.append(np.hstack([s.theta[idx], s.omega[idx]]))
-    return np.concatenate(parts) if parts else np.zeros((0, 0))
+def _state(s: RunSignals) -> np.ndarray:
+    """Every channel's position and speed at every sample (samples, 2 n)."""
+    return np.hstack([s.theta, s.omega])
 
 
 def retraced_share(train: Sequence[RunSignals], heldout: Sequence[RunSignals],
                    tolerance: float = RETRACE_TOLERANCE) -> float:
-    """The share of the held-out statistics rows whose motion state (every channel's
-    position and speed) some training sample matches to within ``tolerance`` of each
-    signal's spread (the largest of the per-signal differences, each over its standard
-    deviation across the training samples). A motion driven on and on: its last block
-    retraces the first ones (1); the same positions passed at another speed do not.
+    """The share of the held-out statistics rows whose motion some training sample
+    retraces: every channel's position and speed within ``tolerance`` of each signal's
+    spread (the largest of the per-signal differences, each over its standard deviation
+    across the training samples), at the row and along :data:`PATH_S` before and after
+    it. A motion driven on and on: its last block retraces the first ones
+    (1); the same positions passed at another speed, or another path through them, do
+    not.
     """
     if not train or not heldout:
         return 0.0
-    reference = _states(train, rows=False)
-    queries = _states(heldout, rows=True)
-    if len(queries) == 0 or reference.shape[1] != queries.shape[1]:
+    parts = [_state(s) for s in train]
+    reference = np.concatenate(parts)
+    if reference.size == 0 or any(_state(h).shape[1] != reference.shape[1]
+                                  for h in heldout):
         return 0.0
+    run_of = np.concatenate([np.full(len(p), k) for k, p in enumerate(parts)])
+    first = np.concatenate([[0], np.cumsum([len(p) for p in parts])[:-1]])[run_of]
+    rates = np.array([s.fs for s in train])[run_of]
     spread = reference.std(axis=0)
     spread = np.where(spread > 0, spread, 1.0)
-    # bounded: a row farther than the tolerance needs no exact distance (milliseconds
-    # instead of a second on 8 cables at 1 kHz)
-    distance, _ = cKDTree(reference / spread).query(queries / spread, p=np.inf,
-                                                     distance_upper_bound=tolerance)
-    return float(np.mean(distance <= tolerance))
+    reference = reference / spread
+    tree = cKDTree(reference)
+    retraced, rows = 0, 0
+    for h in heldout:
+        state = _state(h) / spread
+        idx = h.row_index()
+        if len(idx) == 0:
+            continue
+        rows += len(idx)
+        # bounded: a sample farther than the tolerance needs no exact distance
+        # (milliseconds instead of a second on 8 cables at 1 kHz)
+        distance, near = tree.query(state[idx], k=NEIGHBOURS, p=np.inf,
+                                    distance_upper_bound=tolerance)
+        ok = distance <= tolerance                          # (rows, NEIGHBOURS)
+        near = np.where(ok, near, 0)
+        # the path at every row's time within PATH_S (the rows resolve the band)
+        step_s = float(np.median(np.diff(idx))) / h.fs if len(idx) > 1 else PATH_S
+        reach = int(PATH_S // step_s)
+        for offset_s in step_s * np.arange(-reach, reach + 1):
+            if offset_s == 0.0:
+                continue
+            mine = idx + int(round(offset_s * h.fs))
+            inside = (mine >= 0) & (mine < len(state))
+            theirs = near + np.round(offset_s * rates[near]).astype(int)
+            same_run = (theirs >= 0) & (theirs < len(reference))
+            theirs = np.clip(theirs, 0, len(reference) - 1)
+            same_run &= run_of[theirs] == run_of[near]
+            same_run &= theirs >= first[near]
+            gap = np.max(np.abs(reference[theirs]
+                                - state[np.clip(mine, 0, len(state) - 1)][:, None, :]),
+                         axis=-1)
+            # a row near the ends of its run is compared where its path lies in the run
+            ok &= ~inside[:, None] | (same_run & (gap <= tolerance))
+        retraced += int(np.count_nonzero(ok.any(axis=1)))
+    return retraced / rows if rows else 0.0
 
 
 def motion_locked(train: Sequence[RunSignals], heldout: Sequence[RunSignals]) -> bool:
