@@ -5,12 +5,13 @@ cogging).
 On one run of a strictly repeated motion (a circle driven round and round, its last
 block held out), every function of the winch angles is a periodic function of time at
 the motion's harmonics, and the held-out block repeats what the training blocks did. A
-torque the nominal model misses that is locked to the motion (the encoders' quantisation
-aliased into the analysed band, a filter's lag at the motion's harmonics) then looks
-like a function of position to a candidate that chooses among dozens of such functions
-(cogging's period counts), on the training rows and on the held-out ones alike: the
-held-out gain confirms it by repetition, not by position.
-"""
+torque the nominal model misses that is locked to the motion (on the lab, the encoders'
+quantisation as the regression reads it) then looks like a function of position to a
+candidate that chooses among dozens of such functions (cogging's period counts), or
+like a function of position and speed to the free-form search, on the training rows
+and on the held-out ones alike: the held-out gain confirms it by repetition, not by
+position. Such candidates are not judged there (:func:`position_identifiable`,
+:func:`motion_locked`)"""
 
 from __future__ import annotations
 
@@ -27,8 +28,8 @@ from cdpr_pipeline.sim.effects import EFFECTS
 #: channel's position and speed within this share of that signal's spread (its standard
 #: deviation over the training samples), and so have the samples up to :data:`PATH_S`
 #: before and after both: the same place, passed the same way at the same speed, along
-#: the same path. Rows of a repeated motion match within the sampling step (below 1 %
-#: of the spread); rows of another motion lie at 10 % or more (docs/method.md 3.3)
+#: the same path. Rows of a repeated motion match within a few % along the path (the
+#: tracking's own noise); rows of other motions miss by 20 % or more (docs/method.md 3.3)
 RETRACE_TOLERANCE = 0.05
 #: how far (s) on either side of a held-out row its path is compared, at every
 #: statistics row's time (the rows resolve the analysed band): on a single axis a long
