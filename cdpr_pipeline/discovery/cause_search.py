@@ -538,19 +538,14 @@ def judge_freeform(search: FreeFormSearch, ctx: FitContext, judge: Judge, scale:
                    kind: str, n_tests: int, gp: bool = True, shapes: Sequence[str] = ()
                    ) -> Judgement:
     """The free-form search on what ``judge``'s base model leaves of the torque (no term
-    of the ``shapes`` the named candidates own), judged as the ``unnamed`` cause; not
-    searched where the held-out rows retrace the training motion
-    (:func:`~cdpr_pipeline.discovery.retrace.motion_locked`)."""
-    if motion_locked(ctx.train, judge.heldout):
-        # held-out rows retracing the training motion cannot confirm a form chosen among
-        # thousands on the training residual: a torque locked to the motion repeats
-        # there (docs/method.md 3.3, cogging)
-        return replace(judge("unnamed", "free-form", judge.base_effects, 0, n_tests),
-                       freeform=FreeFormResult(())).failed(
-            "not searched: the held-out rows retrace the training motion")
+    of the ``shapes`` the named candidates own, none periodic in position where the
+    held-out rows retrace the training motion: :func:`~cdpr_pipeline.discovery.retrace.
+    motion_locked`), judged as the ``unnamed`` cause."""
     torque = judge.base_train.stacked("torque")
-    periodicity = WINCH_ANGLE if kind == "cdpr" else \
-        Periodicity.of_axes([s.theta for s in ctx.train])
+    # no term periodic in position where the held-out rows retrace the training motion:
+    # there it takes up a torque locked to the motion (docs/method.md 3.3, cogging)
+    periodicity = None if motion_locked(ctx.train, judge.heldout) else \
+        WINCH_ANGLE if kind == "cdpr" else Periodicity.of_axes([s.theta for s in ctx.train])
     result = search.fit(ctx.train, torque, scale.speed_rms, periodicity, use_gp=gp,
                         exclude=shapes)
     j = replace(judge("unnamed", "free-form",
