@@ -16,11 +16,15 @@ position. Such candidates are not judged there (:func:`position_identifiable`,
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from cdpr_pipeline.discovery.residuals import Model
 from cdpr_pipeline.discovery.signals import RunSignals
+from cdpr_pipeline.discovery.sizes import below_noise
 from cdpr_pipeline.sim.candidate_forms import Candidate
 from cdpr_pipeline.sim.effects import EFFECTS
 
@@ -140,3 +144,25 @@ def position_identifiable(candidates: Sequence[Candidate], train: Sequence[RunSi
                  "torque locked to the motion there",
                  100 * retraced_share(train, heldout), ", ".join(sorted(by_position)))
     return [c for c in candidates if c.effect not in by_position]
+
+
+def above_noise_where_retraced(selection: Any, nominal: Model, train: Sequence[RunSignals],
+                               heldout: Sequence[RunSignals], log=None) -> Any:
+    """``selection`` (a :class:`~cdpr_pipeline.discovery.selection.Selection`) without
+    the causes whose every part stays below the noise, where the held-out rows retrace
+    the training motion (:func:`motion_locked`): there the held-out gain confirms by
+    repetition, and a torque locked to the motion below the noise (the lab's encoder
+    quantisation: 4-8e-4 N m on the rows) is what such a cause may be; its size is the
+    evidence left (docs/method.md 3.3)."""
+    if not selection.causes or not motion_locked(train, heldout):
+        return selection
+    quiet = below_noise(selection.causes, nominal, list(train))
+    if not any(quiet):
+        return selection
+    keep = tuple(c for c, q in zip(selection.causes, quiet, strict=True) if not q)
+    if log is not None:
+        log.info("the held-out rows retrace the training motion: %s dropped, below the "
+                 "noise", ", ".join(c.label for c, q in zip(selection.causes, quiet,
+                                                             strict=True) if q))
+    return replace(selection, causes=keep,
+                   effects=tuple(e for c in keep for e in c.effects))
