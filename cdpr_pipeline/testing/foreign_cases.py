@@ -239,11 +239,10 @@ def truth_judgement(case: ForeignCase) -> Any:
     case is not diagnosed, or the stated model was re-identified first."""
     record = case.record
     effects = _pipeline_form(case.truth.effects[0]) if case.truth.effects else None
-    if effects is None or record is None or not record["candidates"]:
+    if effects is None or record is None or not record["candidates"] \
+            or "unusable" in record["nominal"]:
         return None
     step = record["candidates"][0]
-    if any(j["variant"].startswith("winch_parameter_error[every") for j in step):
-        return None
     settings = case.settings or foreign_settings()
     settings = dataclasses.replace(settings, regression=as_resolved(
         settings.regression, case.dataset.trajectories, case.dataset.rig))
