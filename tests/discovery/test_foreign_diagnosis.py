@@ -11,9 +11,9 @@ generator's documented ranges. A torque-side effect (friction, a winch parameter
 the true torque on the held-out runs, in whatever form
 (``foreign_cases.CONTRIBUTION_TOLERANCE``); for the others, where the truth gives a number
 the cause can express, the fitted magnitude must be close to it
-(``foreign_cases.TOLERANCE``). ``none`` is right where the hidden effect itself, with its
-true parameters, fails the held-out tests (``foreign_cases.below_heldout_limit``: the
-held-out runs do not determine it). A shorter experiment than the
+(``foreign_cases.TOLERANCE``). ``none`` or ``unexplained`` is right where the hidden effect
+itself, with its true parameters, fails the held-out tests
+(``foreign_cases.below_heldout_limit``: the held-out runs do not determine it). A shorter experiment than the
 slow suite's keeps these fast (``foreign_cases.FAST``); the slow suite
 (``test_detection_rates.py``) runs every effect on the full one.
 """
@@ -133,10 +133,11 @@ def test_a_hidden_vocabulary_effect_is_named(tmp_path, seed, kind):
     record = case.record
 
     def check():
-        if record["verdict"] == "none" and below_heldout_limit(case):
+        if record["verdict"] in ("none", "unexplained") and below_heldout_limit(case):
             # the hidden effect itself, with its true parameters, fails the held-out
-            # tests on these runs: below what they determine, `none` is right
-            # (docs/method.md, known limits: weakly excited effects)
+            # tests on these runs: below what they determine, no name is right, `none`
+            # or (seen, not named) `unexplained` (docs/method.md, known limits: weakly
+            # excited effects)
             return
         assert record["verdict"] == name, case.describe()
         gain = record["gain"]
