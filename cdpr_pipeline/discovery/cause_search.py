@@ -31,6 +31,7 @@ from cdpr_pipeline.discovery.freeform.search import (
 from cdpr_pipeline.discovery.judge import Judge, Judgement, SelectionSettings, fit_weights
 from cdpr_pipeline.discovery.kept import KeptCauses
 from cdpr_pipeline.discovery.residuals import Model, relative_sse, signal_scales
+from cdpr_pipeline.discovery.retrace import motion_locked
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.sim.candidate_forms import SLOW_SHARE, Candidate, DataScale
 from cdpr_pipeline.sim.effects import Effect, WinchParameterError
@@ -537,10 +538,14 @@ def judge_freeform(search: FreeFormSearch, ctx: FitContext, judge: Judge, scale:
                    kind: str, n_tests: int, gp: bool = True, shapes: Sequence[str] = ()
                    ) -> Judgement:
     """The free-form search on what ``judge``'s base model leaves of the torque (no term
-    of the ``shapes`` the named candidates own), judged as the ``unnamed`` cause."""
+    of the ``shapes`` the named candidates own, none periodic in position where the
+    held-out rows retrace the training motion: :func:`~cdpr_pipeline.discovery.retrace.
+    motion_locked`), judged as the ``unnamed`` cause."""
     torque = judge.base_train.stacked("torque")
-    periodicity = WINCH_ANGLE if kind == "cdpr" else \
-        Periodicity.of_axes([s.theta for s in ctx.train])
+    # no term periodic in position where the held-out rows retrace the training motion:
+    # there it takes up a torque locked to the motion (docs/method.md 3.3, cogging)
+    periodicity = None if motion_locked(ctx.train, judge.heldout) else \
+        WINCH_ANGLE if kind == "cdpr" else Periodicity.of_axes([s.theta for s in ctx.train])
     result = search.fit(ctx.train, torque, scale.speed_rms, periodicity, use_gp=gp,
                         exclude=shapes)
     j = replace(judge("unnamed", "free-form",

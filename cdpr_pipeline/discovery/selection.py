@@ -49,6 +49,7 @@ from cdpr_pipeline.discovery.cause_search import (
 from cdpr_pipeline.discovery.freeform.search import FreeFormSearch
 from cdpr_pipeline.discovery.judge import Judge, Judgement, SelectionSettings, fit_weights
 from cdpr_pipeline.discovery.residuals import Model
+from cdpr_pipeline.discovery.retrace import position_identifiable
 from cdpr_pipeline.discovery.signals import RunSignals
 from cdpr_pipeline.sim.candidate_forms import Candidate
 from cdpr_pipeline.sim.effects import Effect
@@ -99,6 +100,7 @@ def named_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Run
     candidates = [c for c in candidates_for(rig, search.scale, settings.effects,
                                             settings.refit_winches)
                   if c.effect not in settings.exclude]
+    candidates = position_identifiable(candidates, train, heldout, log)
     # free-form terms with a candidate's shape are that candidate's to explain
     search.shapes = vocabulary_shapes(rig, search.scale, settings.effects)
     causes = search.forward([], candidates, False, settings.max_causes)

@@ -333,3 +333,22 @@ def _component(channel: int | None, sizes: list[SizeEstimate],
         label = f"cable {channel}"
     return CauseComponent(channel, label, tuple(sizes), sig, rms, threshold, rms_unit,
                           bool(ratio < 1.0 or vanishes))
+
+
+def below_noise(causes: Sequence[Any], nominal: Model, train: list[RunSignals]
+                ) -> list[bool]:
+    """Per cause, whether everything it changes in the training residual stays below the
+    noise on every column (what :func:`cause_sizes` reports as ``below_noise`` for each
+    of its parts), without the standard errors."""
+    extended = nominal.with_effects([e for c in causes for e in c.effects])
+    with_all = residuals(extended, nominal, train)
+    thresholds = _column_noise(train, with_all.channels)
+    out = []
+    for c in causes:
+        others = [e for o in causes if o is not c for e in o.effects]
+        without = residuals(nominal.with_effects(others), nominal, train)
+        out.append(all(
+            bool(np.all(np.sqrt(np.mean((without.stacked(ch) - with_all.stacked(ch)) ** 2,
+                                        axis=0)) < thresholds[ch]))
+            for ch in with_all.channels))
+    return out

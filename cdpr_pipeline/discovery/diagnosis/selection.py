@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 
 from cdpr_pipeline.discovery.diagnosis.state import DiagnosisState
+from cdpr_pipeline.discovery.retrace import above_noise_where_retraced
 from cdpr_pipeline.discovery.selection import settle
 
 log = logging.getLogger(__name__)
@@ -16,7 +17,9 @@ log = logging.getLogger(__name__)
 def run(state: DiagnosisState) -> None:
     """Set the selection and the causes: the re-identification of an unusable stated
     model first, then the selection's."""
-    state.selection = settle(state.pending)
+    base = state.nominal.with_effects(state.first.effects) if state.first else state.nominal
+    state.selection = above_noise_where_retraced(settle(state.pending), base, state.train,
+                                                 state.held, log)
     state.causes = ([state.first] if state.first else []) + list(state.selection.causes)
     log.info("causes: candidates %.1f s, free-form %.1f s; checking that the causes hold on "
              "the held-out runs (never worse, validity)", state.clock["candidates"],
