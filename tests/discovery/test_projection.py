@@ -21,12 +21,16 @@ def test_compiled_projection_is_einsums_to_the_bit(seed, cables):
     size = 500 + int(rng.integers(0, 50))
     p = rng.normal(size=(size, cables, cables))
     x = rng.normal(size=(size, cables)) * np.exp(rng.normal(0.0, 5.0, (size, cables)))
-    got = projection.project(p, x)
-    expected = projection.project_numpy(p, x)
-    # the sums' order shows: a sequential sum differs somewhere
+    # the sums' order shows: a sequential sum differs somewhere from einsum's on a
+    # C-ordered block, and is einsum's on a Fortran-ordered one
     sequential = sum(p[:, :, j] * x[:, j:j + 1] for j in range(cables))
-    assert not np.array_equal(sequential, expected)
-    assert np.array_equal(got, expected)
+    assert not np.array_equal(sequential, projection.project_numpy(p, x))
+    for block in (x, np.asfortranarray(x), np.repeat(x, 2, axis=1)[:, ::2],
+                  np.repeat(x, 3, axis=0)[1::3]):
+        assert np.array_equal(block, x)
+        got = projection.project(p, block)
+        assert np.array_equal(got, projection.project_numpy(p, block))
+    assert np.array_equal(projection.project(p, np.asfortranarray(x)), sequential)
 
 
 def test_projection_of_an_8_cable_rig_removes_internal_forces_to_the_bit(seed):
