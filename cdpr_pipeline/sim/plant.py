@@ -90,7 +90,7 @@ def compiled_law_torque(model: Plant, omega: np.ndarray,
     omega = np.asarray(omega)
     widths, rows, sizes = bumps
     sign = smooth_sign(omega, model.sign_sharpness)
-    shape = (-1, *omega.shape[-2:])
+    shape = (int(np.prod(omega.shape[:-2])), *omega.shape[-2:])
     exps = np.empty((len(widths), *omega.shape))
     for k, width in enumerate(widths):
         exps[k] = np.exp(-(omega / width) ** 2)
