@@ -27,11 +27,6 @@ import numpy as np
 
 from cdpr_pipeline.jit import numba_module
 
-try:
-    numba = numba_module()
-except ImportError:     # pragma: no cover - numba is a dependency; einsum serves
-    numba = None
-
 
 def project_numpy(projection: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``y[k] = projection[k] @ x[k]`` (N, n) by :func:`numpy.einsum`, the reference."""
@@ -72,22 +67,33 @@ def _project_sequential(p: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
             out[k, i] = 0.0 + total
 
 
-def _njit(function):
-    return None if numba is None else numba.njit(cache=True, nogil=True)(function)
+#: the compiled kernels (lanes, sequential), made on the first call: numba is loaded
+#: then, not with the module (a process that never projects does not pay its memory);
+#: None where numba is not installed
+_kernels: list = []
 
 
-_lanes = _njit(_project_lanes)
-_sequential = _njit(_project_sequential)
+def _compiled() -> tuple | None:
+    if not _kernels:
+        try:
+            numba = numba_module()
+        except ImportError:     # pragma: no cover - numba is a dependency; einsum serves
+            _kernels.append(None)
+        else:
+            _kernels.append(tuple(numba.njit(cache=True, nogil=True)(f)
+                                  for f in (_project_lanes, _project_sequential)))
+    return _kernels[0]
 
 
 def project(projection: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``y[k] = projection[k] @ x[k]``: ``projection`` (N, n, n), ``x`` (N, n) ->
     (N, n) C-ordered, :func:`project_numpy`'s numbers to the bit."""
     x = np.asarray(x)
-    if numba is None or projection.dtype != np.float64 or x.dtype != np.float64 \
+    kernels = _compiled()
+    if kernels is None or projection.dtype != np.float64 or x.dtype != np.float64 \
             or not projection.flags.c_contiguous:
         return project_numpy(projection, x)
     out = np.empty(x.shape)
-    kernel = _lanes if x.strides[1] == x.itemsize else _sequential
-    kernel(projection, x, out)
+    lanes, sequential = kernels
+    (lanes if x.strides[1] == x.itemsize else sequential)(projection, x, out)
     return out

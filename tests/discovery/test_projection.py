@@ -11,7 +11,7 @@ from cdpr_pipeline.discovery.signals import internal_force_projection
 from cdpr_pipeline.sim.kinematics import cable_geometry
 
 
-@pytest.mark.skipif(projection.numba is None, reason="numba not installed")
+@pytest.mark.skipif(projection._compiled() is None, reason="numba not installed")
 @pytest.mark.parametrize("cables", [4, 5, 7, 8, 9, 12, 16, 17])
 def test_compiled_projection_is_einsums_to_the_bit(seed, cables):
     """Random projectors and blocks of sizes many decades apart (where the order of the
