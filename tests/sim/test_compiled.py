@@ -6,7 +6,6 @@ import subprocess
 import sys
 
 import numpy as np
-
 import pytest
 
 from cdpr_pipeline.data.rig import WinchParams
