@@ -25,7 +25,7 @@ try:  # the compiled kernel of scipy.signal.sosfilt
 except ImportError:     # pragma: no cover - another SciPy layout
     _sosfilt = None
 
-from cdpr_pipeline.jit import numba_module
+from cdpr_pipeline.jit import compile_kernel, numba_module
 
 try:
     numba = numba_module()
@@ -83,8 +83,7 @@ def _forward_backward_loops(sos: np.ndarray, ext: np.ndarray, zi: np.ndarray) ->
                     ext[n, i] = new
 
 
-_compiled = None if numba is None else numba.njit(cache=True, nogil=True)(
-    _forward_backward_loops)
+_compiled = None if numba is None else compile_kernel(_forward_backward_loops, nogil=True)
 
 
 def forward_backward(sos: np.ndarray, ext: np.ndarray, zi: np.ndarray) -> None:

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from cdpr_pipeline.jit import numba_module
+from cdpr_pipeline.jit import compile_kernel
 
 #: the kernels' Python functions, by name, until :func:`_compile_all` swaps them in
 _PYTHON: dict[str, Callable[..., Any]] = {}
@@ -35,10 +35,9 @@ def _compile_all() -> None:
     imported here, on the first kernel called, not with the module: a process that
     never simulates (the black box's helper unpickles regression rows, whose module
     imports the plant) does not load it (about 115 MB and 0.2 s)."""
-    numba = numba_module()
     namespace = globals()
     for name, function in _PYTHON.items():
-        namespace[name] = numba.njit(cache=True, error_model="numpy")(function)
+        namespace[name] = compile_kernel(function, error_model="numpy")
     _PYTHON.clear()
 
 
