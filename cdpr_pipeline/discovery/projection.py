@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdpr_pipeline.jit import numba_module
+from cdpr_pipeline.jit import compile_kernel
 
 
 def project_numpy(projection: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -76,12 +76,10 @@ _kernels: list = []
 def _compiled() -> tuple | None:
     if not _kernels:
         try:
-            numba = numba_module()
+            _kernels.append(tuple(compile_kernel(f, nogil=True)
+                                  for f in (_project_lanes, _project_sequential)))
         except ImportError:     # pragma: no cover - numba is a dependency; einsum serves
             _kernels.append(None)
-        else:
-            _kernels.append(tuple(numba.njit(cache=True, nogil=True)(f)
-                                  for f in (_project_lanes, _project_sequential)))
     return _kernels[0]
 
 
