@@ -330,8 +330,9 @@ class Plant:
     @cached_property
     def _bumps(self) -> tuple[list[np.ndarray], np.ndarray, np.ndarray] | None:
         """The effects as Gaussian bumps (:meth:`~cdpr_pipeline.sim.effects.base.Effect.
-        gaussian_bump`): widths, sizes (E, n) and the runs each acts on (E, B; B is 1
-        where every bump acts on every run), None where an effect is not one."""
+        gaussian_bump`): their widths (n,) each, the runs each acts on (E, B; B is 1
+        where every bump acts on every run) and their sizes (E, n); None where an
+        effect is not one."""
         bumps = [e.gaussian_bump(self) for e in self.effects]
         if any(b is None for b in bumps):
             return None
