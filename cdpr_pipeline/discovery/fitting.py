@@ -114,7 +114,9 @@ class FitContext:
         periodic motion is ``-k/w^2`` times its acceleration): another effect imitated,
         and a model no simulator can run. Where the data ask for an inertia of zero or
         less, the stated inertia stays (the data do not determine it beside the effect
-        they imitate) and the other parameters are re-fitted around it."""
+        they imitate) and the other parameters are re-fitted around it. Used by an
+        unusable stated model's re-identification and inside every evaluation of a
+        ``+winches`` candidate variant (:meth:`vector`, ``refit``)."""
         delta = self.winch_refit(torque_residual)
         if np.all(delta[:, :3] > -1.0):
             return delta
@@ -150,7 +152,9 @@ class FitContext:
         for ch in res.channels:
             r = res.stacked(ch)
             if ch == "torque" and refit:
-                r = r - self.winch_explained(self.winch_refit(r))
+                # the re-fit a "+winches" variant is judged with is one a simulator can
+                # run: unbounded, it imitated other effects with negative inertias
+                r = r - self.winch_explained(self.physical_winch_refit(r))
             parts.append((self.weights[ch] * r).ravel())   # a weight per column
         return np.concatenate(parts)
 
@@ -641,6 +645,6 @@ def _fit_candidate(candidate: Candidate, ctx: FitContext, jacobian: Callable[...
     n_params = candidate.n_params
     if candidate.refit_winches:
         res = ctx.residuals(effects)
-        effects = refit_effects(ctx.winch_refit(res.stacked("torque"))) + effects
+        effects = refit_effects(ctx.physical_winch_refit(res.stacked("torque"))) + effects
         n_params += 4 * ctx.columns.shape[1]
     return Fit(candidate, best.x, effects, n_params, float(best.cost), bool(best.success))

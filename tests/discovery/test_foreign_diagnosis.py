@@ -11,8 +11,10 @@ generator's documented ranges. A torque-side effect (friction, a winch parameter
 the true torque on the held-out runs, in whatever form
 (``foreign_cases.CONTRIBUTION_TOLERANCE``); for the others, where the truth gives a number
 the cause can express, the fitted magnitude must be close to it
-(``foreign_cases.TOLERANCE``). A shorter experiment than the
-slow suite's keeps these fast (``foreign_cases.FAST``); the slow suite
+(``foreign_cases.TOLERANCE``). ``none`` or ``unexplained`` is right where the hidden effect
+itself, with its true parameters, fails the held-out tests
+(``foreign_cases.below_heldout_limit``: the held-out runs do not determine it). A shorter
+experiment than the slow suite's keeps these fast (``foreign_cases.FAST``); the slow suite
 (``test_detection_rates.py``) runs every effect on the full one.
 """
 
@@ -23,14 +25,17 @@ import pytest
 
 from cdpr_pipeline.testing.foreign_cases import (
     FAST,
+    FULL,
     KINDS,
     OUTSIDE,
     VOCABULARY,
+    below_heldout_limit,
     contribution_errors,
     effects_above_noise,
     foreign_case,
     parameters_ok,
     rng_for,
+    truth_judgement,
 )
 from cdpr_pipeline.testing.independent_sim import Effect
 
@@ -130,6 +135,12 @@ def test_a_hidden_vocabulary_effect_is_named(tmp_path, seed, kind):
     record = case.record
 
     def check():
+        if record["verdict"] in ("none", "unexplained") and below_heldout_limit(case):
+            # the hidden effect itself, with its true parameters, fails the held-out
+            # tests on these runs: below what they determine, no name is right, `none`
+            # or (seen, not named) `unexplained` (docs/method.md, known limits: weakly
+            # excited effects)
+            return
         assert record["verdict"] == name, case.describe()
         gain = record["gain"]
         assert gain["relative"] > 0 and gain["ci95"][0] > 0, \
@@ -138,6 +149,33 @@ def test_a_hidden_vocabulary_effect_is_named(tmp_path, seed, kind):
         assert ok, f"{why}: {case.describe()}"
 
     _unless_known_gap(case, name, check)
+
+
+#: the Stribeck bump of docs/method.md's known limits: 4 cables at 596 Hz, winch 1
+_UNDETERMINED_ON_FAST = 1886006466
+
+
+def test_an_effect_the_heldout_runs_do_not_determine_is_below_the_limit(tmp_path):
+    """``foreign_cases.below_heldout_limit`` on that bump: on the fast experiment the
+    true bump's own held-out interval reaches below zero though its gain is large (the
+    held-out spiral shows it in its first seconds only), and the diagnosis gives
+    ``none``."""
+    fast = _diagnosed(tmp_path, "cdpr", ["stribeck_friction"], _UNDETERMINED_ON_FAST)
+    truth = truth_judgement(fast)
+    assert truth.heldout_gain > 0.5 and truth.ci[0] < 0, fast.describe()
+    assert below_heldout_limit(fast) and fast.record["verdict"] == "none", fast.describe()
+
+
+@pytest.mark.slow
+def test_the_same_effect_on_five_full_runs_is_determined_and_named(tmp_path):
+    """The bump above, with five 15-s runs: determined (the truth's interval above zero)
+    and named."""
+    runs, duration = FULL["cdpr"]
+    full = foreign_case(tmp_path, "cdpr", ["stribeck_friction"], _UNDETERMINED_ON_FAST,
+                        n_runs=runs, duration_s=duration)
+    full.diagnose()
+    assert truth_judgement(full).ci[0] > 0 and not below_heldout_limit(full), full.describe()
+    assert full.record["verdict"] == "stribeck_friction", full.describe()
 
 
 @pytest.mark.parametrize("kind", KINDS)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from cdpr_pipeline.discovery.fitting import FitContext
+from cdpr_pipeline.discovery.residuals import Residuals
 
 
 def _columns(n_winches: int, rows: int = 2000) -> tuple[np.ndarray, np.ndarray]:
@@ -55,3 +56,24 @@ def test_mixing_winches_are_bounded_together():
     assert ctx.winch_refit(residual)[0, 0] < -1.0
     delta = ctx.physical_winch_refit(residual)
     assert abs(delta[0, 0]) < 1e-12 and np.all(delta[:, :3] >= -1.0)
+
+
+def test_a_winch_refit_variant_is_judged_with_the_physical_refit():
+    """A ``+winches`` candidate variant re-fits the winch parameters inside every
+    evaluation of its fit (``FitContext.vector`` with ``refit``): that re-fit is the
+    physical one too, so what the candidate leaves is not a negative inertia's work."""
+    columns, q = _columns(2)
+    residual = np.stack([60.0 * q[:, 0], 0.4 * columns[:, 1, 1]], axis=1)
+    ctx = FitContext(None, [], [], {}, columns)
+    ctx.weights = {"torque": np.array([2.0, 0.5])}
+    res = Residuals(["run"], [{"torque": residual}])
+    left = ctx.vector(res, refit=True).reshape(residual.shape) / ctx.weights["torque"]
+    explained = residual - left
+    physical = ctx.winch_explained(ctx.physical_winch_refit(residual))
+    free = ctx.winch_explained(ctx.winch_refit(residual))
+    np.testing.assert_allclose(explained, physical, atol=1e-9)
+    # the free re-fit explains winch 1's load with a negative inertia, the physical
+    # one leaves it (the load is another effect's to explain)
+    assert np.linalg.norm(free[:, 0] - physical[:, 0]) > 0.1 * np.linalg.norm(residual[:, 0])
+    np.testing.assert_allclose(ctx.vector(res, refit=False).reshape(residual.shape),
+                               residual * ctx.weights["torque"])
