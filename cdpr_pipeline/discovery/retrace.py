@@ -127,6 +127,19 @@ def motion_locked(train: Sequence[RunSignals], heldout: Sequence[RunSignals]) ->
     return bool(cache[key])
 
 
+#: what the summary adds where the held-out rows retrace the training motion
+RETRACED_NOTE = ("The held-out runs repeat the training motion (one run of a repeated "
+                 "motion): effects that depend on position (cogging, a position-dependent "
+                 "load) were not tried, since no held-out test can tell them from a torque "
+                 "locked to the motion; record a second, different motion to have them "
+                 "judged.")
+
+
+def retrace_note(train: Sequence[RunSignals], heldout: Sequence[RunSignals]) -> str:
+    """:data:`RETRACED_NOTE` where :func:`motion_locked`, else nothing."""
+    return RETRACED_NOTE if motion_locked(train, heldout) else ""
+
+
 def position_identifiable(candidates: Sequence[Candidate], train: Sequence[RunSignals],
                           heldout: Sequence[RunSignals], log=None) -> list[Candidate]:
     """``candidates`` without those of effects explained by position (``cogging``,

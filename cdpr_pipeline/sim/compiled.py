@@ -518,3 +518,28 @@ def path_friction(w: np.ndarray, g: np.ndarray, direction: np.ndarray, omega: np
         c0[d] = impulse / h[d]
         c1[d] = 12.0 * first / h[d] ** 3
     return c0, c1
+
+
+@_kernel
+def friction_law(omega: np.ndarray, sign: np.ndarray, exps: np.ndarray,
+                 viscous: np.ndarray, coulomb: np.ndarray, offset: np.ndarray,
+                 sizes: np.ndarray, rows: np.ndarray, out: np.ndarray) -> None:
+    """:func:`~cdpr_pipeline.sim.plant.resisting_torque` of Gaussian bumps
+    (:func:`~cdpr_pipeline.sim.plant.compiled_law_torque`), term for term in its order:
+    ``F_v w + F_c s`` plus ``d``, then each bump ``(size e) s`` where it acts (0 where
+    it does not), added in turn. ``omega, sign, out`` (M, B, n); ``exps`` (E, M, B, n)
+    the bumps' ``exp(-(w/width)^2)``; ``sizes`` (E, n); ``rows`` (E, B or 1)."""
+    count, batch, n = omega.shape
+    spread = rows.shape[1] > 1
+    for q in range(count):
+        for b in range(batch):
+            for i in range(n):
+                total = viscous[i] * omega[q, b, i] + coulomb[i] * sign[q, b, i]
+                total = total + offset[i]
+                for e in range(sizes.shape[0]):
+                    extra = sizes[e, i] * exps[e, q, b, i]
+                    extra = extra * sign[q, b, i]
+                    if rows[e, b if spread else 0] == 0.0:
+                        extra = 0.0
+                    total = total + extra
+                out[q, b, i] = total

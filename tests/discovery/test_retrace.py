@@ -18,6 +18,7 @@ from cdpr_pipeline.data.reading import RegressionSettings
 from cdpr_pipeline.discovery.candidates import candidates_for
 from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.discovery.retrace import (
+    RETRACED_NOTE,
     RETRACED_SHARE,
     position_identifiable,
     retraced_share,
@@ -114,3 +115,5 @@ def test_one_run_of_a_repeated_motion_is_not_named_cogging(paper_rig, tmp_path, 
     quiet = [c["effect"] for c in record["causes"]
              if c.get("sizes") and all(p["below_noise"] for p in c["sizes"])]
     assert not quiet, f"seed {seed}: {quiet} below the noise"
+    # and the user reads why, with what to record instead
+    assert RETRACED_NOTE in record["summary"]

@@ -6,9 +6,14 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
+from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.sim import compiled
+from cdpr_pipeline.sim.effects import AsymmetricViscousFriction, StribeckFriction
 from cdpr_pipeline.sim.kinematics import cable_geometry, winch_rates
+from cdpr_pipeline.sim.model_rows import plant_of_rows
+from cdpr_pipeline.sim.plant import Plant, resisting_torque
 
 
 def _rig(rng, cables, batch):
@@ -70,3 +75,39 @@ def test_numba_loads_with_the_first_kernel_not_with_the_plant():
             "compiled._shortfall(np.array([1.0, -2.0]), 0.0); "
             "assert 'numba' in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize("sharpness", [np.inf, 20.0, 3000.0])
+def test_the_compiled_friction_law_is_numpys_to_the_bit(seed, sharpness):
+    """The stepped plant's friction (:attr:`~cdpr_pipeline.sim.plant.Plant.compiled_law`)
+    of a batch whose runs follow the nominal model or one with Stribeck bumps (one on
+    some winches, one on all), on speeds of one batch and of several stacked, some at
+    exactly zero: :func:`~cdpr_pipeline.sim.plant.resisting_torque`'s numbers in every
+    bit; an effect that is no bump leaves the law to numpy."""
+    rng = np.random.default_rng(seed)
+    anchors, radius, _ = _rig(rng, 8, 1)
+    winch = WinchParams(rng.uniform(0.01, 0.1, 8), rng.uniform(0.0, 0.5, 8),
+                        rng.uniform(0.1, 1.0, 8), rng.normal(0.0, 0.05, 8))
+    nominal = Plant(anchors, radius, 5.0, winch, sign_sharpness=sharpness)
+    extended = nominal.replace(effects=(
+        StribeckFriction(static_ratio=None, cables=[2, 5], extra_static=[0.3, 0.7],
+                         stribeck_velocity=[0.2, 1.5]),
+        StribeckFriction(static_ratio=2.0, stribeck_velocity=0.5)))
+    batch = plant_of_rows(nominal, [nominal, extended, nominal, extended, extended])
+    plant = batch.replace(compiled_law=True)
+    assert plant._bumps is not None
+    theta = rng.normal(size=(5, 8))
+    for shape in [(5, 8), (4, 5, 8)]:
+        omega = rng.normal(0.0, 1.0, shape) * 10.0 ** rng.uniform(-4.0, 1.0, shape)
+        omega[..., 3] = 0.0
+        got = plant.friction_torque(theta, omega)
+        expected = resisting_torque(batch, theta, omega)
+        assert got.shape == expected.shape
+        assert np.array_equal(got, expected)
+        assert not np.array_equal(got, resisting_torque(nominal, theta, omega))   # bumps
+    other = extended.replace(effects=(*extended.effects, AsymmetricViscousFriction()),
+                             compiled_law=True)
+    assert other._bumps is None
+    omega = rng.normal(size=(5, 8))
+    assert np.array_equal(other.friction_torque(theta, omega),
+                          resisting_torque(other, theta, omega))

@@ -7,7 +7,7 @@ import numpy as np
 
 from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.sim.effects import ActuatorLag, CableElasticity, StribeckFriction
-from cdpr_pipeline.sim.kinematics import tensions_for_force
+from cdpr_pipeline.sim.kinematics import cable_geometry, solve_gram, tensions_for_force
 from cdpr_pipeline.sim.lab import simulate_lab
 from cdpr_pipeline.sim.plant import Drives, commanded_torque
 from cdpr_pipeline.sim.sensors import Sensors
@@ -23,6 +23,25 @@ def test_least_norm_tensions_match_the_pseudo_inverse():
     t = tensions_for_force(units, force)
     ref = np.einsum("bni,bi->bn", np.linalg.pinv(np.swapaxes(units, 1, 2)), force)
     assert np.allclose(t, ref)
+
+
+def test_the_gram_solve_is_lapacks_to_rounding(seed):
+    """The adjugate solve of :func:`tensions_for_force` against LAPACK's
+    (:func:`numpy.linalg.solve`) on the Gram matrices of a redundant rig's cables over its
+    workspace: a few units in the last place, and the force balanced as well."""
+    rng = np.random.default_rng(seed)
+    anchors = np.column_stack([rng.uniform(0.0, 3.0, (8, 2)), rng.uniform(2.0, 3.0, 8)])
+    position = np.array([1.5, 1.5, 1.0]) + rng.uniform(-0.7, 0.7, (2000, 3))
+    units = cable_geometry(anchors, position)[1]
+    gram = np.einsum("bni,bnj->bij", units, units)
+    force = rng.normal(0.0, 20.0, (2000, 3))
+    got = solve_gram(gram, force)
+    expected = np.linalg.solve(gram, force[..., None])[..., 0]
+    np.testing.assert_allclose(got, expected, rtol=1e-13,
+                               atol=1e-14 * np.abs(expected).max())
+    t = tensions_for_force(units, force)
+    np.testing.assert_allclose(np.einsum("bni,bn->bi", units, t), force, rtol=1e-12,
+                               atol=1e-12 * np.abs(force).max())
 
 
 def test_inverse_dynamics_returns_the_commanded_torque(paper_rig):

@@ -38,6 +38,7 @@ from cdpr_pipeline.discovery.diagnosis.settings import DiagnosisSettings
 from cdpr_pipeline.discovery.diagnosis.state import DiagnosisState
 from cdpr_pipeline.discovery.plots import BeforeAfterPlot, HeldoutRunPlot, Plots
 from cdpr_pipeline.discovery.residuals import measured_rows
+from cdpr_pipeline.discovery.retrace import retrace_note
 from cdpr_pipeline.discovery.summary import summary_sentence
 from cdpr_pipeline.heap import trim_heap
 
@@ -122,6 +123,8 @@ def _diagnosis(state: DiagnosisState) -> Diagnosis:
                                 state.withdrawn, state.unexplained, state.failing,
                                 settings.unexplained_noise_ratio, state.sizes,
                                 largest_failing_ratio(state.held_columns))
+    note = retrace_note(state.train, held)
+    sentence += f" {note}" if note else ""
     band, clock, again = state.band, state.clock, state.again
     if again is not None:
         sentence += (f" Sought again on 0-{again.band['analysed_hz']:.3g} Hz (the band "

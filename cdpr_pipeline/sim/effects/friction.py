@@ -77,6 +77,11 @@ class StribeckFriction(Effect):
         return self.extra(plant) * np.exp(-(omega / speed) ** 2) * smooth_sign(
             omega, plant.sign_sharpness)
 
+    def gaussian_bump(self, plant):
+        # winch_torque's law, its arithmetic in its order (Plant.friction_torque)
+        return (self.extra(plant), per_winch(self.stribeck_velocity, self.cables, plant.n,
+                                             fill=1.0), None)
+
     def scaled(self, s):
         if self.extra_static is not None:
             return dataclasses.replace(self, extra_static=_map(self.extra_static,
