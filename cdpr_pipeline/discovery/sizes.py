@@ -291,17 +291,12 @@ def cause_sizes(causes: Sequence[Any], nominal: Model, train: list[RunSignals],
         Per residual channel, the AR noise model of the extended model's training
         residual (:func:`~cdpr_pipeline.discovery.diagnosis.fit_noise`).
     """
-    extended = nominal.with_effects([e for c in causes for e in c.effects])
-    with_all = residuals(extended, nominal, train)
-    thresholds = _column_noise(train, with_all.channels)
+    extended, thresholds, changes = _changes(causes, nominal, train)
     out = []
-    for c in causes:
+    for c, change in zip(causes, changes, strict=True):
         others = [e for o in causes if o is not c for e in o.effects]
         references = _references(c.effects, nominal, causes)
         sizes, std = _standard_errors(c.effects, others, references, nominal, train, noise)
-        without = residuals(nominal.with_effects(others), nominal, train)
-        change = {ch: np.sqrt(np.mean((without.stacked(ch) - with_all.stacked(ch)) ** 2,
-                                      axis=0)) for ch in with_all.channels}
         estimates = [SizeEstimate(s.channel, s.name, s.value,
                                   None if not np.isfinite(v) else float(v),
                                   unit(extended, s.channel, s.quantity), s.neutral)
@@ -340,15 +335,22 @@ def below_noise(causes: Sequence[Any], nominal: Model, train: list[RunSignals]
     """Per cause, whether everything it changes in the training residual stays below the
     noise on every column (what :func:`cause_sizes` reports as ``below_noise`` for each
     of its parts), without the standard errors."""
+    _, thresholds, changes = _changes(causes, nominal, train)
+    return [all(bool(np.all(rms < thresholds[ch])) for ch, rms in change.items())
+            for change in changes]
+
+
+def _changes(causes: Sequence[Any], nominal: Model, train: list[RunSignals]
+             ) -> tuple[Model, dict[str, np.ndarray], list[dict[str, np.ndarray]]]:
+    """The extended model (every cause's effects), each residual column's noise
+    threshold, and per cause the RMS per column of what it changes in the training
+    residual (the residual without it minus the residual with every cause)."""
     extended = nominal.with_effects([e for c in causes for e in c.effects])
     with_all = residuals(extended, nominal, train)
-    thresholds = _column_noise(train, with_all.channels)
-    out = []
+    changes = []
     for c in causes:
         others = [e for o in causes if o is not c for e in o.effects]
         without = residuals(nominal.with_effects(others), nominal, train)
-        out.append(all(
-            bool(np.all(np.sqrt(np.mean((without.stacked(ch) - with_all.stacked(ch)) ** 2,
-                                        axis=0)) < thresholds[ch]))
-            for ch in with_all.channels))
-    return out
+        changes.append({ch: np.sqrt(np.mean((without.stacked(ch) - with_all.stacked(ch))
+                                            ** 2, axis=0)) for ch in with_all.channels})
+    return extended, _column_noise(train, with_all.channels), changes
