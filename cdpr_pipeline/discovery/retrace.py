@@ -113,18 +113,35 @@ def retraced_share(train: Sequence[RunSignals], heldout: Sequence[RunSignals],
     return retraced / rows if rows else 0.0
 
 
-def motion_locked(train: Sequence[RunSignals], heldout: Sequence[RunSignals]) -> bool:
-    """Whether the held-out rows mostly retrace the training motion
-    (:func:`retraced_share` over :data:`RETRACED_SHARE`): a function of position is not
-    identifiable apart from a torque locked to the motion there. Kept with the first
-    held-out run (asked at every free-form search of a selection)."""
+def motion_share(train: Sequence[RunSignals], heldout: Sequence[RunSignals]) -> float:
+    """:func:`retraced_share`, kept with the first held-out run (asked at every free-form
+    search of a selection); 0 without held-out runs."""
     if not heldout:
-        return False
+        return 0.0
     key = ("retraced", tuple(s.name for s in train), tuple(s.name for s in heldout))
     cache = heldout[0].cache
     if key not in cache:
-        cache[key] = retraced_share(train, heldout) > RETRACED_SHARE
-    return bool(cache[key])
+        cache[key] = retraced_share(train, heldout)
+    return float(cache[key])
+
+
+def motion_locked(train: Sequence[RunSignals], heldout: Sequence[RunSignals]) -> bool:
+    """Whether the held-out rows mostly retrace the training motion
+    (:func:`retraced_share` over :data:`RETRACED_SHARE`): a function of position is not
+    identifiable apart from a torque locked to the motion there."""
+    return motion_share(train, heldout) > RETRACED_SHARE
+
+
+def retrace_record(train: Sequence[RunSignals], heldout: Sequence[RunSignals],
+                   withheld: Sequence[str] = (), dropped: Sequence[str] = ()
+                   ) -> dict[str, Any]:
+    """``diagnosis.json``'s ``retrace`` block: the share of held-out rows that retrace
+    the training motion, whether it is over :data:`RETRACED_SHARE`, the effects not
+    tried for it (:func:`position_identifiable`) and the causes dropped below the noise
+    (:func:`above_noise_where_retraced`)."""
+    return {"share": motion_share(train, heldout), "threshold": RETRACED_SHARE,
+            "locked": motion_locked(train, heldout), "withheld": list(withheld),
+            "dropped_below_noise": list(dropped)}
 
 
 #: what the summary adds where the held-out rows retrace the training motion

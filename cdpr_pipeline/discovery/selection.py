@@ -82,6 +82,9 @@ class PendingSelection:
     freeform: FreeFormSearch | None
     causes: list[Judgement]
     rest: Judgement | None = None
+    #: the vocabulary's effects not tried, the held-out rows retracing the training
+    #: motion (:func:`~cdpr_pipeline.discovery.retrace.position_identifiable`)
+    withheld: tuple[str, ...] = ()
 
     @property
     def n_tests(self) -> int:
@@ -100,11 +103,13 @@ def named_causes(nominal: Model, rig, train: list[RunSignals], heldout: list[Run
     candidates = [c for c in candidates_for(rig, search.scale, settings.effects,
                                             settings.refit_winches)
                   if c.effect not in settings.exclude]
-    candidates = position_identifiable(candidates, train, heldout, log)
+    judged = position_identifiable(candidates, train, heldout, log)
+    withheld = tuple(sorted({c.effect for c in candidates} - {c.effect for c in judged}))
+    candidates = judged
     # free-form terms with a candidate's shape are that candidate's to explain
     search.shapes = vocabulary_shapes(rig, search.scale, settings.effects)
     causes = search.forward([], candidates, False, settings.max_causes)
-    return PendingSelection(search, candidates, freeform, causes)
+    return PendingSelection(search, candidates, freeform, causes, withheld=withheld)
 
 
 def freeform_rest(pending: PendingSelection) -> PendingSelection:

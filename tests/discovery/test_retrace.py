@@ -107,6 +107,10 @@ def test_one_run_of_a_repeated_motion_is_not_named_cogging(paper_rig, tmp_path, 
         record = foreign_case(tmp_path, "cdpr", [], seed, n_runs=1, duration_s=30.0,
                               n=3, rate_hz=250.0).diagnose(settings)
     assert RETRACED_NOTE in record["summary"], f"seed {seed}: not read as retraced"
+    # diagnosis.json says so too, with what it withheld for it
+    retrace = record["retrace"]
+    assert retrace["locked"] and retrace["share"] > retrace["threshold"]
+    assert "cogging" in retrace["withheld"]
     judged = [j for step in record["candidates"] for j in step]
     tried = {j["effect"] for j in judged}
     assert "cogging" not in tried, f"seed {seed}: cogging judged on a retraced motion"

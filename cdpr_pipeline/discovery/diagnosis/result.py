@@ -76,6 +76,9 @@ class Diagnosis:
     sizes: tuple[tuple[CauseComponent, ...], ...] = ()
     #: runs set aside as an untouched cross-test (:attr:`DiagnosisSettings.crosstest`)
     crosstest: tuple[str, ...] = ()
+    #: whether the held-out rows retrace the training motion, and what that withheld
+    #: (:func:`~cdpr_pipeline.discovery.retrace.retrace_record`)
+    retrace: dict[str, Any] = field(default_factory=dict)
 
     @property
     def shares(self) -> list[GainShare]:
@@ -111,6 +114,7 @@ class Diagnosis:
             "summary": self.sentence,
             "unexplained": self.unexplained.as_dict() if self.unexplained else None,
             "band": dict(self.band),
+            "retrace": dict(self.retrace),
             "extended_model": extended_model_file,
             "extended": {"metrics": self.extended_metrics.as_dict()},
             "gain": self.gain.as_dict(),

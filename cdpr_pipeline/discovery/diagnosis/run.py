@@ -38,7 +38,7 @@ from cdpr_pipeline.discovery.diagnosis.settings import DiagnosisSettings
 from cdpr_pipeline.discovery.diagnosis.state import DiagnosisState
 from cdpr_pipeline.discovery.plots import BeforeAfterPlot, HeldoutRunPlot, Plots
 from cdpr_pipeline.discovery.residuals import measured_rows
-from cdpr_pipeline.discovery.retrace import retrace_note
+from cdpr_pipeline.discovery.retrace import retrace_note, retrace_record
 from cdpr_pipeline.discovery.summary import summary_sentence
 from cdpr_pipeline.heap import trim_heap
 
@@ -150,4 +150,7 @@ def _diagnosis(state: DiagnosisState) -> Diagnosis:
                      state.validity, state.closed, state.blackbox, sentence, clock, plots,
                      tuple(state.extension), state.unusable, state.unexplained, band,
                      state.sizes, crosstest=tuple(tr.name for tr in crosstest_runs(
-                         dataset.trajectories, settings.crosstest)))
+                         dataset.trajectories, settings.crosstest)),
+                     retrace=retrace_record(state.train, held, state.pending.withheld
+                                            if state.pending else (),
+                                            state.dropped_below_noise))

@@ -18,8 +18,10 @@ def run(state: DiagnosisState) -> None:
     """Set the selection and the causes: the re-identification of an unusable stated
     model first, then the selection's."""
     base = state.nominal.with_effects(state.first.effects) if state.first else state.nominal
-    state.selection = above_noise_where_retraced(settle(state.pending), base, state.train,
-                                                 state.held, log)
+    settled = settle(state.pending)
+    state.selection = above_noise_where_retraced(settled, base, state.train, state.held, log)
+    state.dropped_below_noise = tuple(c.label for c in settled.causes
+                                      if c not in state.selection.causes)
     state.causes = ([state.first] if state.first else []) + list(state.selection.causes)
     log.info("causes: candidates %.1f s, free-form %.1f s; checking that the causes hold on "
              "the held-out runs (never worse, validity)", state.clock["candidates"],

@@ -64,6 +64,8 @@ class DiagnosisState:
     pending: PendingSelection | None = None
     # selection
     selection: Selection | None = None
+    #: causes the selection dropped, below the noise on a retraced motion
+    dropped_below_noise: tuple[str, ...] = ()
     causes: list[Judgement] = field(default_factory=list)
     # never worse
     before_held: Residuals | None = None
