@@ -20,7 +20,7 @@ from cdpr_pipeline.stages.diagnose import run_diagnosis
 from cdpr_pipeline.stages.simulate import simulate
 
 FAST = ["blackbox.epochs=1", "blackbox.max_windows=256",
-        "discovery.freeform.gp.max_evaluations=1000", "discovery.selection.n_boot=200"]
+        "discovery.freeform.gp.max_evaluations=1000"]
 
 
 @pytest.fixture
