@@ -266,7 +266,7 @@ def test_block_sum_bootstrap_vector_statistic_and_chunks(monkeypatch):
     est, lo, hi = block_sum_bootstrap(both, sums, 5000, 0.9, 7)
     assert est.shape == lo.shape == hi.shape == (2,)
     assert np.all(lo < est) and np.all(est < hi)
-    monkeypatch.setattr(validity, "_DRAW_CHUNK", 30 * 2 * 7)       # chunks of 7 draws
+    monkeypatch.setattr(validity, "_DRAW_CHUNK", 30 * 7)           # chunks of 7 draws
     chunked = block_sum_bootstrap(both, sums, 5000, 0.9, 7)
     for x, y in zip((est, lo, hi), chunked, strict=True):
         np.testing.assert_array_equal(x, y)
