@@ -30,7 +30,11 @@ from cdpr_pipeline.discovery.residuals import (
     signal_scales,
 )
 from cdpr_pipeline.discovery.signals import RunSignals
-from cdpr_pipeline.discovery.validity import block_bootstrap, split_blocks
+from cdpr_pipeline.discovery.validity import (
+    block_sum_bootstrap,
+    bootstrap_draws,
+    split_blocks,
+)
 from cdpr_pipeline.sim.candidate_forms import Candidate
 from cdpr_pipeline.sim.effects import Effect
 
@@ -66,8 +70,12 @@ class SelectionSettings:
         and the ranking can differ).
     block_s : float
         Bootstrap block length (residuals are correlated within a block).
-    n_boot : int
-        Bootstrap draws.
+    tail_draws : int
+        Bootstrap draws expected beyond each end of an interval: the draws are
+        :func:`~cdpr_pipeline.discovery.validity.bootstrap_draws` of the interval's level
+        (2000 at 95 %, 24 000 at a step of 24 candidates' corrected level), so an end at
+        a Bonferroni-corrected level is no extreme draw whose value, and the decision on
+        it, scatters with the bootstrap's seed.
     effects : list of str or None
         Candidate effects (all of the vocabulary when None).
     refit_winches : bool
@@ -90,7 +98,7 @@ class SelectionSettings:
     max_causes: int = 3
     joint_refits: int = 2
     block_s: float = 1.0
-    n_boot: int = 400
+    tail_draws: int = 50
     effects: list[str] | None = None
     refit_winches: bool = False
     min_winch_gain: float = 0.05
@@ -170,6 +178,39 @@ def fit_weights(base: Residuals, scales: dict[str, np.ndarray]) -> dict[str, np.
     return out
 
 
+def heldout_block_sums(runs: Sequence[RunSignals], before: Residuals, after: Residuals,
+                       channel: str, block_s: float) -> np.ndarray:
+    """Each bootstrap block's sums of squared residuals of ``channel``, per column, before
+    and after: what every held-out interval (:meth:`Judge._interval`,
+    :func:`~cdpr_pipeline.discovery.never_worse.heldout_gain`) resamples
+    (:func:`~cdpr_pipeline.discovery.validity.block_sum_bootstrap`).
+
+    Parameters
+    ----------
+    runs : sequence of RunSignals
+        The held-out runs (their times give each run's rate).
+    before, after : Residuals
+        Two models' residuals on ``runs``.
+    channel : str
+    block_s : float
+        Block length in seconds (``selection.block_s``), at least two rows; blocks do not
+        cross runs (:func:`~cdpr_pipeline.discovery.validity.split_blocks`).
+
+    Returns
+    -------
+    ndarray of shape (n_blocks, 2, n_columns)
+        ``[:, 0]`` before, ``[:, 1]`` after.
+    """
+    out = []
+    for sig, rb, ra in zip(runs, before.by_run, after.by_run, strict=True):
+        b, a = rb[channel], ra[channel]
+        rate = len(b) / max(sig.t[-1] - sig.t[0], 1e-9)
+        length = max(2, int(round(block_s * rate)))
+        out += [np.stack([np.sum(x ** 2, axis=0), np.sum(y ** 2, axis=0)])
+                for x, y in split_blocks((b, a), length)]
+    return np.asarray(out, dtype=float).reshape(len(out), 2, -1)
+
+
 @dataclass
 class Judge:
     """Tests fitted extensions against the model they extend.
@@ -245,17 +286,17 @@ class Judge:
                          passed=not reason, reason=reason)
 
     def _interval(self, held: Residuals, channel: str, level: float) -> tuple[float, float]:
-        w2 = self.scales[channel] ** 2
-        blocks = []
-        for sig, b, a in zip(self.heldout, self.base_held.by_run, held.by_run, strict=True):
-            b, a = b[channel], a[channel]
-            rate = len(b) / max(sig.t[-1] - sig.t[0], 1e-9)
-            length = max(2, int(round(self.settings.block_s * rate)))
-            blocks += split_blocks(((b ** 2) @ w2, (a ** 2) @ w2), length)
-        if len(blocks) < 2:
+        """Block-bootstrap interval at ``level`` of the relative drop of ``channel``'s
+        weighted held-out sum of squares."""
+        sums = heldout_block_sums(self.heldout, self.base_held, held, channel,
+                                  self.settings.block_s)
+        if len(sums) < 2:
             return (-np.inf, np.inf)
-        _, lo, hi = block_bootstrap(lambda b, a: 1 - a.sum() / max(b.sum(), 1e-300), blocks,
-                                    self.settings.n_boot, level, self.settings.seed)
+        w2 = self.scales[channel] ** 2
+        weighted = np.sum(sums * w2, axis=2)        # (blocks, before/after)
+        _, lo, hi = block_sum_bootstrap(
+            lambda t: 1 - t[:, 1] / np.maximum(t[:, 0], 1e-300), weighted,
+            bootstrap_draws(level, self.settings.tail_draws), level, self.settings.seed)
         return float(lo), float(hi)
 
     def _channels_explained(self, train: Residuals, chans: Sequence[str],

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from cdpr_pipeline.discovery.judge import Judgement, SelectionSettings
+from cdpr_pipeline.discovery.judge import Judgement, SelectionSettings, heldout_block_sums
 from cdpr_pipeline.discovery.residuals import (
     Model,
     Residuals,
@@ -35,7 +35,7 @@ from cdpr_pipeline.discovery.residuals import (
 )
 from cdpr_pipeline.discovery.results import ChannelGain, HeldoutGain
 from cdpr_pipeline.discovery.signals import RunSignals
-from cdpr_pipeline.discovery.validity import block_bootstrap, split_blocks
+from cdpr_pipeline.discovery.validity import block_sum_bootstrap, bootstrap_draws
 from cdpr_pipeline.sim.effects import Effect
 
 log = logging.getLogger(__name__)
@@ -99,7 +99,7 @@ def never_worse(nominal: Model, causes: Sequence[Judgement], held: list[RunSigna
         judged the causes.
     settings : SelectionSettings
         ``min_gain`` (what a cause must add to the others, as a share of their held-out
-        error) and the block bootstrap's ``block_s``, ``n_boot`` and ``seed``.
+        error) and the block bootstrap's ``block_s``, ``tail_draws`` and ``seed``.
     """
     kept, withdrawn = _adding_to_the_others(nominal, causes, held, scales, settings)
     # spec: the verdict is the strongest cause, the largest held-out contribution; the
@@ -120,8 +120,8 @@ def never_worse(nominal: Model, causes: Sequence[Judgement], held: list[RunSigna
         extended = nominal.with_effects([e for c in kept for e in c.effects])
         channel = kept[0].channel if kept else "torque"
         after = residuals(extended, nominal, held)
-        gain = heldout_gain(before, after, held, channel, settings.block_s, settings.n_boot,
-                            settings.seed, scales)
+        gain = heldout_gain(before, after, held, channel, settings.block_s,
+                            settings.tail_draws, settings.seed, scales)
         if not kept or gain.ci95[0] > 0:
             break
         dropped = kept.pop()
@@ -159,7 +159,7 @@ def _adding_to_the_others(nominal: Model, causes: Sequence[Judgement],
         ch = max(adds, key=adds.get)
         # its own held-out interval, not only its point estimate, must lie above zero
         own = (heldout_gain(without_res, with_res, held, ch, settings.block_s,
-                            settings.n_boot, settings.seed, scales, per_column=False)
+                            settings.tail_draws, settings.seed, scales, per_column=False)
                if adds[ch] >= settings.min_gain else None)
         if own is None or own.ci95[0] <= 0:
             causes.remove(c)
@@ -174,38 +174,48 @@ def _adding_to_the_others(nominal: Model, causes: Sequence[Judgement],
 
 
 def heldout_gain(before: Residuals, after: Residuals, held: list[RunSignals], channel: str,
-                 block_s: float, n_boot: int, seed: int,
+                 block_s: float, tail_draws: int, seed: int,
                  scales: dict[str, np.ndarray] | None = None,
                  per_column: bool = True) -> HeldoutGain:
     """Held-out RMSE of ``channel`` before and after, relative drop and its 95 % block
-    bootstrap interval; per channel column too (unless ``per_column`` is false).
+    bootstrap interval (:func:`~cdpr_pipeline.discovery.validity.bootstrap_draws` of
+    ``tail_draws``, ``block_s`` blocks); per channel column too (unless ``per_column`` is
+    false), on the same draws.
 
     The relative drop weights each column's squared error by ``scales``
     (:func:`~cdpr_pipeline.discovery.residuals.signal_scales`; equal weights when None),
     as the selection judged it; ``before`` and ``after`` are the plain RMSE."""
-    def stat(b, a):
-        return 1 - np.sqrt(a.sum() / max(b.sum(), 1e-300))
-
     b, a = before.stacked(channel), after.stacked(channel)
     w2 = np.ones(b.shape[1]) if scales is None else scales[channel] ** 2
-    blocks, per_col = [], {}
-    for sig, rb, ra in zip(held, before.by_run, after.by_run, strict=True):
-        rate = len(rb[channel]) / max(sig.t[-1] - sig.t[0], 1e-9)
-        length = max(2, int(round(block_s * rate)))
-        blocks += split_blocks((rb[channel] ** 2, ra[channel] ** 2), length)
-    est, lo, hi = (block_bootstrap(lambda x, y: stat(x @ w2, y @ w2), blocks, n_boot, 0.95,
-                                   seed) if len(blocks) > 1
-                   else (stat(b ** 2 @ w2, a ** 2 @ w2), -np.inf, np.inf))
-    for i, name in enumerate(channel_names(channel, b.shape[1]) if per_column else ()):
-        _, clo, chi = (block_bootstrap(lambda x, y, i=i: stat(x[:, i], y[:, i]), blocks, n_boot,
-                                       0.95, seed) if len(blocks) > 1 else (0, -np.inf, np.inf))
-        per_col[name] = ChannelGain(float(np.sqrt(np.mean(b[:, i] ** 2))),
-                                    float(np.sqrt(np.mean(a[:, i] ** 2))),
-                                    float(stat(b[:, i] ** 2, a[:, i] ** 2)),
-                                    (float(clo), float(chi)))
+    n_cols = b.shape[1] if per_column else 0
+
+    def stat(totals: np.ndarray) -> np.ndarray:
+        """RMSE drops of the weighted channel, then of each column, per row of totals
+        ``(before columns..., after columns...)``."""
+        tb, ta = totals[:, :b.shape[1]], totals[:, b.shape[1]:]
+        weighted = 1 - np.sqrt(np.sum(ta * w2, axis=1)
+                               / np.maximum(np.sum(tb * w2, axis=1), 1e-300))
+        cols = 1 - np.sqrt(ta[:, :n_cols] / np.maximum(tb[:, :n_cols], 1e-300))
+        return np.column_stack([weighted, cols])
+
+    sums = heldout_block_sums(held, before, after, channel, block_s)
+    sums = sums.reshape(len(sums), -1)          # (blocks, before columns + after columns)
+    if len(sums) > 1:
+        est, lo, hi = block_sum_bootstrap(stat, sums, bootstrap_draws(0.95, tail_draws),
+                                          0.95, seed)
+    else:
+        est = stat(np.concatenate([np.sum(b ** 2, axis=0), np.sum(a ** 2, axis=0)])[None])[0]
+        lo, hi = np.full_like(est, -np.inf), np.full_like(est, np.inf)
+    per_col = {name: ChannelGain(float(np.sqrt(np.mean(b[:, i] ** 2))),
+                                 float(np.sqrt(np.mean(a[:, i] ** 2))),
+                                 float(1 - np.sqrt(np.sum(a[:, i] ** 2)
+                                                   / max(np.sum(b[:, i] ** 2), 1e-300))),
+                                 (float(lo[1 + i]), float(hi[1 + i])))
+               for i, name in enumerate(channel_names(channel, b.shape[1])[:n_cols])}
     return HeldoutGain(channel, float(np.sqrt(np.mean(b ** 2))),
-                       float(np.sqrt(np.mean(a ** 2))), float(est), (float(lo), float(hi)),
-                       per_col, relative_to="each column's measured signal (RMS)"
+                       float(np.sqrt(np.mean(a ** 2))), float(est[0]),
+                       (float(lo[0]), float(hi[0])), per_col,
+                       relative_to="each column's measured signal (RMS)"
                        if scales is not None else "")
 
 

@@ -30,8 +30,7 @@ from cdpr_pipeline.stages.simulate import simulate
 
 #: a diagnosis without the parts that do not read the data differently (black box,
 #: closed loop, free-form search): the count is the same with them, the test faster
-LEAN = ["blackbox.enabled=false", "discovery.closed_loop=false", "discovery.freeform=null",
-        "discovery.selection.n_boot=200"]
+LEAN = ["blackbox.enabled=false", "discovery.closed_loop=false", "discovery.freeform=null"]
 
 
 @pytest.fixture
