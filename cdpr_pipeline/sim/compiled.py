@@ -504,6 +504,26 @@ def winch_paths(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarra
 
 
 @_kernel
+def secant_slopes(phi: np.ndarray, at_omega: np.ndarray, omega: np.ndarray,
+                  omega_end: np.ndarray, delta: float) -> np.ndarray:
+    """:func:`~cdpr_pipeline.sim.integrators.friction_slope`'s arithmetic after the
+    law's call, element by element in its order: the central difference of the law at
+    ``omega +- delta`` (``phi[0]``, ``phi[1]``), or, where ``omega_end`` lies further
+    than ``delta`` from ``omega``, the secant from the law there (``at_omega``) to
+    ``phi[2]``; negative slopes as zero (a nan stays, as :func:`numpy.maximum` keeps it)."""
+    batch, n = omega.shape
+    out = np.empty((batch, n))
+    for b in range(batch):
+        for i in range(n):
+            slope = (phi[0, b, i] - phi[1, b, i]) / (2.0 * delta)
+            change = omega_end[b, i] - omega[b, i]
+            if abs(change) > delta:
+                slope = (phi[2, b, i] - at_omega[b, i]) / change
+            out[b, i] = slope if (slope >= 0.0 or slope != slope) else 0.0
+    return out
+
+
+@_kernel
 def implicit_matrices(units: np.ndarray, reflected: np.ndarray, slope: np.ndarray,
                       mass: float, factor: float) -> tuple[np.ndarray, np.ndarray]:
     """The reduced mass matrices ``M = m I + K^T diag(I / R^2) K`` (B, 3, 3) and

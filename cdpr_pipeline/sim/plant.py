@@ -492,13 +492,20 @@ class Plant:
         resist = self.friction_torque(theta, omega)
         if friction is not None:
             resist = np.where(friction[0], friction[1], resist)
-        if resist.shape != omega.shape:     # a law constant over the batch
-            resist = np.broadcast_to(resist, omega.shape)
-        if u.shape != omega.shape:
-            u = np.broadcast_to(u, omega.shape)
+        return self.acceleration_of(units, u, resist, curvature)
+
+    def acceleration_of(self, units: np.ndarray, u: np.ndarray, resist: np.ndarray,
+                        curvature: np.ndarray) -> np.ndarray:
+        """:meth:`rigid_acceleration` from the geometry
+        (:func:`~cdpr_pipeline.sim.compiled.rigid_motion`'s unit vectors and ``k'.v``
+        terms) and the resisting torques: for a step that has them already."""
+        if resist.shape != curvature.shape:     # a law constant over the batch
+            resist = np.broadcast_to(resist, curvature.shape)
+        if u.shape != curvature.shape:
+            u = np.broadcast_to(u, curvature.shape)
         return compiled.rigid_acceleration(
-            units, u, resist, curvature, R, self.winch.inertia, self._reflected_inertia,
-            float(self.mass), self.gravity_vector)
+            units, u, resist, curvature, self.drum_radius, self.winch.inertia,
+            self._reflected_inertia, float(self.mass), self.gravity_vector)
 
     def rigid_acceleration_numpy(self, p: np.ndarray, v: np.ndarray, u: np.ndarray,
                                  friction: tuple | None = None) -> np.ndarray:
