@@ -694,6 +694,22 @@ def path_friction(w: np.ndarray, g: np.ndarray, direction: np.ndarray, omega: np
 
 
 @_kernel
+def bump_exponents(omega: np.ndarray, widths: np.ndarray) -> np.ndarray:
+    """The arguments ``-(w / width)^2`` (E, M, B, n) of E Gaussian bumps' exponentials
+    at speeds ``omega`` (M, B, n), ``widths`` (E, n): numpy's ``-(omega / width) ** 2``
+    (its square a product), whose exponentials numpy takes."""
+    count, batch, n = omega.shape
+    out = np.empty((widths.shape[0], count, batch, n))
+    for e in range(widths.shape[0]):
+        for q in range(count):
+            for b in range(batch):
+                for i in range(n):
+                    x = omega[q, b, i] / widths[e, i]
+                    out[e, q, b, i] = -(x * x)
+    return out
+
+
+@_kernel
 def friction_law(omega: np.ndarray, sign: np.ndarray, exps: np.ndarray,
                  viscous: np.ndarray, coulomb: np.ndarray, offset: np.ndarray,
                  sizes: np.ndarray, rows: np.ndarray, out: np.ndarray) -> None:

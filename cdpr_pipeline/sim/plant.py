@@ -82,27 +82,27 @@ def resisting_torque(model: Plant | Drives, theta: np.ndarray, omega: np.ndarray
 
 
 def compiled_law_torque(model: Plant, omega: np.ndarray,
-                        bumps: tuple[list[np.ndarray], np.ndarray, np.ndarray]) -> np.ndarray:
+                        bumps: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
     """:func:`resisting_torque` of a model whose effects are Gaussian bumps
     (``bumps``: :attr:`Plant._bumps`), on speeds ``omega`` (..., B, n): the signs and
-    the bumps' exponentials by numpy's own functions, as there, the rest by one compiled
-    loop (:func:`~cdpr_pipeline.sim.compiled.friction_law`) in that function's order:
-    the same numbers to the bit, at a third of the cost of its dozen numpy calls."""
-    omega = np.asarray(omega)
+    the bumps' exponentials by numpy's own functions, as there, the rest by compiled
+    loops (:func:`~cdpr_pipeline.sim.compiled.bump_exponents`, the exponentials'
+    arguments; :func:`~cdpr_pipeline.sim.compiled.friction_law`) in that function's
+    order: the same numbers to the bit, at a third of the cost of its dozen numpy
+    calls."""
+    omega = np.ascontiguousarray(omega, dtype=float)
     widths, rows, sizes = bumps
     sign = smooth_sign(omega, model.sign_sharpness)
     # (math.prod: numpy's took 6 of this function's 21 us, on a tuple of one or none)
     shape = (math.prod(omega.shape[:-2]), *omega.shape[-2:])
-    exps = np.empty((len(widths), *omega.shape))
-    for k, width in enumerate(widths):
-        exps[k] = np.exp(-(omega / width) ** 2)
-    out = np.empty(omega.shape)
+    flat = omega.reshape(shape)
+    exps = compiled.bump_exponents(flat, widths)
+    np.exp(exps, out=exps)
+    out = np.empty(shape)
     w = model.winch
-    compiled.friction_law(np.ascontiguousarray(omega, float).reshape(shape),
-                          np.ascontiguousarray(sign, float).reshape(shape),
-                          exps.reshape((len(widths), *shape)), w.viscous, w.coulomb, w.offset,
-                          sizes, rows, out.reshape(shape))
-    return out
+    compiled.friction_law(flat, np.ascontiguousarray(sign, float).reshape(shape), exps,
+                          w.viscous, w.coulomb, w.offset, sizes, rows, out)
+    return out.reshape(omega.shape)
 
 
 def commanded_torque(drum_torque: np.ndarray, t: np.ndarray,
@@ -336,9 +336,9 @@ class Plant:
         return resisting_torque(self, theta, omega)
 
     @cached_property
-    def _bumps(self) -> tuple[list[np.ndarray], np.ndarray, np.ndarray] | None:
+    def _bumps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """The effects as Gaussian bumps (:meth:`~cdpr_pipeline.sim.effects.base.Effect.
-        gaussian_bump`): their widths (n,) each, the runs each acts on (E, B; B is 1
+        gaussian_bump`): their widths (E, n), the runs each acts on (E, B; B is 1
         where every bump acts on every run) and their sizes (E, n); None where an
         effect is not one."""
         bumps = [e.gaussian_bump(self) for e in self.effects]
@@ -350,7 +350,8 @@ class Plant:
             if bump[2] is not None:
                 rows[k] = bump[2]
         sizes = np.array([np.broadcast_to(b[0], (self.n,)) for b in bumps], float)
-        return [np.asarray(b[1], float) for b in bumps], rows, sizes.reshape(-1, self.n)
+        widths = np.array([np.broadcast_to(b[1], (self.n,)) for b in bumps], float)
+        return widths.reshape(-1, self.n), rows, sizes.reshape(-1, self.n)
 
     def reeled_length(self, geometric: np.ndarray, tension: np.ndarray) -> np.ndarray:
         """Reeled-out (unstretched) cable length that spans ``geometric`` under
