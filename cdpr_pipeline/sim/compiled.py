@@ -524,6 +524,61 @@ def secant_slopes(phi: np.ndarray, at_omega: np.ndarray, omega: np.ndarray,
 
 
 @_kernel
+def steep_probes(omega: np.ndarray, rate: np.ndarray, dt: float) -> np.ndarray:
+    """The speeds (8, B, n) at which
+    :func:`~cdpr_pipeline.sim.integrators._steep_winches` reads the friction law: the
+    step's start ``omega`` and end ``omega + dt rate``, +-1e-12, and each end +- a
+    thousandth of the step's change (plus 1e-12)."""
+    batch, n = omega.shape
+    out = np.empty((8, batch, n))
+    for b in range(batch):
+        for i in range(n):
+            start = omega[b, i]
+            end = start + dt * rate[b, i]
+            spread = 1e-3 * abs(end - start) + 1e-12
+            out[0, b, i] = start
+            out[1, b, i] = end
+            out[2, b, i] = 1e-12
+            out[3, b, i] = -1e-12
+            out[4, b, i] = start - spread
+            out[5, b, i] = start + spread
+            out[6, b, i] = end - spread
+            out[7, b, i] = end + spread
+    return out
+
+
+@_kernel
+def _larger(a: float, b: float) -> float:
+    """:func:`numpy.maximum` of two numbers (a nan wins)."""
+    if a != a or a >= b:
+        return a
+    return b
+
+
+@_kernel
+def steep_judgement(phi: np.ndarray, omega: np.ndarray, rate: np.ndarray, dt: float,
+                    bound: np.ndarray, accuracy: float) -> np.ndarray:
+    """Which winches (B, n) meet the law's steep part within the step, from the law
+    ``phi`` at :func:`steep_probes`'s speeds: the speed changes sign, or the law's
+    slope (the larger of the secant over the step and the central differences at its
+    ends) times ``dt`` times the reflected inertia's ``bound`` exceeds ``accuracy``
+    (:func:`~cdpr_pipeline.sim.integrators._steep_winches`' numpy arithmetic)."""
+    batch, n = omega.shape
+    out = np.empty((batch, n), dtype=np.bool_)
+    for b in range(batch):
+        for i in range(n):
+            start = omega[b, i]
+            end = start + dt * rate[b, i]
+            spread = 1e-3 * abs(end - start) + 1e-12
+            secant = (phi[1, b, i] - phi[0, b, i]) / (end - start) if end != start else 0.0
+            central = _larger(abs(phi[5, b, i] - phi[4, b, i]),
+                              abs(phi[7, b, i] - phi[6, b, i])) / (2.0 * spread)
+            slope = _larger(abs(secant), central)
+            out[b, i] = start * end <= 0.0 or dt * bound[b, i] * slope > accuracy
+    return out
+
+
+@_kernel
 def implicit_matrices(units: np.ndarray, reflected: np.ndarray, slope: np.ndarray,
                       mass: float, factor: float) -> tuple[np.ndarray, np.ndarray]:
     """The reduced mass matrices ``M = m I + K^T diag(I / R^2) K`` (B, 3, 3) and

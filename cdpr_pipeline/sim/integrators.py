@@ -224,18 +224,16 @@ def _steep_winches(plant: Plant, state: np.ndarray, k1: np.ndarray, dt: float,
     R = plant.drum_radius
     units, omega, rate, theta = compiled.winch_paths(plant.anchors, plant.home_lengths, R,
                                                      state[:, 0:3], state[:, 3:6], k1[:, 3:6])
-    end = omega + dt * rate
-    spread = 1e-3 * np.abs(end - omega) + 1e-12
-    tiny = np.full_like(omega, 1e-12)
-    phi = plant.friction_torque(theta, np.stack([omega, end, tiny, -tiny, omega - spread,
-                                                 omega + spread, end - spread, end + spread]))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        secant = np.where(end != omega, (phi[1] - phi[0]) / (end - omega), 0.0)
-    slope = np.maximum(np.abs(secant), np.maximum(np.abs(phi[5] - phi[4]),
-                                                  np.abs(phi[7] - phi[6])) / (2.0 * spread))
+    # the probed speeds and the judgement after the law's call compiled
+    # (:func:`~cdpr_pipeline.sim.compiled.steep_probes`, :func:`~cdpr_pipeline.sim.
+    # compiled.steep_judgement`: the numpy arithmetic's numbers, without its 40 calls)
+    phi = plant.friction_torque(theta, compiled.steep_probes(omega, rate, float(dt)))
     # the reflected inertia's bound k^T M^-1 k / R^2 <= 1 / (m R^2 + I)
     bound = 1.0 / (plant.mass * R ** 2 + plant.winch.inertia)
-    steep = (omega * end <= 0.0) | (dt * bound * slope > accuracy)
+    steep = compiled.steep_judgement(
+        np.ascontiguousarray(np.broadcast_to(phi, (8, *omega.shape)), dtype=float), omega,
+        rate, float(dt), np.ascontiguousarray(np.broadcast_to(bound, omega.shape),
+                                              dtype=float), float(accuracy))
     return steep, (units, R, omega, rate, theta, phi)
 
 
