@@ -604,6 +604,23 @@ def implicit_matrices(units: np.ndarray, reflected: np.ndarray, slope: np.ndarra
 
 
 @_kernel
+def ros2_stages(state: np.ndarray, k1: np.ndarray, k2: np.ndarray, step: float,
+                first: float, second: float) -> np.ndarray:
+    """``state + step (first k1 + second k2)`` (B, S) with numpy's rounding of the
+    ROS2 step's three forms: ``state + dt k1`` (``first`` 1, ``second`` 0: the sum is
+    ``dt k1`` itself), ``f - 2 k1`` (``step`` -2) and ``state + dt (1.5 k1 +
+    0.5 k2)``."""
+    out = np.empty_like(state)
+    for b in range(state.shape[0]):
+        for j in range(state.shape[1]):
+            if second == 0.0 and first == 1.0:
+                out[b, j] = state[b, j] + step * k1[b, j]
+            else:
+                out[b, j] = state[b, j] + step * (first * k1[b, j] + second * k2[b, j])
+    return out
+
+
+@_kernel
 def implicit_solve(damped: np.ndarray, masses: np.ndarray, rates: np.ndarray) -> np.ndarray:
     """``W^-1 f`` of the linearly implicit step on every run's state rates ``f`` (B, S),
     ``W = I - gamma dt J`` with ``J`` nonzero only in ``dv'/dv = -M^-1 D``: the velocity

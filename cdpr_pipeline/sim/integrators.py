@@ -170,7 +170,7 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
     c = friction_slope(plant, theta, omega, omega_end, at_omega)
     # W = M + gamma dt D (compiled: the matrices and solves of a few runs were the
     # numpy calls' overhead)
-    mass, w = compiled.implicit_matrices(units, plant.winch.inertia / R ** 2, c / R ** 2,
+    mass, w = compiled.implicit_matrices(units, plant._reflected_inertia, c / R ** 2,
                                          float(plant.mass), ROS2_GAMMA * dt)
 
     def solve(f: np.ndarray) -> np.ndarray:
@@ -178,9 +178,12 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
         return compiled.implicit_solve(w, mass, f)
 
     if not plant.lagged:
+        # the step's own arithmetic compiled (compiled.ros2_stages: numpy's numbers,
+        # without its nine calls)
         k1 = solve(k1)
-        k2 = solve(plant.derivative(state + dt * k1, u) - 2.0 * k1)
-        return state + dt * (1.5 * k1 + 0.5 * k2)
+        stage = compiled.ros2_stages(state, k1, k1, float(dt), 1.0, 0.0)
+        k2 = solve(compiled.ros2_stages(plant.derivative(stage, u), k1, k1, -2.0, 1.0, 0.0))
+        return compiled.ros2_stages(state, k1, k2, float(dt), 1.5, 0.5)
     k1 = solve(k1)
     stage = state + dt * k1
     stage[:, lag] = full + shift
