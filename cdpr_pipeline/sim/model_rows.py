@@ -218,13 +218,15 @@ def runs_of(plant: Any, runs: np.ndarray) -> Any:
     if not isinstance(plant, DrivesOfRows | PlantOfRows) and \
             not any(isinstance(e, OnRows) for e in plant.effects):
         return plant
+    # (a model without the cache, drive axes of one model, makes it every time)
+    cache = getattr(plant, "models_of_runs", {})
     key = np.asarray(runs, dtype=np.int64).tobytes()
-    known = plant.models_of_runs.get(key)
+    known = cache.get(key)
     if known is None:
         if isinstance(plant, DrivesOfRows | PlantOfRows):
             known = plant.take(runs)
         else:
             known = plant.replace(effects=tuple(e.take(runs) if isinstance(e, OnRows) else e
                                                 for e in plant.effects))
-        plant.models_of_runs[key] = known
+        cache[key] = known
     return known
