@@ -65,13 +65,22 @@ NEWTON_STEPS, HALVINGS = 100, 30
 #: eigenvalues below this share of the largest count as zero in the Newton step's
 #: pseudo-inverse (:func:`numpy.linalg.pinv`'s default cut-off)
 PINV_RCOND = 1e-15
+#: a Cholesky pivot of the Newton step's matrix below this share of its largest
+#: diagonal entry counts as a rank the cables' directions lack (aligned cables): the
+#: step is then taken by the eigen-decomposition's pseudo-inverse. Far above
+#: :data:`PINV_RCOND`: the pivots bound the smallest eigenvalue only to a factor of a
+#: few per row
+CHOLESKY_PIVOT_SHARE = 1e-10
 
 
 @_kernel
-def _shortfall(t: np.ndarray, min_tension: float) -> float:
+def _shortfall(t: np.ndarray, step: np.ndarray, fraction: float, min_tension: float
+               ) -> float:
+    """Half the sum of squared shortfalls below ``min_tension`` of ``t + fraction step``
+    (the sum taken as numpy takes it on that array, without making it)."""
     total = 0.0
     for i in range(t.shape[0]):
-        gap = min_tension - t[i]
+        gap = min_tension - (t[i] + fraction * step[i])
         if gap > 0.0:
             total += gap * gap
     return 0.5 * total
@@ -115,11 +124,111 @@ def _solve3(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 
 @_kernel
+def _null_basis(units: np.ndarray, out: np.ndarray) -> None:
+    """An orthonormal basis (n, n - 3) of the null space of ``units^T`` (``units``
+    (n, 3)) into ``out``: the last n - 3 columns of ``Q`` of the Householder QR of
+    ``units`` (a full SVD of ``units`` gave another basis of the same space at six
+    times the cost)."""
+    n = units.shape[0]
+    a = units.copy()
+    vectors = np.zeros((3, n))
+    betas = np.zeros(3)
+    for j in range(3):
+        norm2 = 0.0
+        for i in range(j, n):
+            norm2 += a[i, j] * a[i, j]
+        # the reflection maps the column to -sign(a_jj) |column| e_j (no cancellation)
+        alpha = -np.sqrt(norm2) if a[j, j] >= 0.0 else np.sqrt(norm2)
+        for i in range(j, n):
+            vectors[j, i] = a[i, j]
+        vectors[j, j] -= alpha
+        length2 = 0.0
+        for i in range(j, n):
+            length2 += vectors[j, i] * vectors[j, i]
+        betas[j] = 2.0 / length2 if length2 > 0.0 else 0.0
+        for c in range(j, 3):
+            dot = 0.0
+            for i in range(j, n):
+                dot += vectors[j, i] * a[i, c]
+            for i in range(j, n):
+                a[i, c] -= betas[j] * dot * vectors[j, i]
+    column = np.empty(n)
+    for c in range(3, n):
+        # Q e_c = H_0 H_1 H_2 e_c
+        column[:] = 0.0
+        column[c] = 1.0
+        for j in range(2, -1, -1):
+            dot = 0.0
+            for i in range(j, n):
+                dot += vectors[j, i] * column[i]
+            for i in range(j, n):
+                column[i] -= betas[j] * dot * vectors[j, i]
+        for i in range(n):
+            out[i, c - 3] = column[i]
+
+
+@_kernel
+def _cholesky(matrix: np.ndarray, out: np.ndarray) -> bool:
+    """The lower Cholesky factor of the symmetric ``matrix`` (m, m) into ``out``'s
+    first m rows and columns; False where a pivot falls below
+    :data:`CHOLESKY_PIVOT_SHARE` of the largest diagonal entry (``out`` then unusable)."""
+    m = matrix.shape[0]
+    largest = 0.0
+    for j in range(m):
+        largest = max(largest, matrix[j, j])
+    for j in range(m):
+        pivot = matrix[j, j]
+        for c in range(j):
+            pivot -= out[j, c] * out[j, c]
+        if not pivot > CHOLESKY_PIVOT_SHARE * largest:
+            return False
+        root = np.sqrt(pivot)
+        out[j, j] = root
+        for i in range(j + 1, m):
+            x = matrix[i, j]
+            for c in range(j):
+                x -= out[i, c] * out[j, c]
+            out[i, j] = x / root
+    return True
+
+
+@_kernel
+def _cholesky_solve(factor: np.ndarray, m: int, x: np.ndarray) -> None:
+    """``x`` (its first m entries) replaced by ``(L L^T)^-1 x``, ``L`` the first m rows
+    and columns of ``factor``."""
+    for i in range(m):
+        total = x[i]
+        for c in range(i):
+            total -= factor[i, c] * x[c]
+        x[i] = total / factor[i, i]
+    for i in range(m - 1, -1, -1):
+        total = x[i]
+        for c in range(i + 1, m):
+            total -= factor[c, i] * x[c]
+        x[i] = total / factor[i, i]
+
+
+#: how a run's Newton step is solved while its short cables stay (see
+#: :func:`nearest_to_bound`)
+_INVERSE, _SMALL_GRAM, _EIGEN = 0, 1, 2
+
+
+@_kernel
 def nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
                      short: np.ndarray, min_tension: float) -> None:
     """:func:`~cdpr_pipeline.sim.controller._nearest_to_bound` on the ``short`` runs
     (B,) of ``t`` (B, n), in place; the Newton loop stops for all of them at once, as
-    the reference's batched loop does."""
+    the reference's batched loop does.
+
+    The step's pseudo-inverse ``pinv(Z_A^T Z_A) Z^T g`` (``Z_A`` the rows of the short
+    cables A, ``a`` of them, of the null-space basis ``Z``, n - 3 = k columns) is
+    taken without an eigen-decomposition where ``Z_A`` has its full rank min(a, k)
+    (unless cables are aligned, it has): for a >= k, ``Z_A^T Z_A`` is invertible; for
+    a < k, ``pinv(Z_A^T Z_A) = Z_A^T (Z_A Z_A^T)^-2 Z_A``; each by the Cholesky factor
+    of the smaller square. Where a factor's pivot says the rank is lacking, the
+    reference's eigenvalues and cut-off (:data:`PINV_RCOND`) take the step. (An SVD
+    per run for ``Z`` and an eigen-decomposition per step and run were 5 us each,
+    five eighths of the tension distribution's time on 8 cables.)"""
     rows = np.flatnonzero(short)
     runs, n = rows.size, t.shape[1]
     k = n - 3
@@ -127,16 +236,24 @@ def nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
     basis = np.empty((runs, n, k))
     for r in range(runs):
         t_force[r] = t[rows[r]]
-        left = np.linalg.svd(np.ascontiguousarray(units[rows[r]]), full_matrices=True)[0]
-        basis[r] = left[:, 3:]
+        _null_basis(units[rows[r]], basis[r])
     alpha = np.zeros(runs)
     step = np.zeros((runs, n))
-    # each run's last active set and the eigen-decomposition of its reduced matrix,
-    # which depends on nothing else: taken again while the set stays (most steps)
+    # each run's last active set and how its step is solved, which depends on nothing
+    # else: taken again while the set stays (most steps)
     last_active = np.zeros((runs, n), dtype=np.bool_)
     known = np.zeros(runs, dtype=np.bool_)
+    mode = np.zeros(runs, dtype=np.int64)
+    members = np.zeros((runs, n), dtype=np.int64)
+    counts = np.zeros(runs, dtype=np.int64)
+    factors = np.zeros((runs, k, k))
     values = np.zeros((runs, k))
     vectors = np.zeros((runs, k, k))
+    gaps = np.empty(n)
+    along = np.empty(k)
+    coords = np.empty(k)
+    inner = np.empty(n)
+    projected = np.empty(k)
     for _ in range(NEWTON_STEPS):
         any_active = False
         for r in range(runs):
@@ -148,39 +265,74 @@ def nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
         progress = False
         for r in range(runs):
             z = basis[r]
-            gaps = np.maximum(min_tension - t[rows[r]], 0.0)
-            along = np.zeros(k)
+            along[:] = 0.0
             same = known[r]
             for i in range(n):
+                gaps[i] = max(min_tension - t[rows[r], i], 0.0)
                 active = gaps[i] > TENSION_SLACK_N
                 same = same and active == last_active[r, i]
                 last_active[r, i] = active
                 for a in range(k):
                     along[a] += z[i, a] * gaps[i]
             if not same:
+                count = 0
+                for i in range(n):
+                    if last_active[r, i]:
+                        members[r, count] = i
+                        count += 1
+                counts[r] = count
                 reduced = np.zeros((k, k))
                 for i in range(n):
                     if last_active[r, i]:
                         for a in range(k):
                             for c in range(k):
                                 reduced[a, c] += z[i, a] * z[i, c]
-                values[r], vectors[r] = np.linalg.eigh(reduced)
+                if count >= k:
+                    mode[r] = _INVERSE
+                    factored = _cholesky(reduced, factors[r])
+                else:
+                    mode[r] = _SMALL_GRAM
+                    small = np.zeros((count, count))
+                    for a in range(count):
+                        for c in range(count):
+                            for b in range(k):
+                                small[a, c] += z[members[r, a], b] * z[members[r, c], b]
+                    factored = _cholesky(small, factors[r])
+                if not factored:
+                    mode[r] = _EIGEN
+                    values[r], vectors[r] = np.linalg.eigh(reduced)
                 known[r] = True
-            w, v = values[r], vectors[r]
-            largest = 0.0
-            for a in range(k):
-                largest = max(largest, abs(w[a]))
-            projected = np.zeros(k)
-            for a in range(k):
-                if abs(w[a]) > PINV_RCOND * largest:
-                    dot = 0.0
-                    for c in range(k):
-                        dot += v[c, a] * along[c]
-                    projected[a] = dot / w[a]
-            coords = np.zeros(k)
-            for c in range(k):
+            count = counts[r]
+            if mode[r] == _INVERSE:
+                coords[:] = along
+                _cholesky_solve(factors[r], k, coords)
+            elif mode[r] == _SMALL_GRAM:
+                for a in range(count):
+                    inner[a] = 0.0
+                    for b in range(k):
+                        inner[a] += z[members[r, a], b] * along[b]
+                _cholesky_solve(factors[r], count, inner)
+                _cholesky_solve(factors[r], count, inner)
+                coords[:] = 0.0
+                for a in range(count):
+                    for b in range(k):
+                        coords[b] += z[members[r, a], b] * inner[a]
+            else:
+                w, v = values[r], vectors[r]
+                largest = 0.0
                 for a in range(k):
-                    coords[c] += v[c, a] * projected[a]
+                    largest = max(largest, abs(w[a]))
+                for a in range(k):
+                    projected[a] = 0.0
+                    if abs(w[a]) > PINV_RCOND * largest:
+                        dot = 0.0
+                        for c in range(k):
+                            dot += v[c, a] * along[c]
+                        projected[a] = dot / w[a]
+                coords[:] = 0.0
+                for c in range(k):
+                    for a in range(k):
+                        coords[c] += v[c, a] * projected[a]
             biggest = 0.0
             for i in range(n):
                 s = 0.0
@@ -188,14 +340,14 @@ def nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
                     s += z[i, a] * coords[a]
                 step[r, i] = s
                 biggest = max(biggest, abs(s))
-            now = _shortfall(t[rows[r]], min_tension)
+            now = _shortfall(t[rows[r]], step[r], 0.0, min_tension)
             slope = 0.0
             for a in range(k):
                 slope -= along[a] * coords[a]
             alpha[r] = 0.0
             fraction = 1.0
             for _h in range(HALVINGS + 1):
-                if _shortfall(t[rows[r]] + fraction * step[r], min_tension) <= \
+                if _shortfall(t[rows[r]], step[r], fraction, min_tension) <= \
                         now + 1e-4 * fraction * slope:
                     alpha[r] = fraction
                     break
@@ -208,12 +360,13 @@ def nearest_to_bound(units: np.ndarray, gram: np.ndarray, t: np.ndarray,
             for i in range(n):
                 t[rows[r], i] += alpha[r] * step[r, i]
     # the steps' rounding off the force: taken back
+    moved = np.empty(3)
     for r in range(runs):
-        moved = np.zeros(3)
+        moved[:] = 0.0
         for i in range(n):
             for a in range(3):
                 moved[a] += units[rows[r], i, a] * (t[rows[r], i] - t_force[r, i])
-        back = np.linalg.solve(gram[rows[r]], moved)
+        back = _solve3(gram[rows[r]], moved)
         for i in range(n):
             s = 0.0
             for a in range(3):
@@ -351,6 +504,81 @@ def winch_paths(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarra
 
 
 @_kernel
+def secant_slopes(phi: np.ndarray, at_omega: np.ndarray, omega: np.ndarray,
+                  omega_end: np.ndarray, delta: float) -> np.ndarray:
+    """:func:`~cdpr_pipeline.sim.integrators.friction_slope`'s arithmetic after the
+    law's call, element by element in its order: the central difference of the law at
+    ``omega +- delta`` (``phi[0]``, ``phi[1]``), or, where ``omega_end`` lies further
+    than ``delta`` from ``omega``, the secant from the law there (``at_omega``) to
+    ``phi[2]``; negative slopes as zero (a nan stays, as :func:`numpy.maximum` keeps it)."""
+    batch, n = omega.shape
+    out = np.empty((batch, n))
+    for b in range(batch):
+        for i in range(n):
+            slope = (phi[0, b, i] - phi[1, b, i]) / (2.0 * delta)
+            change = omega_end[b, i] - omega[b, i]
+            if abs(change) > delta:
+                slope = (phi[2, b, i] - at_omega[b, i]) / change
+            out[b, i] = slope if (slope >= 0.0 or slope != slope) else 0.0
+    return out
+
+
+@_kernel
+def steep_probes(omega: np.ndarray, rate: np.ndarray, dt: float) -> np.ndarray:
+    """The speeds (8, B, n) at which
+    :func:`~cdpr_pipeline.sim.integrators._steep_winches` reads the friction law: the
+    step's start ``omega`` and end ``omega + dt rate``, +-1e-12, and each end +- a
+    thousandth of the step's change (plus 1e-12)."""
+    batch, n = omega.shape
+    out = np.empty((8, batch, n))
+    for b in range(batch):
+        for i in range(n):
+            start = omega[b, i]
+            end = start + dt * rate[b, i]
+            spread = 1e-3 * abs(end - start) + 1e-12
+            out[0, b, i] = start
+            out[1, b, i] = end
+            out[2, b, i] = 1e-12
+            out[3, b, i] = -1e-12
+            out[4, b, i] = start - spread
+            out[5, b, i] = start + spread
+            out[6, b, i] = end - spread
+            out[7, b, i] = end + spread
+    return out
+
+
+@_kernel
+def _larger(a: float, b: float) -> float:
+    """:func:`numpy.maximum` of two numbers (a nan wins)."""
+    if a != a or a >= b:
+        return a
+    return b
+
+
+@_kernel
+def steep_judgement(phi: np.ndarray, omega: np.ndarray, rate: np.ndarray, dt: float,
+                    bound: np.ndarray, accuracy: float) -> np.ndarray:
+    """Which winches (B, n) meet the law's steep part within the step, from the law
+    ``phi`` at :func:`steep_probes`'s speeds: the speed changes sign, or the law's
+    slope (the larger of the secant over the step and the central differences at its
+    ends) times ``dt`` times the reflected inertia's ``bound`` exceeds ``accuracy``
+    (:func:`~cdpr_pipeline.sim.integrators._steep_winches`' numpy arithmetic)."""
+    batch, n = omega.shape
+    out = np.empty((batch, n), dtype=np.bool_)
+    for b in range(batch):
+        for i in range(n):
+            start = omega[b, i]
+            end = start + dt * rate[b, i]
+            spread = 1e-3 * abs(end - start) + 1e-12
+            secant = (phi[1, b, i] - phi[0, b, i]) / (end - start) if end != start else 0.0
+            central = _larger(abs(phi[5, b, i] - phi[4, b, i]),
+                              abs(phi[7, b, i] - phi[6, b, i])) / (2.0 * spread)
+            slope = _larger(abs(secant), central)
+            out[b, i] = start * end <= 0.0 or dt * bound[b, i] * slope > accuracy
+    return out
+
+
+@_kernel
 def implicit_matrices(units: np.ndarray, reflected: np.ndarray, slope: np.ndarray,
                       mass: float, factor: float) -> tuple[np.ndarray, np.ndarray]:
     """The reduced mass matrices ``M = m I + K^T diag(I / R^2) K`` (B, 3, 3) and
@@ -373,6 +601,23 @@ def implicit_matrices(units: np.ndarray, reflected: np.ndarray, slope: np.ndarra
             for c in range(3):
                 damped[b, a, c] = masses[b, a, c] + factor * damped[b, a, c]
     return masses, damped
+
+
+@_kernel
+def ros2_stages(state: np.ndarray, k1: np.ndarray, k2: np.ndarray, step: float,
+                first: float, second: float) -> np.ndarray:
+    """``state + step (first k1 + second k2)`` (B, S) with numpy's rounding of the
+    ROS2 step's three forms: ``state + dt k1`` (``first`` 1, ``second`` 0: the sum is
+    ``dt k1`` itself), ``f - 2 k1`` (``step`` -2) and ``state + dt (1.5 k1 +
+    0.5 k2)``."""
+    out = np.empty_like(state)
+    for b in range(state.shape[0]):
+        for j in range(state.shape[1]):
+            if second == 0.0 and first == 1.0:
+                out[b, j] = state[b, j] + step * k1[b, j]
+            else:
+                out[b, j] = state[b, j] + step * (first * k1[b, j] + second * k2[b, j])
+    return out
 
 
 @_kernel
@@ -518,6 +763,22 @@ def path_friction(w: np.ndarray, g: np.ndarray, direction: np.ndarray, omega: np
         c0[d] = impulse / h[d]
         c1[d] = 12.0 * first / h[d] ** 3
     return c0, c1
+
+
+@_kernel
+def bump_exponents(omega: np.ndarray, widths: np.ndarray) -> np.ndarray:
+    """The arguments ``-(w / width)^2`` (E, M, B, n) of E Gaussian bumps' exponentials
+    at speeds ``omega`` (M, B, n), ``widths`` (E, n): numpy's ``-(omega / width) ** 2``
+    (its square a product), whose exponentials numpy takes."""
+    count, batch, n = omega.shape
+    out = np.empty((widths.shape[0], count, batch, n))
+    for e in range(widths.shape[0]):
+        for q in range(count):
+            for b in range(batch):
+                for i in range(n):
+                    x = omega[q, b, i] / widths[e, i]
+                    out[e, q, b, i] = -(x * x)
+    return out
 
 
 @_kernel

@@ -91,7 +91,8 @@ ROS2_GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
 
 
 def friction_slope(plant: Plant, theta: np.ndarray, omega: np.ndarray,
-                   omega_end: np.ndarray | None = None) -> np.ndarray:
+                   omega_end: np.ndarray | None = None, at_omega: np.ndarray | None = None
+                   ) -> np.ndarray:
     """``d(resisting torque)/d(omega)`` of every winch (B, n), by central differences
     across a hundredth of the smooth sign's transition band; negative slopes (a friction
     that falls with speed, as Stribeck's beside its peak) count as zero.
@@ -102,21 +103,29 @@ def friction_slope(plant: Plant, theta: np.ndarray, omega: np.ndarray,
     start (flat, outside the band) would let the step cross with the friction still
     pushing the old way (on a 4-cable rig with ``tanh(500 w)`` at 500 Hz, two steps per
     tick: 21 um RMS from a fine-step reference with the local slope, 3 um with the
-    secant)."""
+    secant). ``at_omega``: the law at ``omega``, where the caller has it (one speed
+    fewer in the law's call). The arithmetic after the law's call is compiled
+    (:func:`~cdpr_pipeline.sim.compiled.secant_slopes`: the same numbers)."""
     delta = 1e-2 / plant.sign_sharpness if np.isfinite(plant.sign_sharpness) else 1e-6
     if omega_end is None:
         phi = plant.friction_torque(theta, np.stack([omega + delta, omega - delta]))
         return np.maximum((phi[0] - phi[1]) / (2.0 * delta), 0.0)
-    # the law's four speeds in one call (each call's cost is Python's, not the arithmetic's)
-    phi = plant.friction_torque(theta, np.stack([omega + delta, omega - delta, omega_end,
-                                                 omega]))
-    slope = (phi[0] - phi[1]) / (2.0 * delta)
-    change = omega_end - omega
-    far = np.abs(change) > delta
-    if far.any():
-        secant = (phi[2] - phi[3]) / np.where(far, change, 1.0)
-        slope = np.where(far, secant, slope)
-    return np.maximum(slope, 0.0)
+    # the law's speeds in one call (each call's cost is Python's, not the arithmetic's)
+    if at_omega is None:
+        phi = plant.friction_torque(theta, np.stack([omega + delta, omega - delta,
+                                                     omega_end, omega]))
+        at_omega = phi[3]
+    else:
+        phi = plant.friction_torque(theta, np.stack([omega + delta, omega - delta,
+                                                     omega_end]))
+    shape = np.shape(omega)
+
+    def full(a: np.ndarray, size: tuple[int, ...]) -> np.ndarray:
+        return np.ascontiguousarray(a if np.shape(a) == size else np.broadcast_to(a, size),
+                                    dtype=float)
+
+    return compiled.secant_slopes(full(phi, (len(phi), *shape)), full(at_omega, shape),
+                                  full(omega, shape), full(omega_end, shape), delta)
 
 
 def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
@@ -137,9 +146,10 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
     if plant.elastic:
         raise ValueError("rosenbrock_step integrates rigid plants only")
     R = plant.drum_radius
-    _, units, omega, _, theta = compiled.rigid_motion(plant.anchors, plant.home_lengths, R,
-                                                      state[:, 0:3], state[:, 3:6])
+    _, units, omega, curvature, theta = compiled.rigid_motion(
+        plant.anchors, plant.home_lengths, R, state[:, 0:3], state[:, 3:6])
     lag = slice(state.shape[1] - plant.n, None)
+    at_omega = None
     if plant.lagged:
         start = state[:, lag]
         full = lag_response(plant, start, u, dt)
@@ -148,13 +158,19 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
         stage[:, lag] = start + shift
         k1 = plant.derivative(stage, u)
     elif k1 is None:
-        k1 = plant.derivative(state, u)
+        # plant.derivative(state, u) on the geometry just computed, its friction kept
+        # for the slope below (the same numbers; a second geometry and law call were a
+        # sixth of this step's time)
+        at_omega = plant.friction_torque(theta, omega)
+        k1 = np.empty_like(state)
+        k1[:, 0:3] = state[:, 3:6]
+        k1[:, 3:6] = plant.acceleration_of(units, u, at_omega, curvature)
     # the speeds an explicit step would reach: the friction's secant slope up to them
     omega_end = omega + dt * np.einsum("bnk,bk->bn", units, k1[:, 3:6]) / R
-    c = friction_slope(plant, theta, omega, omega_end)
+    c = friction_slope(plant, theta, omega, omega_end, at_omega)
     # W = M + gamma dt D (compiled: the matrices and solves of a few runs were the
     # numpy calls' overhead)
-    mass, w = compiled.implicit_matrices(units, plant.winch.inertia / R ** 2, c / R ** 2,
+    mass, w = compiled.implicit_matrices(units, plant._reflected_inertia, c / R ** 2,
                                          float(plant.mass), ROS2_GAMMA * dt)
 
     def solve(f: np.ndarray) -> np.ndarray:
@@ -162,9 +178,12 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
         return compiled.implicit_solve(w, mass, f)
 
     if not plant.lagged:
+        # the step's own arithmetic compiled (compiled.ros2_stages: numpy's numbers,
+        # without its nine calls)
         k1 = solve(k1)
-        k2 = solve(plant.derivative(state + dt * k1, u) - 2.0 * k1)
-        return state + dt * (1.5 * k1 + 0.5 * k2)
+        stage = compiled.ros2_stages(state, k1, k1, float(dt), 1.0, 0.0)
+        k2 = solve(compiled.ros2_stages(plant.derivative(stage, u), k1, k1, -2.0, 1.0, 0.0))
+        return compiled.ros2_stages(state, k1, k2, float(dt), 1.5, 0.5)
     k1 = solve(k1)
     stage = state + dt * k1
     stage[:, lag] = full + shift
@@ -208,18 +227,16 @@ def _steep_winches(plant: Plant, state: np.ndarray, k1: np.ndarray, dt: float,
     R = plant.drum_radius
     units, omega, rate, theta = compiled.winch_paths(plant.anchors, plant.home_lengths, R,
                                                      state[:, 0:3], state[:, 3:6], k1[:, 3:6])
-    end = omega + dt * rate
-    spread = 1e-3 * np.abs(end - omega) + 1e-12
-    tiny = np.full_like(omega, 1e-12)
-    phi = plant.friction_torque(theta, np.stack([omega, end, tiny, -tiny, omega - spread,
-                                                 omega + spread, end - spread, end + spread]))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        secant = np.where(end != omega, (phi[1] - phi[0]) / (end - omega), 0.0)
-    slope = np.maximum(np.abs(secant), np.maximum(np.abs(phi[5] - phi[4]),
-                                                  np.abs(phi[7] - phi[6])) / (2.0 * spread))
+    # the probed speeds and the judgement after the law's call compiled
+    # (:func:`~cdpr_pipeline.sim.compiled.steep_probes`, :func:`~cdpr_pipeline.sim.
+    # compiled.steep_judgement`: the numpy arithmetic's numbers, without its 40 calls)
+    phi = plant.friction_torque(theta, compiled.steep_probes(omega, rate, float(dt)))
     # the reflected inertia's bound k^T M^-1 k / R^2 <= 1 / (m R^2 + I)
     bound = 1.0 / (plant.mass * R ** 2 + plant.winch.inertia)
-    steep = (omega * end <= 0.0) | (dt * bound * slope > accuracy)
+    steep = compiled.steep_judgement(
+        np.ascontiguousarray(np.broadcast_to(phi, (8, *omega.shape)), dtype=float), omega,
+        rate, float(dt), np.ascontiguousarray(np.broadcast_to(bound, omega.shape),
+                                              dtype=float), float(accuracy))
     return steep, (units, R, omega, rate, theta, phi)
 
 

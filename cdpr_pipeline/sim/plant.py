@@ -31,6 +31,7 @@ them apart by class.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -81,26 +82,27 @@ def resisting_torque(model: Plant | Drives, theta: np.ndarray, omega: np.ndarray
 
 
 def compiled_law_torque(model: Plant, omega: np.ndarray,
-                        bumps: tuple[list[np.ndarray], np.ndarray, np.ndarray]) -> np.ndarray:
+                        bumps: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
     """:func:`resisting_torque` of a model whose effects are Gaussian bumps
     (``bumps``: :attr:`Plant._bumps`), on speeds ``omega`` (..., B, n): the signs and
-    the bumps' exponentials by numpy's own functions, as there, the rest by one compiled
-    loop (:func:`~cdpr_pipeline.sim.compiled.friction_law`) in that function's order:
-    the same numbers to the bit, at a third of the cost of its dozen numpy calls."""
-    omega = np.asarray(omega)
+    the bumps' exponentials by numpy's own functions, as there, the rest by compiled
+    loops (:func:`~cdpr_pipeline.sim.compiled.bump_exponents`, the exponentials'
+    arguments; :func:`~cdpr_pipeline.sim.compiled.friction_law`) in that function's
+    order: the same numbers to the bit, at a third of the cost of its dozen numpy
+    calls."""
+    omega = np.ascontiguousarray(omega, dtype=float)
     widths, rows, sizes = bumps
     sign = smooth_sign(omega, model.sign_sharpness)
-    shape = (int(np.prod(omega.shape[:-2])), *omega.shape[-2:])
-    exps = np.empty((len(widths), *omega.shape))
-    for k, width in enumerate(widths):
-        exps[k] = np.exp(-(omega / width) ** 2)
-    out = np.empty(omega.shape)
+    # (math.prod: numpy's took 6 of this function's 21 us, on a tuple of one or none)
+    shape = (math.prod(omega.shape[:-2]), *omega.shape[-2:])
+    flat = omega.reshape(shape)
+    exps = compiled.bump_exponents(flat, widths)
+    np.exp(exps, out=exps)
+    out = np.empty(shape)
     w = model.winch
-    compiled.friction_law(np.ascontiguousarray(omega, float).reshape(shape),
-                          np.ascontiguousarray(sign, float).reshape(shape),
-                          exps.reshape((len(widths), *shape)), w.viscous, w.coulomb, w.offset,
-                          sizes, rows, out.reshape(shape))
-    return out
+    compiled.friction_law(flat, np.ascontiguousarray(sign, float).reshape(shape), exps,
+                          w.viscous, w.coulomb, w.offset, sizes, rows, out)
+    return out.reshape(omega.shape)
 
 
 def commanded_torque(drum_torque: np.ndarray, t: np.ndarray,
@@ -300,6 +302,12 @@ class Plant:
         lagged = self.lags > 0.0
         return u_drum if lagged.all() else np.where(lagged, u_drum, u_cmd)
 
+    @cached_property
+    def models_of_runs(self) -> dict[bytes, Plant]:
+        """The models of some runs of this batch (:func:`~cdpr_pipeline.sim.model_rows.
+        runs_of`), by the runs' indices: made once per set of runs, not once per step."""
+        return {}
+
     @cached_property    # read on every derivative call (frozen: computed once)
     def _platform_mass(self) -> np.ndarray:
         return self.mass * np.eye(3)
@@ -328,9 +336,9 @@ class Plant:
         return resisting_torque(self, theta, omega)
 
     @cached_property
-    def _bumps(self) -> tuple[list[np.ndarray], np.ndarray, np.ndarray] | None:
+    def _bumps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """The effects as Gaussian bumps (:meth:`~cdpr_pipeline.sim.effects.base.Effect.
-        gaussian_bump`): their widths (n,) each, the runs each acts on (E, B; B is 1
+        gaussian_bump`): their widths (E, n), the runs each acts on (E, B; B is 1
         where every bump acts on every run) and their sizes (E, n); None where an
         effect is not one."""
         bumps = [e.gaussian_bump(self) for e in self.effects]
@@ -342,7 +350,8 @@ class Plant:
             if bump[2] is not None:
                 rows[k] = bump[2]
         sizes = np.array([np.broadcast_to(b[0], (self.n,)) for b in bumps], float)
-        return [np.asarray(b[1], float) for b in bumps], rows, sizes.reshape(-1, self.n)
+        widths = np.array([np.broadcast_to(b[1], (self.n,)) for b in bumps], float)
+        return widths.reshape(-1, self.n), rows, sizes.reshape(-1, self.n)
 
     def reeled_length(self, geometric: np.ndarray, tension: np.ndarray) -> np.ndarray:
         """Reeled-out (unstretched) cable length that spans ``geometric`` under
@@ -484,13 +493,20 @@ class Plant:
         resist = self.friction_torque(theta, omega)
         if friction is not None:
             resist = np.where(friction[0], friction[1], resist)
-        if resist.shape != omega.shape:     # a law constant over the batch
-            resist = np.broadcast_to(resist, omega.shape)
-        if u.shape != omega.shape:
-            u = np.broadcast_to(u, omega.shape)
+        return self.acceleration_of(units, u, resist, curvature)
+
+    def acceleration_of(self, units: np.ndarray, u: np.ndarray, resist: np.ndarray,
+                        curvature: np.ndarray) -> np.ndarray:
+        """:meth:`rigid_acceleration` from the geometry
+        (:func:`~cdpr_pipeline.sim.compiled.rigid_motion`'s unit vectors and ``k'.v``
+        terms) and the resisting torques: for a step that has them already."""
+        if resist.shape != curvature.shape:     # a law constant over the batch
+            resist = np.broadcast_to(resist, curvature.shape)
+        if u.shape != curvature.shape:
+            u = np.broadcast_to(u, curvature.shape)
         return compiled.rigid_acceleration(
-            units, u, resist, curvature, R, self.winch.inertia, self._reflected_inertia,
-            float(self.mass), self.gravity_vector)
+            units, u, resist, curvature, self.drum_radius, self.winch.inertia,
+            self._reflected_inertia, float(self.mass), self.gravity_vector)
 
     def rigid_acceleration_numpy(self, p: np.ndarray, v: np.ndarray, u: np.ndarray,
                                  friction: tuple | None = None) -> np.ndarray:

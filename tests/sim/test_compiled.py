@@ -72,7 +72,7 @@ def test_numba_loads_with_the_first_kernel_not_with_the_plant():
     code = ("import sys; import cdpr_pipeline.sim.plant, cdpr_pipeline.sim.controller; "
             "assert 'numba' not in sys.modules; "
             "import numpy as np; from cdpr_pipeline.sim import compiled; "
-            "compiled._shortfall(np.array([1.0, -2.0]), 0.0); "
+            "compiled._solve3(np.eye(3), np.ones(3)); "
             "assert 'numba' in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)
 

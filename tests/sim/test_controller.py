@@ -122,3 +122,28 @@ def test_the_compiled_tensions_are_the_numpy_reference(cables, min_tension):
         assert (reference < min_tension - 1e-6).any()     # the Newton steps were taken
     np.testing.assert_allclose(distribute_tensions(units, force, min_tension), reference,
                                rtol=0.0, atol=1e-12 * np.abs(reference).max())
+
+
+def test_aligned_cables_take_the_pseudo_inverse_and_match_the_numpy_reference():
+    """Eight cables, four overhead and four horizontal in opposite pairs, a bound the
+    overhead ones cannot all meet (they would pull more than the weight of 2 kg): the
+    overhead cables stay short,
+    the horizontal ones reach the bound. Their matrix of the Newton step lacks a rank
+    (the short cables' vertical components are a force direction the horizontal
+    cables do not touch), which the compiled kernel leaves to the eigen-decomposition's
+    pseudo-inverse, as the reference: equal to rounding, the force given exactly."""
+    rng = np.random.default_rng(6)
+    overhead = np.array([[1, 1, 1], [-1, 1, 1], [-1, -1, 1], [1, -1, 1]], float)
+    flat = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]], float)
+    units = np.concatenate([overhead / np.linalg.norm(overhead, axis=1, keepdims=True),
+                            flat])
+    units = np.repeat(units[None], 20, axis=0)
+    force = np.array([0, 0, 19.62]) + np.concatenate(
+        [rng.normal(0, 2, (20, 2)), np.zeros((20, 1))], axis=1)
+    min_tension = 12.0                   # four overhead cables at 12 N pull 27.7 N up
+    reference = distribute_tensions_numpy(units, force, min_tension)
+    t = distribute_tensions(units, force, min_tension)
+    np.testing.assert_allclose(t, reference, rtol=0.0, atol=1e-12 * np.abs(reference).max())
+    np.testing.assert_allclose(np.einsum("bnk,bn->bk", units, t), force, atol=1e-9)
+    assert (t[:, :4] < min_tension - 1e-6).all()
+    np.testing.assert_allclose(t[:, 4:].min(axis=1), min_tension, atol=1e-9)
