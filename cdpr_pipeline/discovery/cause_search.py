@@ -585,10 +585,11 @@ def judge_freeform(search: FreeFormSearch, ctx: FitContext, judge: Judge, scale:
 
 
 def merge_causes(causes: list[Judgement]) -> list[Judgement]:
-    """One entry per effect name (several winches re-identified become one cause)."""
+    """One entry per effect name (several winches re-identified become one cause, as do
+    exit points moved on several cables, named one or several cables a step)."""
     out: dict[str, Judgement] = {}
     for j in causes:
-        if j.effect in out and j.effect == WINCH_PARAMETER_ERROR:
+        if j.effect in out and j.effect in (WINCH_PARAMETER_ERROR, ANCHOR_OFFSET):
             first = out[j.effect]
             out[j.effect] = replace(first, effects=first.effects + j.effects,
                                     channels=tuple(sorted(set(first.channels)
