@@ -459,15 +459,18 @@ def _anchors_together(significant: list[Judgement]) -> Candidate | None:
     ``significant`` (judgements whose training likelihood ratio passed) together
     (:func:`_joint` of them, each from its start; 3 parameters per cable), None for
     fewer than two cables. Its effects are one :class:`AnchorOffset` per cable."""
-    cands = {j.candidate.label: j.candidate for j in significant
-             if j.candidate.n_params == 3}
-    if len(cands) < 2:
+    # one-cable variants only (each builds one exit point), by cable
+    by_cable = {}
+    for j in significant:
+        built = j.candidate.build(j.candidate.starts[0])
+        if len(built) == 1 and not j.candidate.refit_winches:
+            by_cable[built[0].cable] = j.candidate
+    if len(by_cable) < 2:
         return None
-    cands_sorted = sorted(cands.values(), key=lambda c: [e.cable for e in c.build(c.starts[0])])
-    cables = ", ".join(str(e.cable) for c in cands_sorted for e in c.build(c.starts[0]))
-    together = _joint([(c, np.asarray(c.starts[0], float)) for c in cands_sorted[:-1]],
-                      cands_sorted[-1])
-    return replace(together, label=f"{ANCHOR_OFFSET}[cables {cables}]")
+    cands = [by_cable[c] for c in sorted(by_cable)]
+    together = _joint([(c, np.asarray(c.starts[0], float)) for c in cands[:-1]], cands[-1])
+    return replace(together, label=f"{ANCHOR_OFFSET}[cables "
+                                   f"{', '.join(str(c) for c in sorted(by_cable))}]")
 
 
 def _kept_joint(parts: list[tuple[Candidate, np.ndarray]]) -> Candidate:
