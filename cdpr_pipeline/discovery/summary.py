@@ -137,10 +137,21 @@ def cause_params(effects: Sequence[Effect], nominal: Model,
     out: dict[str, Any] = {}
     reference = nominal if reference is None else reference
     changes = [e.winch_change(nominal.winch) for e in effects if e.reidentifies_winch]
+    one_cable: dict[str, list[dict[str, Any]]] = {}
     for e in effects:
         if not e.reidentifies_winch:
             # per-winch sizes both absolute and relative to the extended winch parameters
-            out.update({**e.params(), **e.derived(reference)})
+            own = {**e.params(), **e.derived(reference)}
+            if "cable" in own:
+                one_cable.setdefault(e.name, []).append(own)
+            else:
+                out.update(own)
+    for group in one_cable.values():
+        # effects that act on one cable each (an exit point moved): one of them as it is,
+        # several (anchors moved on several cables, one cause) each parameter a list with
+        # one entry per cable
+        out.update(group[0] if len(group) == 1 else {k: [g[k] for g in group]
+                                                      for k in group[0]})
     if changes:
         out["winches" if all(e.reidentifies_winch for e in effects)
             else "refit_winches"] = changes

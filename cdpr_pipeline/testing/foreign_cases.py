@@ -339,7 +339,8 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
     gives a number the cause's form can express: per-winch (per-cable) effects always
     (``cogging``: its period count must be the true one, and its amplitude is compared);
     ``anchor_offset``: the cable named must be one that moved, and its
-    offset is compared when only one moved.
+    offset is compared when only one moved; anchors fitted on several cables together
+    must name every cable that moved, each offset compared.
 
     Returns ``{"errors": {name: error}, "missing": [...], "checked": bool}``; ``missing``
     lists the affected channels the cause does not act on (or the wrong direction)."""
@@ -433,13 +434,20 @@ def parameter_errors(case: ForeignCase, cause: dict) -> dict[str, Any]:
                 continue
             errors[f"amplitude[{c}]"] = _rel(at[c][1], eff.params["amplitude"][c - 1])
     elif name == "anchor_offset":
-        c = int(p["cable"])
-        if c not in chans:
+        # one cable's offset, or several cables' moved together (one entry per cable)
+        several = isinstance(p["cable"], list)
+        at = dict(zip(p["cable"], p["offset_m"], strict=True)) if several \
+            else {int(p["cable"]): p["offset_m"]}
+        if not several and int(p["cable"]) not in chans:
             missing.append(f"cable {p['cable']} (offset on {chans})")
-        elif len(chans) == 1:   # several moved anchors confound a one-cable fit
-            true = eff.params["offset_m"][c - 1]
-            errors[f"offset_m[{c}]"] = float(np.linalg.norm(np.asarray(p["offset_m"]) - true)
-                                             / np.linalg.norm(true))
+        elif several or len(chans) == 1:  # several moved anchors confound a one-cable fit
+            for c in chans:
+                if c not in at:
+                    missing.append(f"cable {c}")
+                    continue
+                true = eff.params["offset_m"][c - 1]
+                errors[f"offset_m[{c}]"] = float(np.linalg.norm(np.asarray(at[c]) - true)
+                                                 / np.linalg.norm(true))
     return {"errors": errors, "missing": missing, "checked": bool(errors or missing)}
 
 

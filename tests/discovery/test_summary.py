@@ -6,11 +6,13 @@ from __future__ import annotations
 import pytest
 
 from cdpr_pipeline.data.rig import AxesRig, WinchParams
+from cdpr_pipeline.discovery.cause_search import merge_causes
 from cdpr_pipeline.discovery.freeform.search import FreeFormResult, FreeFormTerm
+from cdpr_pipeline.discovery.residuals import nominal_model
 from cdpr_pipeline.discovery.results import BlackBoxShare
 from cdpr_pipeline.discovery.selection import Judgement
-from cdpr_pipeline.discovery.summary import cause_name, gain_shares, rmse_drop
-from cdpr_pipeline.sim.effects import SymbolicWinchTorque
+from cdpr_pipeline.discovery.summary import cause_name, cause_params, gain_shares, rmse_drop
+from cdpr_pipeline.sim.effects import AnchorOffset, SymbolicWinchTorque
 from cdpr_pipeline.sim.plant import Drives, Plant
 
 
@@ -78,3 +80,21 @@ def test_free_form_terms_and_causes_in_the_rigs_words(paper_rig):
     assert "winch" not in text and "theta" not in text
     assert effect.explanatory_variable == "position"
     assert cause_name(_cause("winch_parameter_error", None), axes) == "axis parameter error"
+
+
+def test_exit_points_moved_on_several_cables_are_one_cause_listing_each(paper_rig):
+    """Anchor offsets fitted together (``anchor_offset[cables 1, 3]``), or named one
+    cable a step, are one cause whose params list one ``cable`` and one ``offset_m`` per
+    cable; before, the record kept one cable's (the params of one effect overwrote the
+    other's, and a second step's cause was dropped from the records)."""
+    nominal = nominal_model(paper_rig, None)
+    one, three = AnchorOffset(1, [0.01, 0.0, 0.0]), AnchorOffset(3, [0.0, -0.02, 0.005])
+    assert cause_params([one], nominal) == {"cable": 1, "offset_m": [0.01, 0.0, 0.0]}
+    both = {"cable": [1, 3], "offset_m": [[0.01, 0.0, 0.0], [0.0, -0.02, 0.005]]}
+    assert cause_params([one, three], nominal) == both
+    steps = [Judgement("anchor_offset", f"anchor_offset[cable {e.cable}]", (e,), 3, {}, {},
+                       1.0, 0.01, 1.0, "torque", 0.5, (0.1, 0.9), (f"l{e.cable}",),
+                       passed=True) for e in (one, three)]
+    merged = merge_causes(steps)
+    assert len(merged) == 1 and merged[0].n_params == 6
+    assert cause_params(merged[0].effects, nominal) == both
