@@ -218,8 +218,7 @@ def runs_of(plant: Any, runs: np.ndarray) -> Any:
     if not isinstance(plant, DrivesOfRows | PlantOfRows) and \
             not any(isinstance(e, OnRows) for e in plant.effects):
         return plant
-    # (a model without the cache, drive axes of one model, makes it every time)
-    cache = getattr(plant, "models_of_runs", {})
+    cache = plant.models_of_runs
     key = np.asarray(runs, dtype=np.int64).tobytes()
     known = cache.get(key)
     if known is None:

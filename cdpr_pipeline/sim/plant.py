@@ -597,6 +597,12 @@ class Drives:
     def n(self) -> int:
         return self.winch.n
 
+    @cached_property
+    def models_of_runs(self) -> dict[bytes, Drives]:
+        """The models of some runs of this batch (:func:`~cdpr_pipeline.sim.model_rows.
+        runs_of`), by the runs' indices, as :attr:`Plant.models_of_runs`."""
+        return {}
+
     @property
     def channel_units(self) -> tuple[ChannelUnits, ...]:
         """Per axis the units of its position and force (:attr:`units`)."""
