@@ -506,6 +506,20 @@ def split_blocks(arrays, block_len: int) -> list[tuple[np.ndarray, ...]]:
     return [tuple(a[s : s + block_len] for a in seq) for s in starts]
 
 
+def _checked_draws(n_boot: int, level: float) -> int:
+    """``n_boot`` as an int, with ``level`` and it checked (both bootstraps)."""
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    if int(n_boot) < 1:
+        raise ValueError(f"n_boot must be >= 1, got {n_boot}")
+    return int(n_boot)
+
+
+def _scalar_or_array(v: np.ndarray) -> Any:
+    """A float for a scalar statistic, the array for a vector one."""
+    return float(v) if np.ndim(v) == 0 else v
+
+
 def block_bootstrap(
     statistic: Callable[..., Any],
     blocks: Sequence[tuple[np.ndarray, ...]],
@@ -554,11 +568,7 @@ def block_bootstrap(
     width = len(tuples[0])
     if width == 0 or any(len(t) != width for t in tuples):
         raise ValueError("all blocks must hold the same, nonzero number of arrays")
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must be in (0, 1), got {level}")
-    n_boot = int(n_boot)
-    if n_boot < 1:
-        raise ValueError(f"n_boot must be >= 1, got {n_boot}")
+    n_boot = _checked_draws(n_boot, level)
     gen = np.random.default_rng(0 if rng is None else rng)
 
     def _stat(idx) -> np.ndarray:
@@ -571,10 +581,7 @@ def block_bootstrap(
     boot = np.stack([_stat(idx) for idx in draws])
     lo, hi = np.quantile(boot, [(1.0 - level) / 2.0, (1.0 + level) / 2.0], axis=0)
 
-    def _out(v: np.ndarray):
-        return float(v) if np.ndim(v) == 0 else v
-
-    return _out(estimate), _out(lo), _out(hi)
+    return _scalar_or_array(estimate), _scalar_or_array(lo), _scalar_or_array(hi)
 
 
 #: the most block indices one chunk of :func:`block_sum_bootstrap`'s draws holds at once
@@ -673,11 +680,7 @@ def block_sum_bootstrap(
     n_blocks = sums.shape[0]
     if n_blocks < 2:
         raise ValueError("need at least 2 blocks to bootstrap")
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must be in (0, 1), got {level}")
-    n_boot = int(n_boot)
-    if n_boot < 1:
-        raise ValueError(f"n_boot must be >= 1, got {n_boot}")
+    n_boot = _checked_draws(n_boot, level)
     gen = np.random.default_rng(0 if rng is None else rng)
     estimate = np.asarray(statistic(sums.sum(axis=0)[None, :]), dtype=float)[0]
     chunk = max(1, _DRAW_CHUNK // n_blocks)
@@ -692,10 +695,7 @@ def block_sum_bootstrap(
     lo, hi = np.quantile(np.concatenate(boot), [(1.0 - level) / 2.0, (1.0 + level) / 2.0],
                          axis=0)
 
-    def _out(v: np.ndarray):
-        return float(v) if np.ndim(v) == 0 else v
-
-    return _out(estimate), _out(lo), _out(hi)
+    return _scalar_or_array(estimate), _scalar_or_array(lo), _scalar_or_array(hi)
 
 
 @dataclass
