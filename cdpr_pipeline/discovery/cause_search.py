@@ -161,6 +161,8 @@ class CauseSearch:
             # otherwise take winches one re-identification at a time explains exactly
             # (a 6-axis rig with wrong parameters on five axes named a load, a Stribeck
             # friction and free-form terms beside them)
+            # (not counted in n_tests: built only behind a counted candidate's rejection,
+            # so the step's family-wise level holds; docs/method.md 3.3)
             together = _winches_together([j.candidate for j in step if j.passed and
                                           j.effect == WINCH_PARAMETER_ERROR and
                                           j.candidate is not None])
