@@ -39,7 +39,12 @@ from cdpr_pipeline.sim.effects import (
 )
 from cdpr_pipeline.sim.expressions import evaluate
 from cdpr_pipeline.sim.model_file import read_model, write_model
-from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset, rng_for
+from cdpr_pipeline.testing.lab_cases import (
+    below_heldout_limit,
+    fast_settings,
+    lab_dataset,
+    rng_for,
+)
 
 VOCABULARY = {n for n, c in EFFECTS.items() if c.in_vocabulary}
 #: data whose RMS winch speed is 1 rad/s (places the shapes of the speed laws; these
@@ -267,11 +272,21 @@ def test_actuator_lag_on_one_winch_names_only_that_winch(paper_rig, seed):
     7 draws named, all with the right winch and within 3 %). Measured on seeds 1-22: 21
     named with the right winch and time constant (5 ms draws came out within 6 %);
     seed 1 (8.7 ms on winch 1) gained 44 % on the held-out run with a bootstrap interval
-    reaching -1.6 % (verdict none), hence runs of :data:`LAG_RUN_S`."""
+    reaching -1.6 % (verdict none), hence runs of :data:`LAG_RUN_S`. A draw whose true
+    lag itself fails the held-out tests (``lab_cases.below_heldout_limit``) may be
+    ``none`` or ``unexplained``: CI seed 181220241 (6.87 ms on winch 2) gained 9.8 % of
+    the held-out squared error, fitted and true lag alike, under the 10 % of
+    ``selection.min_gain`` (docs/method.md, known limits: weakly excited effects)."""
     rng = rng_for(seed)
     cable, tau = int(rng.integers(1, paper_rig.n + 1)), float(rng.uniform(0.005, 0.010))
-    d, record = _diagnose(paper_rig, [ActuatorLag(tau, cables=[cable])], seed, LAG_RUN_S)
+    effects = [ActuatorLag(tau, cables=[cable])]
+    d, record, dataset = _diagnose_lags(paper_rig, effects, seed)
     case = f"seed {seed}: lag {1000 * tau:.2f} ms on winch {cable}: {d.sentence}"
+    if record["verdict"] in ("none", "unexplained") and \
+            below_heldout_limit(d, dataset, fast_settings(), effects, 1):
+        # the true lag, with its true time constant, fails the held-out tests on these
+        # runs: no name is right (`none`, or `unexplained`: seen, not named)
+        return
     assert record["verdict"] == "actuator_lag", case
     cause = record["causes"][0]
     assert cause["params"]["cables"] == [cable], case
@@ -288,7 +303,7 @@ def test_actuator_lag_of_different_sizes_per_winch_is_named_per_winch(paper_rig,
     while np.min(np.diff(taus)) < 0.0015:
         taus = np.sort(rng.uniform(0.003, 0.010, 3))
     taus = rng.permutation(taus).tolist()
-    d, record = _diagnose(paper_rig, [ActuatorLag(taus)], seed, LAG_RUN_S)
+    d, record, _ = _diagnose_lags(paper_rig, [ActuatorLag(taus)], seed)
     case = f"seed {seed}: lags {np.round(1000 * np.asarray(taus), 2).tolist()} ms: " \
            f"{d.sentence}"
     assert record["verdict"] == "actuator_lag", case
@@ -298,6 +313,14 @@ def test_actuator_lag_of_different_sizes_per_winch_is_named_per_winch(paper_rig,
     assert cause["params"]["time_constant_s"] == pytest.approx(taus, rel=0.2), case
     assert cause["evidence"]["n_params"] == 3, case
     assert record["gain"]["ci95"][0] > 0, case
+
+
+def _diagnose_lags(rig, effects, seed):
+    """The diagnosis of lab runs of :data:`LAG_RUN_S` hiding ``effects``, its record and
+    the dataset."""
+    dataset = lab_dataset(rig, effects, seed, LAG_RUN_S)
+    d = diagnose(dataset, fast_settings())
+    return d, d.as_json(), dataset
 
 
 @pytest.mark.parametrize("effect", [QuadraticDamping(0.5)], ids=["quadratic_damping"])
