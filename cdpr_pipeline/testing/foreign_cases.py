@@ -28,13 +28,8 @@ import yaml
 
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import Dataset, load_dataset
-from cdpr_pipeline.data.reading import as_resolved
-from cdpr_pipeline.discovery.cause_search import CauseSearch, data_scale
 from cdpr_pipeline.discovery.diagnosis import diagnose
-from cdpr_pipeline.discovery.diagnosis.admission import diagnosis_split
-from cdpr_pipeline.discovery.residuals import nominal_model
-from cdpr_pipeline.discovery.signals import dataset_signals
-from cdpr_pipeline.sim.effects import per_winch
+from cdpr_pipeline.sim.effects import ActuatorLag, per_winch
 from cdpr_pipeline.sim.effects.friction import StribeckFriction
 from cdpr_pipeline.stages.diagnose import settings_from_config
 from cdpr_pipeline.testing.independent_sim import (
@@ -53,9 +48,11 @@ from cdpr_pipeline.testing.lab_cases import (
     added_torque,
     fast_settings,
     heldout_signals,
+    heldout_undetermined,
     relative_errors,
     torque_rows,
 )
+from cdpr_pipeline.testing.lab_cases import truth_judgement as lab_truth_judgement
 
 KINDS = ("cdpr", "axes")
 #: effects the pipeline has a name for, per rig kind
@@ -217,54 +214,49 @@ def rng_for(seed: int) -> np.random.Generator:
 
 
 # ------------------------------------------------------------------ detection limit
-def _pipeline_form(eff: Any) -> list[Any] | None:
-    """The hidden effect ``eff`` (the generator's) as the pipeline's effect with its true
-    parameters, where the vocabulary's form is the generator's law (Stribeck friction);
-    None otherwise."""
-    if eff.name != "stribeck_friction":
-        return None
+def _pipeline_form(eff: Any) -> tuple[list[Any], int] | None:
+    """The hidden effect ``eff`` (the generator's) as the pipeline's effects with its
+    true parameters, and their parameter count, where the vocabulary's form is the
+    generator's law: Stribeck friction (two per channel) and an actuator lag (a
+    first-order lag of the applied torque, one per channel); None otherwise."""
     chans = list(eff.channels)
-    return [StribeckFriction(static_ratio=None, cables=[c + 1 for c in chans],
-                             extra_static=[float(eff.params["delta"][c]) for c in chans],
-                             stribeck_velocity=[float(eff.params["speed"][c]) for c in chans])]
+    cables = [c + 1 for c in chans]
+    if eff.name == "stribeck_friction":
+        return [StribeckFriction(static_ratio=None, cables=cables,
+                                 extra_static=[float(eff.params["delta"][c]) for c in chans],
+                                 stribeck_velocity=[float(eff.params["speed"][c])
+                                                    for c in chans])], 2 * len(chans)
+    if eff.name == "actuator_lag":
+        return [ActuatorLag(time_constant_s=[float(eff.params["time_constant_s"][c])
+                                             for c in chans], cables=cables)], len(chans)
+    return None
 
 
 def truth_judgement(case: ForeignCase) -> Any:
     """The hidden effect itself, in the pipeline's form with its true parameters, judged
     as the diagnosis's first step judged its candidates (the same training and held-out
-    runs, column weights and test count): where even the truth's held-out gain falls
-    short of ``min_gain`` or its block-bootstrap interval reaches zero, the held-out runs
-    do not determine the effect and ``none`` is the method's right answer (docs/method.md,
-    known limits: weakly excited effects). None where the effect has no such form, the
-    case is not diagnosed, or the stated model was re-identified first."""
+    runs, column weights and test count: :func:`~cdpr_pipeline.testing.lab_cases.
+    truth_judgement`): where even the truth's held-out gain falls short of ``min_gain``
+    or its block-bootstrap interval reaches zero, the held-out runs do not determine the
+    effect and ``none`` is the method's right answer (docs/method.md, known limits:
+    weakly excited effects). None where the effect has no such form, the case is not
+    diagnosed, or the stated model was re-identified first."""
     record = case.record
-    effects = _pipeline_form(case.truth.effects[0]) if case.truth.effects else None
-    if effects is None or record is None or not record["candidates"] \
+    form = _pipeline_form(case.truth.effects[0]) if case.truth.effects else None
+    if form is None or record is None or not record["candidates"] \
             or "unusable" in record["nominal"]:
         return None
-    step = record["candidates"][0]
-    settings = case.settings or foreign_settings()
-    settings = dataclasses.replace(settings, regression=as_resolved(
-        settings.regression, case.dataset.trajectories, case.dataset.rig))
-    split = diagnosis_split(case.dataset, settings)
-    signals = {s.name: s for s in dataset_signals(split.cut_all(case.dataset.trajectories),
-                                                  case.dataset.rig, settings.regression)}
-    train, held = [signals[n] for n in split.train], [signals[n] for n in split.heldout]
-    nominal = nominal_model(case.dataset.rig, settings.regression.sign_sharpness)
-    search = CauseSearch(nominal, train, held, settings.selection, None,
-                         data_scale(train, case.kind, nominal), case.kind)
-    _, judge = search.context([])
-    return judge(effects[0].name, "truth", effects, 2 * len(effects[0].cables), len(step))
+    effects, n_params = form
+    return lab_truth_judgement(case.dataset, case.settings or foreign_settings(), effects,
+                               n_params, len(record["candidates"][0]))
 
 
 def below_heldout_limit(case: ForeignCase) -> bool:
     """Whether the hidden effect is below what the held-out runs determine
-    (:func:`truth_judgement`: the truth's held-out gain under ``min_gain`` or its interval
-    reaching zero); False where that cannot be told."""
+    (:func:`truth_judgement`, :func:`~cdpr_pipeline.testing.lab_cases.
+    heldout_undetermined`); False where that cannot be told."""
     truth = truth_judgement(case)
-    if truth is None:
-        return False
-    return bool(truth.heldout_gain < case.settings.selection.min_gain or truth.ci[0] <= 0)
+    return truth is not None and heldout_undetermined(truth, case.settings)
 
 
 # ----------------------------------------------------------------------------- grading

@@ -16,8 +16,10 @@ from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.data.reading import as_resolved
 from cdpr_pipeline.discovery.candidates import candidates_for
+from cdpr_pipeline.discovery.cause_search import CauseSearch, data_scale
 from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnosis_split
 from cdpr_pipeline.discovery.freeform import FreeFormSearch
+from cdpr_pipeline.discovery.judge import Judgement
 from cdpr_pipeline.discovery.residuals import Model, nominal_model, predict
 from cdpr_pipeline.discovery.signals import RunSignals, dataset_signals
 from cdpr_pipeline.sim.candidate_forms import DataScale
@@ -121,3 +123,45 @@ def contribution_errors(diagnosis, dataset: Dataset, settings: DiagnosisSettings
     fitted = torque_rows(held, added_torque(diagnosis.extended, diagnosis.nominal))
     true = torque_rows(held, added_torque(nominal.with_effects(list(effects)), nominal))
     return relative_errors(fitted, true, channels)
+
+
+# ------------------------------------------------------------------ detection limit
+def truth_judgement(dataset: Dataset, settings: DiagnosisSettings, effects: list[Effect],
+                    n_params: int, n_tests: int) -> Judgement:
+    """The hidden ``effects`` (the pipeline's, with their true parameters) judged as the
+    diagnosis's first step judges its candidates: on the training and held-out runs
+    ``settings`` choose, read as the diagnosis reads them, with the same column weights,
+    the nominal model as the base and ``n_tests`` tests in the step (the Bonferroni
+    level of the likelihood ratio and of the held-out interval)."""
+    settings = dataclasses.replace(settings, regression=as_resolved(
+        settings.regression, dataset.trajectories, dataset.rig))
+    split = diagnosis_split(dataset, settings)
+    signals = {s.name: s for s in dataset_signals(split.cut_all(dataset.trajectories),
+                                                  dataset.rig, settings.regression)}
+    train, held = [signals[n] for n in split.train], [signals[n] for n in split.heldout]
+    nominal = nominal_model(dataset.rig, settings.regression.sign_sharpness)
+    search = CauseSearch(nominal, train, held, settings.selection, None,
+                         data_scale(train, nominal.kind, nominal), nominal.kind)
+    _, judge = search.context([])
+    return judge(effects[0].name, "truth", effects, n_params, n_tests)
+
+
+def heldout_undetermined(truth: Judgement, settings: DiagnosisSettings) -> bool:
+    """Whether a :func:`truth_judgement` says the held-out runs do not determine the
+    effect: its held-out gain under ``selection.min_gain``, or its block-bootstrap
+    interval reaching zero. No diagnosis can then name it on these runs, and ``none``
+    (or ``unexplained``: seen, not named) is the method's answer (docs/method.md, known
+    limits: weakly excited effects)."""
+    return bool(truth.heldout_gain < settings.selection.min_gain or truth.ci[0] <= 0)
+
+
+def below_heldout_limit(diagnosis, dataset: Dataset, settings: DiagnosisSettings,
+                        effects: list[Effect], n_params: int) -> bool:
+    """Whether the hidden ``effects`` of a lab ``diagnosis`` (made with ``settings``)
+    are below what its held-out runs determine (:func:`heldout_undetermined` of their
+    :func:`truth_judgement` at the test count of its first step); False where that
+    cannot be told (no candidate judged, or the stated model re-identified first)."""
+    if not diagnosis.steps or diagnosis.unusable is not None:
+        return False
+    truth = truth_judgement(dataset, settings, effects, n_params, len(diagnosis.steps[0]))
+    return heldout_undetermined(truth, settings)

@@ -39,7 +39,12 @@ from cdpr_pipeline.sim.effects import (
 )
 from cdpr_pipeline.sim.expressions import evaluate
 from cdpr_pipeline.sim.model_file import read_model, write_model
-from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset, rng_for
+from cdpr_pipeline.testing.lab_cases import (
+    below_heldout_limit,
+    fast_settings,
+    lab_dataset,
+    rng_for,
+)
 
 VOCABULARY = {n for n, c in EFFECTS.items() if c.in_vocabulary}
 #: data whose RMS winch speed is 1 rad/s (places the shapes of the speed laws; these
@@ -47,8 +52,8 @@ VOCABULARY = {n for n, c in EFFECTS.items() if c.in_vocabulary}
 UNIT_SPEED = DataScale(1.0, 3, "cdpr")
 
 
-def _diagnose(rig, effects, seed, duration_s=None):
-    d = diagnose(lab_dataset(rig, effects, seed, duration_s), fast_settings())
+def _diagnose(rig, effects, seed):
+    d = diagnose(lab_dataset(rig, effects, seed), fast_settings())
     return d, d.as_json()
 
 
@@ -59,6 +64,14 @@ def _diagnose(rig, effects, seed, duration_s=None):
 #: reaching -0.8 %); at 40 s those two have lower ends of 3-15 % and 16 of 16 fresh
 #: draws (seeds 101-116) were named
 LAG_RUN_S = 40.0
+
+
+def _diagnose_lags(rig, effects, seed):
+    """The diagnosis of lab runs of :data:`LAG_RUN_S` hiding ``effects``, its record and
+    the dataset."""
+    dataset = lab_dataset(rig, effects, seed, LAG_RUN_S)
+    d = diagnose(dataset, fast_settings())
+    return d, d.as_json(), dataset
 
 
 # ------------------------------------------------------------------ effects per winch
@@ -267,11 +280,24 @@ def test_actuator_lag_on_one_winch_names_only_that_winch(paper_rig, seed):
     7 draws named, all with the right winch and within 3 %). Measured on seeds 1-22: 21
     named with the right winch and time constant (5 ms draws came out within 6 %);
     seed 1 (8.7 ms on winch 1) gained 44 % on the held-out run with a bootstrap interval
-    reaching -1.6 % (verdict none), hence runs of :data:`LAG_RUN_S`."""
+    reaching -1.6 % (verdict none), hence runs of :data:`LAG_RUN_S`. A draw whose true
+    lag itself fails the held-out tests (``lab_cases.below_heldout_limit``) may be
+    ``none`` or ``unexplained``: on winch 2, which carries about 2.5 times the others'
+    torque and so counts least in the weighted torque gain, a slowly turning held-out
+    spiral leaves the true lag under the 10 % of ``selection.min_gain`` (CI seed
+    181220241, 6.87 ms: 9.8 %, fitted lag alike, verdict none; seeds 8, 20, 37: 7.8, 6.8,
+    5.3 %). Seeds 1-40: the other 37 named with the right winch and time constant
+    (docs/method.md, known limits: weakly excited effects)."""
     rng = rng_for(seed)
     cable, tau = int(rng.integers(1, paper_rig.n + 1)), float(rng.uniform(0.005, 0.010))
-    d, record = _diagnose(paper_rig, [ActuatorLag(tau, cables=[cable])], seed, LAG_RUN_S)
+    effects = [ActuatorLag(tau, cables=[cable])]
+    d, record, dataset = _diagnose_lags(paper_rig, effects, seed)
     case = f"seed {seed}: lag {1000 * tau:.2f} ms on winch {cable}: {d.sentence}"
+    if record["verdict"] in ("none", "unexplained") and \
+            below_heldout_limit(d, dataset, fast_settings(), effects, 1):
+        # the true lag, with its true time constant, fails the held-out tests on these
+        # runs: no name is right (`none`, or `unexplained`: seen, not named)
+        return
     assert record["verdict"] == "actuator_lag", case
     cause = record["causes"][0]
     assert cause["params"]["cables"] == [cable], case
@@ -288,7 +314,7 @@ def test_actuator_lag_of_different_sizes_per_winch_is_named_per_winch(paper_rig,
     while np.min(np.diff(taus)) < 0.0015:
         taus = np.sort(rng.uniform(0.003, 0.010, 3))
     taus = rng.permutation(taus).tolist()
-    d, record = _diagnose(paper_rig, [ActuatorLag(taus)], seed, LAG_RUN_S)
+    d, record, _ = _diagnose_lags(paper_rig, [ActuatorLag(taus)], seed)
     case = f"seed {seed}: lags {np.round(1000 * np.asarray(taus), 2).tolist()} ms: " \
            f"{d.sentence}"
     assert record["verdict"] == "actuator_lag", case
