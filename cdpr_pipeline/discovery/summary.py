@@ -253,7 +253,7 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
                      withdrawn: Sequence[str] = (), unexplained: Unexplained | None = None,
                      failing: Sequence[str] = (), noise_ratio: float = 12.0,
                      sizes: Sequence[Sequence[CauseComponent]] = (),
-                     largest_failing: float = 0.0) -> str:
+                     largest_failing: float = 0.0, min_gain: float = 0.10) -> str:
     """The diagnosis in a few sentences. Every cause comes with its sizes and their
     standard errors (``sizes``, per cause: :func:`~cdpr_pipeline.discovery.sizes.
     cause_sizes`; parts below the noise left out), the gain as :func:`gain_text`.
@@ -262,8 +262,12 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
     its held-out residual passing the calibrated validity test; where columns
     (``failing``) fail a statistical test, it says they do so at most ``largest_failing``
     times the measurement noise, within the ``noise_ratio`` effect-free data stay below
-    (:mod:`~cdpr_pipeline.discovery.adequacy`)."""
+    (:mod:`~cdpr_pipeline.discovery.adequacy`). What no candidate did is said as the
+    selection judges it: a held-out gain of at least ``min_gain`` whose interval excludes
+    zero (a candidate can beat chance and still fall short of ``min_gain``)."""
     prefix = ""
+    short = (f"by the {100 * min_gain:.0f} % a cause must add, with its interval above "
+             f"zero")
     if unusable:
         prefix = (f"The stated model was unusable ({unusable.relative_error_pct:.0f} % "
                   f"relative error of the {signal_words('torque', nominal)} on the training "
@@ -279,7 +283,7 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
         band = u.band_hz
         return prefix + (
             f"The nominal model does not explain the held-out measurements, and no "
-            f"candidate effect improves them beyond chance (verdict: unexplained): the "
+            f"candidate effect improves them {short} (verdict: unexplained): the "
             f"held-out {signal_words(u.signal, nominal)} residual of {where} holds "
             f"{100 * u.share_of_error:.0f} % of the error"
             + ("" if band is None else f", most of it at {band[0]:.3g}-{band[1]:.3g} Hz of "
@@ -289,13 +293,13 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
             f"{', '.join(sorted({t for c in u.columns for t in c.failed_tests})) or 'none'}).")
     if not causes:
         if not failing:
-            return prefix + ("The nominal model explains the measurements as well as "
-                             "anything tried: no candidate effect improves the held-out runs "
-                             "beyond chance, and the held-out residuals pass the validity "
-                             "tests (verdict: none).")
+            return prefix + (f"The nominal model explains the measurements as well as "
+                             f"anything tried: no candidate effect improves the held-out "
+                             f"runs {short}, and the held-out residuals pass the validity "
+                             f"tests (verdict: none).")
         return prefix + (
             f"The nominal model explains the measurements as well as anything tried: no "
-            f"candidate effect improves the held-out runs beyond chance, and the held-out "
+            f"candidate effect improves the held-out runs {short}, and the held-out "
             f"residuals pass the calibrated validity test (verdict: none). The residual of "
             f"{', '.join(failing)} fails a statistical test at "
             f"{largest_failing:.2g} times the measurement noise at most, within what "

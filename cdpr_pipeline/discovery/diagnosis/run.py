@@ -122,7 +122,8 @@ def _diagnosis(state: DiagnosisState) -> Diagnosis:
     sentence = summary_sentence(state.causes, state.nominal, state.gain, state.unusable,
                                 state.withdrawn, state.unexplained, state.failing,
                                 settings.unexplained_noise_ratio, state.sizes,
-                                largest_failing_ratio(state.held_columns))
+                                largest_failing_ratio(state.held_columns),
+                                settings.selection.min_gain)
     note = retrace_note(state.train, held)
     sentence += f" {note}" if note else ""
     band, clock, again = state.band, state.clock, state.again
