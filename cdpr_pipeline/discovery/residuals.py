@@ -96,15 +96,23 @@ def _load(model: Plant, sig: RunSignals, acceleration: np.ndarray):
     geometry and mass alone, and the per-sample solves are the costliest part of a fit."""
     # tensions are linear in the mass: cache them per unit mass, so fitting a payload
     # error does not repeat the per-sample solves
-    key = (model.anchors.tobytes(), float(model.gravity), id(acceleration))
     # full-rate arrays, 1.9 MB a run each on 8 cables at 1 kHz: four per run (the
     # nominal geometry and the few a fit comes back to; sixteen held 380 MB there, for
     # the same evaluations; two cost anchor fits a third more CPU). The cable unit
     # vectors load_tensions also returns are not kept: nothing here reads them, and
     # they were 60 % of the memo (58 MB on five 15-s runs)
-    unit, g = _memo(sig, "load", key, lambda: model.replace(mass=1.0).load_tensions(
-        sig.position, acceleration)[:2], size=4)
+    unit, g = _unit_load(model, sig, acceleration)
     return float(model.mass) * unit, g, None
+
+
+def _unit_load(model: Plant, sig: RunSignals, acceleration: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The tensions per unit mass and the geometric lengths of :func:`_load` (the
+    lengths alone need no tensions scaled: the length side reads them at every
+    evaluation of a fit that moves an exit point)."""
+    key = (model.anchors.tobytes(), float(model.gravity), id(acceleration))
+    return _memo(sig, "load", key, lambda: model.replace(mass=1.0).load_tensions(
+        sig.position, acceleration)[:2], size=4)
 
 
 # ---------------------------------------------------------------- residual rows
@@ -380,8 +388,8 @@ def _tension_key(model: Plant, radius: bool) -> tuple:
 
 def _unit_tension_values(model: Plant, sig: RunSignals, radius: bool) -> np.ndarray:
     """The tensions per unit mass (N, n), times the drums' radii when ``radius``."""
-    return (model.drum_radius if radius else 1.0) * _load(
-        model.replace(mass=1.0), sig, sig.acceleration)[0]
+    return (model.drum_radius if radius else 1.0) * _unit_load(
+        model, sig, sig.acceleration)[0]
 
 
 def _unit_tension(model: Plant, sig: RunSignals, radius: bool) -> _Filtered:
@@ -396,6 +404,46 @@ def _predicted_torque_rows(model: Model, sig: RunSignals, keys: list[tuple | Non
     from rows filtered once (per run, per geometry, per effect value). ``reference``:
     the model residuals are written about; a geometry other than its own is its
     tensions plus the change."""
+    # the stated part (winches and tensions) is the same at every evaluation of a fit
+    # that moves an effect alone: combined once per run and value (four per-winch
+    # combinations of (rows, n, n) spread rows where winches mix, and the tensions'),
+    # then each evaluation adds its effects' rows to it, the same sums in the same order
+    stated = _memo(sig, "stated", _stated_key(model, reference), lambda: _read_only(
+        _stated_torque_rows(model, sig, reference)), size=8)
+    tau = model.actuator_time_constant
+    pred = stated
+    for effect, key in zip(model.effects, keys, strict=True):
+        extra = _extra_rows(sig, effect, model, key)
+        if extra is not None:
+            pred = pred + extra.commanded(tau)
+    return pred
+
+
+def _read_only(rows: np.ndarray) -> np.ndarray:
+    """``rows``, no longer writeable: a memoised value handed to every caller."""
+    rows.flags.writeable = False
+    return rows
+
+
+def _stated_key(model: Model, reference: Model | None) -> tuple:
+    """What :func:`_stated_torque_rows` depends on: the Coulomb law, the lags, the
+    winch parameters and, on a cable robot, the mass, radii and geometry (and the
+    reference's geometry the tensions are written about)."""
+    tau = np.asarray(model.actuator_time_constant, float)
+    w = model.winch
+    k = model.sign_sharpness
+    key = (None if k is None else float(k), tau.shape, tau.tobytes(), w.inertia.tobytes(),
+           w.viscous.tobytes(), w.coulomb.tobytes(), w.offset.tobytes())
+    if model.cables:
+        key += (float(model.mass), model.drum_radius.tobytes(), _tension_key(model, True),
+                None if reference is None else _tension_key(reference, True))
+    return key
+
+
+def _stated_torque_rows(model: Model, sig: RunSignals, reference: Model | None
+                        ) -> np.ndarray:
+    """The rows of :func:`_predicted_torque_rows` without the effects' extra torques:
+    the winch side and, on a cable robot, the tensions."""
     plant = model.cables
     k = model.sign_sharpness
     winch = _memo(sig, "winch", None if k is None else float(k), lambda: [
@@ -425,10 +473,6 @@ def _predicted_torque_rows(model: Model, sig: RunSignals, keys: list[tuple | Non
                 + change.commanded(tau, scale)
         else:
             pred = pred + _unit_tension(model, sig, radius).commanded(tau, scale)
-    for effect, key in zip(model.effects, keys, strict=True):
-        extra = _extra_rows(sig, effect, model, key)
-        if extra is not None:
-            pred = pred + extra.commanded(tau)
     return pred
 
 
@@ -449,7 +493,7 @@ def _length_rows(model: Plant, nominal: Plant, sig: RunSignals) -> np.ndarray:
     nominal lengths: the decimation's sections round relative to what they filter
     (~2e-12 of it by 100), and a moved anchor's length change of 5 cm, filtered whole,
     strayed 1e-13 m from the direct rows on a 4e-5 m residual (8 cables, 1 kHz)."""
-    g = _load(model, sig, sig.acceleration)[1]
+    g = _unit_load(model, sig, sig.acceleration)[1]
     ref_key = nominal.anchors.tobytes()
     g0 = _memo(sig, "nominal geometric", ref_key,
                lambda: cable_geometry(nominal.anchors, sig.position)[0], size=1)
