@@ -256,9 +256,12 @@ def truth_judgement(case: ForeignCase) -> Any:
 def undetermined_channels(case: ForeignCase) -> set[int]:
     """The hidden effect's channels (1-based) whose part the held-out runs do not
     determine given the rest: the true part on that channel, added to the truth on its
-    other channels, judged as :func:`truth_judgement` judges the whole, fails the
-    held-out tests (:func:`~cdpr_pipeline.testing.lab_cases.heldout_undetermined`).
-    No size is expected there (:func:`parameters_ok`): e.g. an actuator lag on a light
+    other channels and judged as :func:`truth_judgement` judges the whole, has a
+    held-out interval reaching zero. (Not ``selection.min_gain`` too, as
+    :func:`below_heldout_limit`: that is the whole effect's practical bar, and one
+    channel's share of the torque channel's gain is small on a many-channel rig even
+    where its size is well determined.) No size is expected there
+    (:func:`parameters_ok`): e.g. an actuator lag on a light
     axis at a low rate, whose true value makes that axis's held-out error larger in the
     equation-error residual (docs/method.md, known limits). Empty where that cannot be
     told (as :func:`truth_judgement`)."""
@@ -275,7 +278,7 @@ def undetermined_channels(case: ForeignCase) -> set[int]:
         base = _pipeline_form(eff, others)[0] if others else []
         truth = lab_truth_judgement(case.dataset, settings, part, n_params,
                                     len(record["candidates"][0]), base=base)
-        if heldout_undetermined(truth, settings):
+        if truth.ci[0] <= 0:
             out.add(int(c) + 1)
     return out
 
