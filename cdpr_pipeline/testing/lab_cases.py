@@ -127,12 +127,16 @@ def contribution_errors(diagnosis, dataset: Dataset, settings: DiagnosisSettings
 
 # ------------------------------------------------------------------ detection limit
 def truth_judgement(dataset: Dataset, settings: DiagnosisSettings, effects: list[Effect],
-                    n_params: int, n_tests: int) -> Judgement:
+                    n_params: int, n_tests: int, base: Sequence[Effect] = ()
+                    ) -> Judgement:
     """The hidden ``effects`` (the pipeline's, with their true parameters) judged as the
     diagnosis's first step judges its candidates: on the training and held-out runs
     ``settings`` choose, read as the diagnosis reads them, with the same column weights,
     the nominal model as the base and ``n_tests`` tests in the step (the Bonferroni
-    level of the likelihood ratio and of the held-out interval)."""
+    level of the likelihood ratio and of the held-out interval).
+
+    ``base``: effects kept in the model before ``effects`` is added (the rest of a
+    hidden effect, to judge one channel's part given the others); none by default."""
     settings = dataclasses.replace(settings, regression=as_resolved(
         settings.regression, dataset.trajectories, dataset.rig))
     split = diagnosis_split(dataset, settings)
@@ -142,7 +146,7 @@ def truth_judgement(dataset: Dataset, settings: DiagnosisSettings, effects: list
     nominal = nominal_model(dataset.rig, settings.regression.sign_sharpness)
     search = CauseSearch(nominal, train, held, settings.selection, None,
                          data_scale(train, nominal.kind, nominal), nominal.kind)
-    _, judge = search.context([])
+    _, judge = search.context(list(base))
     return judge(effects[0].name, "truth", effects, n_params, n_tests)
 
 
