@@ -129,6 +129,11 @@ def _dispatch(sub: str, argv: list[str]) -> None:
     """Run the subcommand's entry point with ``argv[1:]`` as its arguments."""
     module_name, _, func = SUBCOMMANDS[sub].partition(":")
     entry = getattr(importlib.import_module(module_name), func or "main")
+    # the imports leave hundreds of thousands of long-lived objects (numpy, scipy,
+    # torch, MLflow); out of the collector's view, its full passes stop walking them
+    # again (they were about a sixth of a foreign-rig diagnosis)
+    gc.collect()
+    gc.freeze()
     # Hydra reads its overrides from sys.argv; present the rest as the app's own argv
     sys.argv = [f"cdpr {sub}", *argv[1:]]
     # a process that re-runs this command (Lightning's DDP launcher runs `python -m
