@@ -45,8 +45,8 @@ from cdpr_pipeline.sim import compiled
 from cdpr_pipeline.sim.kinematics import (
     cable_geometry,
     default_home,
-    geometry_and_tensions,
     static_tensions,
+    tensions_for_force,
     winch_rates,
 )
 
@@ -366,8 +366,9 @@ class Plant:
 
         Returns tensions, geometric lengths and unit vectors, each ``(..., n[, 3])``.
         """
-        return geometry_and_tensions(self.anchors, position,
-                                     self.mass * (acceleration - self.gravity_vector))
+        g, units = cable_geometry(self.anchors, position)
+        tension = tensions_for_force(units, self.mass * (acceleration - self.gravity_vector))
+        return tension, g, units
 
     def inverse_dynamics(self, position: np.ndarray, acceleration: np.ndarray,
                          theta: np.ndarray, omega: np.ndarray, alpha: np.ndarray,
