@@ -150,12 +150,6 @@ class CauseSearch:
                 step.append(judge_freeform(self.freeform, ctx, judge, self.scale, self.kind,
                                            n_tests, shapes=self.shapes))
                 templates.append(None)      # a free-form part is fitted on top only
-            # a sparse candidate (a winch re-identification) ranks by the parameters the
-            # data need, as in the comparison with free-form terms: a wrong offset alone
-            # is one parameter, not four (counted as four, a prismatic load's a q + b
-            # took an offset error's place with an insignificant slope)
-            base_bic = self.bic(current, 0) if any(self.sparse(j) for j in step) else None
-            step = [self.lean(j, current, base_bic) if self.sparse(j) else j for j in step]
             # the winch re-identifications that pass on their own, also as one cause: a
             # variant acting on every winch at once (a load on every axis) would
             # otherwise take winches one re-identification at a time explains exactly
@@ -181,6 +175,12 @@ class CauseSearch:
             if anchors is not None:
                 step.append(_screen(anchors, ctx, judge, kept, n_tests))
                 templates.append(anchors)
+            # a sparse candidate (a winch re-identification) ranks by the parameters the
+            # data need, as in the comparison with free-form terms: a wrong offset alone
+            # is one parameter, not four (counted as four, a prismatic load's a q + b
+            # took an offset error's place with an insignificant slope)
+            base_bic = self.bic(current, 0) if any(self.sparse(j) for j in step) else None
+            step = [self.lean(j, current, base_bic) if self.sparse(j) else j for j in step]
             eligible = list(range(len(step)))
             if kept is not None:
                 step, eligible = self.refit_passing(step, templates, kept, n_tests)
@@ -368,14 +368,12 @@ class CauseSearch:
         # linear in the parameters: one step per parameter gives the exact Jacobian
         J = np.stack([(vector(x0 + h * e) - v0) / h for h, e in
                       zip(cand.x_scale, np.eye(cand.n_params), strict=True)], axis=1)
+        if cand.blocks:
+            return self._parsimonious_blocks(cand, others, J, v0, x0)
         best: dict[int, tuple[float, np.ndarray]] = {}
         for mask in range(1, 2 ** cand.n_params):
             keep = np.array([(mask >> k) & 1 for k in range(cand.n_params)], bool)
-            step = np.linalg.lstsq(J[:, keep], -v0, rcond=None)[0]
-            x = x0.copy()
-            x[keep] += step
-            x = np.clip(x, cand.lower, cand.upper)
-            sse = float(np.sum((v0 + J @ (x - x0)) ** 2))
+            x, sse = _subset_fit(cand, J, v0, x0, keep)
             size = int(keep.sum())
             if size not in best or sse < best[size][0]:
                 best[size] = (sse, x)
@@ -385,6 +383,35 @@ class CauseSearch:
                   for size, (_, x) in sorted(best.items())]
         _, size, x = min(scored, key=lambda t: t[:2])
         return list(cand.build(x)), size
+
+    def _parsimonious_blocks(self, cand: Candidate, others: list[Effect], J: np.ndarray,
+                             v0: np.ndarray, x0: np.ndarray) -> tuple[list[Effect], int]:
+        """:meth:`parsimonious` for a candidate of several parameter groups
+        (:attr:`Candidate.blocks`): each group's subset chosen by BIC with the other
+        groups' parameters free, the chosen subsets then fitted together. Exact where
+        the groups act on separate channels (independent axes), whose likelihoods add;
+        where a projection mixes them (a redundant cable robot) a coordinate step."""
+        bounds = np.cumsum([0, *cand.blocks])
+        chosen = np.ones(cand.n_params, bool)
+        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+            best: dict[int, tuple[float, np.ndarray, np.ndarray]] = {}
+            for mask in range(2 ** (hi - lo)):
+                keep = np.ones(cand.n_params, bool)
+                keep[lo:hi] = [(mask >> k) & 1 for k in range(hi - lo)]
+                x, sse = _subset_fit(cand, J, v0, x0, keep)
+                size = int(keep[lo:hi].sum())
+                if size not in best or sse < best[size][0]:
+                    best[size] = (sse, x, keep)
+            rest = cand.n_params - (hi - lo)
+            scored = [(self.bic(others + list(cand.build(x)), rest + size), size, keep)
+                      for size, (_, x, keep) in sorted(best.items())]
+            chosen[lo:hi] = min(scored, key=lambda t: t[:2])[2][lo:hi]
+        if not chosen.any():        # nothing needed anywhere: the single best parameter
+            sse = [_subset_fit(cand, J, v0, x0, np.eye(cand.n_params, dtype=bool)[k])[1]
+                   for k in range(cand.n_params)]
+            chosen[int(np.argmin(sse))] = True
+        x, _ = _subset_fit(cand, J, v0, x0, chosen)
+        return list(cand.build(x)), int(chosen.sum())
 
     @staticmethod
     def sparse(j: Judgement) -> bool:
@@ -417,6 +444,18 @@ class CauseSearch:
                               "PASS" if j.passed else j.reason)
 
 
+def _subset_fit(cand: Candidate, J: np.ndarray, v0: np.ndarray, x0: np.ndarray,
+                keep: np.ndarray) -> tuple[np.ndarray, float]:
+    """The least-squares step of the parameters in ``keep`` (the others at ``x0``) of a
+    linear candidate whose residual vector is ``v0 + J (x - x0)``, clipped to its
+    bounds, and the sum of squares there."""
+    step = np.linalg.lstsq(J[:, keep], -v0, rcond=None)[0]
+    x = x0.copy()
+    x[keep] += step
+    x = np.clip(x, cand.lower, cand.upper)
+    return x, float(np.sum((v0 + J @ (x - x0)) ** 2))
+
+
 def _screen(cand: Candidate, ctx: FitContext, judge: Judge, kept: KeptCauses | None,
             n_tests: int) -> Judgement:
     """``cand`` judged on top of the model ``ctx`` and ``judge`` extend: alone where no
@@ -444,16 +483,18 @@ def effects_of(causes: Sequence[Judgement]) -> list[Effect]:
 def _winches_together(cands: list[Candidate]) -> Candidate | None:
     """One candidate re-identifying the winches of several one-winch re-identifications
     (``winch_parameter_error[winch k]``) together (:func:`_joint` of them, each from its
-    start), None for fewer than two. It counts all their parameters (not only those the
-    data need: not :attr:`Candidate.sparse`, whose best-subset search would take
-    ``2^(4k)`` fits)."""
+    start), None for fewer than two. Sparse like them, with a block per winch: it
+    counts the parameters the data need, searched a winch at a time
+    (:attr:`Candidate.blocks`). Counted in full, two wrong offsets (2 parameters
+    needed, 8 counted) lost by BIC to a prismatic load on every axis that holds them in
+    its ``b`` plus one slope at two standard errors, which added nothing held out."""
     if len(cands) < 2:
         return None
     cands = sorted(cands, key=lambda c: c.label)
     winches = ", ".join(str(e.cable) for c in cands for e in c.build(c.starts[0]))
     together = _joint([(c, np.asarray(c.starts[0], float)) for c in cands[:-1]], cands[-1])
     return replace(together, label=f"{WINCH_PARAMETER_ERROR}[winches {winches}]",
-                   sparse=False)
+                   sparse=True, blocks=tuple(c.n_params for c in cands))
 
 
 def _anchors_together(significant: list[Judgement]) -> Candidate | None:

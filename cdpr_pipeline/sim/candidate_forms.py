@@ -155,6 +155,11 @@ class Candidate:
         winch re-identification keeps what the data sheet got right): where the cause
         is weighed against descriptions with fewer parameters, it counts only the
         parameters the data need (best BIC subset, see ``_Search.parsimonious``).
+    blocks : tuple of int
+        For a sparse candidate made of several (a re-identification of several
+        winches): the sizes of its parameter groups, in order. The best subset is then
+        searched one group at a time, the other groups' parameters free (``2^4`` fits a
+        winch rather than ``2^(4k)`` for ``k`` winches). Empty: one group.
     """
 
     effect: str
@@ -170,6 +175,7 @@ class Candidate:
     affects: frozenset[str] = frozenset({"torque", "length"})
     form: WinchForm | None = None
     sparse: bool = False
+    blocks: tuple[int, ...] = ()
 
     @property
     def n_params(self) -> int:
