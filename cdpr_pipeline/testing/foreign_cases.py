@@ -48,10 +48,10 @@ from cdpr_pipeline.testing.lab_cases import (
     added_torque,
     fast_settings,
     heldout_signals,
-    heldout_undetermined,
     relative_errors,
     torque_rows,
 )
+from cdpr_pipeline.testing.lab_cases import below_heldout_limit as lab_below_heldout_limit
 from cdpr_pipeline.testing.lab_cases import truth_judgement as lab_truth_judgement
 
 KINDS = ("cdpr", "axes")
@@ -284,11 +284,16 @@ def undetermined_channels(case: ForeignCase) -> set[int]:
 
 
 def below_heldout_limit(case: ForeignCase) -> bool:
-    """Whether the hidden effect is below what the held-out runs determine
-    (:func:`truth_judgement`, :func:`~cdpr_pipeline.testing.lab_cases.
-    heldout_undetermined`); False where that cannot be told."""
-    truth = truth_judgement(case)
-    return truth is not None and heldout_undetermined(truth, case.settings)
+    """Whether the hidden effect is below what the held-out runs determine, on each look
+    that could name it (:func:`~cdpr_pipeline.testing.lab_cases.below_heldout_limit`:
+    :func:`truth_judgement` on the band from the motion, and on the wider band where
+    the second look ran); False where that cannot be told."""
+    form = _pipeline_form(case.truth.effects[0]) if case.truth.effects else None
+    if form is None or case.diagnosis is None:
+        return False
+    effects, n_params = form
+    return lab_below_heldout_limit(case.diagnosis, case.dataset,
+                                   case.settings or foreign_settings(), effects, n_params)
 
 
 # ----------------------------------------------------------------------------- grading

@@ -15,6 +15,7 @@ import numpy as np
 from cdpr_pipeline.config import compose_config
 from cdpr_pipeline.data.io import Dataset
 from cdpr_pipeline.data.reading import as_resolved
+from cdpr_pipeline.discovery.adequacy import MOTION_BAND_EFFECTS, wider_band
 from cdpr_pipeline.discovery.candidates import candidates_for
 from cdpr_pipeline.discovery.cause_search import CauseSearch, data_scale
 from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, diagnosis_split
@@ -161,11 +162,26 @@ def heldout_undetermined(truth: Judgement, settings: DiagnosisSettings) -> bool:
 
 def below_heldout_limit(diagnosis, dataset: Dataset, settings: DiagnosisSettings,
                         effects: list[Effect], n_params: int) -> bool:
-    """Whether the hidden ``effects`` of a lab ``diagnosis`` (made with ``settings``)
-    are below what its held-out runs determine (:func:`heldout_undetermined` of their
-    :func:`truth_judgement` at the test count of its first step); False where that
-    cannot be told (no candidate judged, or the stated model re-identified first)."""
+    """Whether the hidden ``effects`` of a ``diagnosis`` (made with ``settings``) are
+    below what its held-out runs determine (:func:`heldout_undetermined` of their
+    :func:`truth_judgement` at the test count of its first step), on each look that
+    could name them: where the second look on a wider band ran (a held-out validity
+    test failed) and tries the effect, judged there too, with that look's settings
+    (:func:`~cdpr_pipeline.discovery.adequacy.wider_band`) and test count. False where
+    that cannot be told (no candidate judged, or the stated model re-identified
+    first)."""
     if not diagnosis.steps or diagnosis.unusable is not None:
         return False
     truth = truth_judgement(dataset, settings, effects, n_params, len(diagnosis.steps[0]))
-    return heldout_undetermined(truth, settings)
+    if not heldout_undetermined(truth, settings):
+        return False
+    if not diagnosis.tried_steps or effects[0].name in MOTION_BAND_EFFECTS:
+        return True
+    resolved = dataclasses.replace(settings, regression=as_resolved(
+        settings.regression, dataset.trajectories, dataset.rig))
+    wider = wider_band(resolved, float(dataset.rig.sample_rate_hz))
+    if wider is None:
+        return True
+    truth = truth_judgement(dataset, wider, effects, n_params,
+                            len(diagnosis.tried_steps[0]))
+    return heldout_undetermined(truth, wider)

@@ -14,8 +14,9 @@ the cause can express, the fitted magnitude must be close to it
 (``foreign_cases.TOLERANCE``) on every channel whose true part the held-out runs
 determine given the rest (``foreign_cases.undetermined_channels``). ``none`` or
 ``unexplained`` is right where the hidden effect itself, with its true parameters, fails
-the held-out tests (``foreign_cases.below_heldout_limit``: the held-out runs do not
-determine it). A shorter experiment than the slow suite's keeps these fast
+the held-out tests on each look that could name it (``foreign_cases.below_heldout_limit``:
+the held-out runs do not determine it, on the band from the motion nor, where the
+second look ran, on its wider band). A shorter experiment than the slow suite's keeps these fast
 (``foreign_cases.FAST``); the slow suite (``test_detection_rates.py``) runs every effect
 on the full one.
 """

@@ -79,6 +79,10 @@ class Diagnosis:
     #: whether the held-out rows retrace the training motion, and what that withheld
     #: (:func:`~cdpr_pipeline.discovery.retrace.retrace_record`)
     retrace: dict[str, Any] = field(default_factory=dict)
+    #: the steps of the second look on a wider band where it ran and named nothing
+    #: (its band and verdict are in :attr:`band`, ``tried``); not written
+    tried_steps: tuple[tuple[Judgement, ...], ...] = field(default=(), compare=False,
+                                                           repr=False)
 
     @property
     def shares(self) -> list[GainShare]:

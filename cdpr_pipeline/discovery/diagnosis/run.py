@@ -154,4 +154,5 @@ def _diagnosis(state: DiagnosisState) -> Diagnosis:
                          dataset.trajectories, settings.crosstest)),
                      retrace=retrace_record(state.train, held, state.pending.withheld
                                             if state.pending else (),
-                                            state.dropped_below_noise))
+                                            state.dropped_below_noise),
+                     tried_steps=again.steps if again is not None else ())
