@@ -136,6 +136,9 @@ class Judgement:
     #: held-out error summed over channels (set by the diagnosis when it ranks causes:
     #: :func:`~cdpr_pipeline.discovery.never_worse.heldout_contributions`)
     contribution: float | None = None
+    #: the tests of its step (its levels are ``alpha / n_tests``); a joint candidate built
+    #: behind a counted one's rejection is judged at its step's level, not counted
+    n_tests: int = 0
     #: its candidate and parameter vector as last fitted jointly with the other causes
     #: (set on the causes :mod:`~cdpr_pipeline.discovery.selection` keeps): what a re-fit
     #: without another cause starts from (:meth:`~cdpr_pipeline.discovery.cause_search.
@@ -283,7 +286,7 @@ class Judge:
             reason = "worse on held-out runs over all channels"
         return Judgement(effect, label, tuple(effects), n_params, tr, ho, lr, pvalue,
                          float(bic), channel, float(gain), ci, tuple(names),
-                         passed=not reason, reason=reason)
+                         passed=not reason, reason=reason, n_tests=int(n_tests))
 
     def _interval(self, held: Residuals, channel: str, level: float) -> tuple[float, float]:
         """Block-bootstrap interval at ``level`` of the relative drop of ``channel``'s

@@ -49,6 +49,7 @@ from cdpr_pipeline.testing.lab_cases import (
     fast_settings,
     heldout_signals,
     relative_errors,
+    step_tests,
     torque_rows,
 )
 from cdpr_pipeline.testing.lab_cases import below_heldout_limit as lab_below_heldout_limit
@@ -250,7 +251,7 @@ def truth_judgement(case: ForeignCase) -> Any:
         return None
     effects, n_params = form
     return lab_truth_judgement(case.dataset, case.settings or foreign_settings(), effects,
-                               n_params, len(record["candidates"][0]))
+                               n_params, step_tests(case.diagnosis.steps[0]))
 
 
 def undetermined_channels(case: ForeignCase) -> set[int]:
@@ -277,7 +278,7 @@ def undetermined_channels(case: ForeignCase) -> set[int]:
         others = [d for d in eff.channels if d != c]
         base = _pipeline_form(eff, others)[0] if others else []
         truth = lab_truth_judgement(case.dataset, settings, part, n_params,
-                                    len(record["candidates"][0]), base=base)
+                                    step_tests(case.diagnosis.steps[0]), base=base)
         if truth.ci[0] <= 0:
             out.add(int(c) + 1)
     return out

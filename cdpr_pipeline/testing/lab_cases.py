@@ -160,6 +160,14 @@ def heldout_undetermined(truth: Judgement, settings: DiagnosisSettings) -> bool:
     return bool(truth.heldout_gain < settings.selection.min_gain or truth.ci[0] <= 0)
 
 
+def step_tests(step: Sequence[Judgement]) -> int:
+    """The tests a step of the selection counted (its Bonferroni level): what its
+    judgements record, the joint candidates built behind a counted one's rejection not
+    among them; the step's length where nothing is recorded."""
+    recorded = {j.n_tests for j in step if getattr(j, "n_tests", 0)}
+    return max(recorded) if recorded else len(step)
+
+
 def below_heldout_limit(diagnosis, dataset: Dataset, settings: DiagnosisSettings,
                         effects: list[Effect], n_params: int) -> bool:
     """Whether the hidden ``effects`` of a ``diagnosis`` (made with ``settings``) are
@@ -172,7 +180,8 @@ def below_heldout_limit(diagnosis, dataset: Dataset, settings: DiagnosisSettings
     first)."""
     if not diagnosis.steps or diagnosis.unusable is not None:
         return False
-    truth = truth_judgement(dataset, settings, effects, n_params, len(diagnosis.steps[0]))
+    truth = truth_judgement(dataset, settings, effects, n_params,
+                            step_tests(diagnosis.steps[0]))
     if not heldout_undetermined(truth, settings):
         return False
     if not diagnosis.tried_steps or effects[0].name in MOTION_BAND_EFFECTS:
@@ -183,5 +192,5 @@ def below_heldout_limit(diagnosis, dataset: Dataset, settings: DiagnosisSettings
     if wider is None:
         return True
     truth = truth_judgement(dataset, wider, effects, n_params,
-                            len(diagnosis.tried_steps[0]))
+                            step_tests(diagnosis.tried_steps[0]))
     return heldout_undetermined(truth, wider)
