@@ -129,7 +129,7 @@ def friction_slope(plant: Plant, theta: np.ndarray, omega: np.ndarray,
 
 
 def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
-                    k1: np.ndarray | None = None) -> np.ndarray:
+                    k1: np.ndarray | None = None, steps: int = 1) -> np.ndarray:
     """One ROS2 Rosenbrock-W step (Verwer et al. 1999: L-stable, second order for any
     approximate Jacobian) of a *rigid* plant, with the Jacobian of its friction only.
 
@@ -142,9 +142,26 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
     the band costs no sub-steps: sticking is damped out, not resolved. Everything else
     is as explicit as Heun's method. An actuator lag's state follows its exact solution,
     as in :func:`rk4_step`.
+
+    ``steps`` such steps of ``dt`` are taken (``k1``: the rates at ``state``, where the
+    caller has them). A plant without lag whose friction law is compiled
+    (:attr:`~cdpr_pipeline.sim.plant.Plant.compiled_law`, Gaussian bumps at most) takes
+    them in one compiled call (:func:`~cdpr_pipeline.sim.compiled.ros2_rigid_steps`:
+    a coupled run's steps were a dozen calls each, most of a steep law's closed loop).
     """
     if plant.elastic:
         raise ValueError("rosenbrock_step integrates rigid plants only")
+    law = plant.rows_law(state.shape[0])
+    if law is not None and not plant.lagged:
+        return compiled.ros2_rigid_steps(
+            plant.anchors, plant.home_lengths, plant.drum_radius, plant.winch.inertia,
+            plant._reflected_inertia, float(plant.mass), plant.gravity_vector,
+            np.ascontiguousarray(state, dtype=float),
+            np.ascontiguousarray(np.broadcast_to(u, (state.shape[0], plant.n)), dtype=float),
+            *law, float(dt), ROS2_GAMMA, int(steps))
+    for _ in range(steps - 1):
+        state = rosenbrock_step(plant, state, u, dt, k1)
+        k1 = None
     R = plant.drum_radius
     _, units, omega, curvature, theta = compiled.rigid_motion(
         plant.anchors, plant.home_lengths, R, state[:, 0:3], state[:, 3:6])
@@ -318,8 +335,6 @@ def friction_path_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float
         # the coupled runs alone: their rows of the batch, on their own plant
         runs = np.flatnonzero(multi)
         part = runs_of(plant, runs)
-        moved = rosenbrock_step(part, state[runs], u[runs], dt / coupled, k1[runs])
-        for _ in range(coupled - 1):
-            moved = rosenbrock_step(part, moved, u[runs], dt / coupled)
-        out[runs] = moved
+        out[runs] = rosenbrock_step(part, state[runs], u[runs], dt / coupled, k1[runs],
+                                    steps=coupled)
     return out

@@ -11,7 +11,8 @@ import pytest
 from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.sim import compiled
 from cdpr_pipeline.sim.effects import AsymmetricViscousFriction, StribeckFriction
-from cdpr_pipeline.sim.kinematics import cable_geometry, winch_rates
+from cdpr_pipeline.sim.integrators import rosenbrock_step
+from cdpr_pipeline.sim.kinematics import cable_geometry, tensions_for_force, winch_rates
 from cdpr_pipeline.sim.model_rows import plant_of_rows
 from cdpr_pipeline.sim.plant import Plant, resisting_torque
 
@@ -78,12 +79,15 @@ def test_numba_loads_with_the_first_kernel_not_with_the_plant():
 
 
 @pytest.mark.parametrize("sharpness", [np.inf, 20.0, 3000.0])
-def test_the_compiled_friction_law_is_numpys_to_the_bit(seed, sharpness):
+def test_the_compiled_friction_law_is_the_models_law(seed, sharpness):
     """The stepped plant's friction (:attr:`~cdpr_pipeline.sim.plant.Plant.compiled_law`)
     of a batch whose runs follow the nominal model or one with Stribeck bumps (one on
     some winches, one on all), on speeds of one batch and of several stacked, some at
-    exactly zero: :func:`~cdpr_pipeline.sim.plant.resisting_torque`'s numbers in every
-    bit; an effect that is no bump leaves the law to numpy."""
+    exactly zero: :func:`~cdpr_pipeline.sim.plant.resisting_torque`'s law to rounding
+    (its ``tanh`` and ``exp`` are the C library's, numpy's vectorised ones may differ in
+    the last bit), exactly the offset at zero speed under the hard sign, and exactly
+    ``F_v w + F_c sign(w) + d`` where the smooth sign has saturated and no bump acts;
+    an effect that is no bump leaves the law to numpy."""
     rng = np.random.default_rng(seed)
     anchors, radius, _ = _rig(rng, 8, 1)
     winch = WinchParams(rng.uniform(0.01, 0.1, 8), rng.uniform(0.0, 0.5, 8),
@@ -97,17 +101,80 @@ def test_the_compiled_friction_law_is_numpys_to_the_bit(seed, sharpness):
     plant = batch.replace(compiled_law=True)
     assert plant._bumps is not None
     theta = rng.normal(size=(5, 8))
+    # the largest bump sizes: a bound of each law's terms, for rounding's share
+    bumps = np.abs(extended.effects[0].extra(nominal)) + np.abs(extended.effects[1].extra(
+        nominal))
     for shape in [(5, 8), (4, 5, 8)]:
         omega = rng.normal(0.0, 1.0, shape) * 10.0 ** rng.uniform(-4.0, 1.0, shape)
         omega[..., 3] = 0.0
         got = plant.friction_torque(theta, omega)
         expected = resisting_torque(batch, theta, omega)
         assert got.shape == expected.shape
-        assert np.array_equal(got, expected)
-        assert not np.array_equal(got, resisting_torque(nominal, theta, omega))   # bumps
+        scale = np.abs(winch.viscous * omega) + winch.coulomb + np.abs(winch.offset) + bumps
+        np.testing.assert_array_less(np.abs(got - expected), 4 * np.finfo(float).eps * scale)
+        assert not np.allclose(got, resisting_torque(nominal, theta, omega))   # bumps
+        if np.isinf(sharpness):
+            assert np.array_equal(got[..., 3], np.broadcast_to(winch.offset[3], got[..., 3].shape))
+        # tanh(x) is 1 to the last bit beyond x = 20 (and the hard sign is 0 at 0)
+        with np.errstate(invalid="ignore"):
+            saturated = (omega == 0.0) | (np.abs(omega) * sharpness >= 20.0)
+        nominal_runs = np.zeros(shape, bool)
+        nominal_runs[..., [0, 2], :] = True         # the runs without bumps
+        exact = saturated & nominal_runs
+        assert exact.any()
+        law = winch.viscous * omega + winch.coulomb * np.sign(omega) + winch.offset
+        assert np.array_equal(got[exact], law[exact])
     other = extended.replace(effects=(*extended.effects, AsymmetricViscousFriction()),
                              compiled_law=True)
     assert other._bumps is None
     omega = rng.normal(size=(5, 8))
     assert np.array_equal(other.friction_torque(theta, omega),
                           resisting_torque(other, theta, omega))
+
+
+@pytest.mark.parametrize("sharpness", [np.inf, 500.0])
+def test_the_compiled_coupled_steps_keep_a_rest_and_follow_the_implicit_step(seed, sharpness):
+    """The coupled runs' ROS2 steps in one compiled call (a rigid plant without lag whose
+    law is compiled, Stribeck bumps on some runs): a platform at rest under the torques
+    that hold it (cables' tensions and the offset; a smooth law's friction is zero at
+    zero speed) stays there to rounding; moving runs near the law's steep part, and the
+    hard sign's rest, agree after eight steps with the same steps of the plant whose
+    law numpy evaluates (the path of other effects' laws) to a billionth of their
+    motion."""
+    rng = np.random.default_rng(seed)
+    anchors, radius, position = _rig(rng, 8, 4)
+    winch = WinchParams(rng.uniform(0.01, 0.1, 8), rng.uniform(0.0, 0.5, 8),
+                        rng.uniform(0.1, 1.0, 8), rng.normal(0.0, 0.05, 8))
+    nominal = Plant(anchors, radius, 5.0, winch, sign_sharpness=sharpness,
+                    home=np.array([1.5, 1.5, 1.2]))
+    extended = nominal.replace(effects=(StribeckFriction(static_ratio=2.0,
+                                                         stribeck_velocity=0.5),))
+    batch = plant_of_rows(nominal, [nominal, extended, nominal, extended])
+    compiled_plant = batch.replace(compiled_law=True)
+    assert compiled_plant.rows_law(4) is not None and batch.rows_law(4) is None
+    # at rest: K^T t = -m g, u = R t + d
+    units = cable_geometry(anchors, position)[1]
+    tension = tensions_for_force(units, -5.0 * nominal.gravity_vector)
+    hold = radius * tension + winch.offset
+    rest = np.concatenate([position, np.zeros((4, 3))], axis=1)
+    held = rosenbrock_step(compiled_plant, rest, hold, 1e-4, steps=8)
+    if np.isfinite(sharpness):
+        assert np.abs(held - rest).max() < 1e-15
+    else:
+        # a hard sign's stages see the speed's rounding (1e-20 m/s) on either side of
+        # its jump: the step damps what that leaves, as the numpy-law step does
+        same = rest
+        for _ in range(8):
+            same = rosenbrock_step(batch, same, hold, 1e-4)
+        assert np.abs(held - same).max() <= 1e-9 * np.abs(same - rest).max()
+    # moving, the winches' speeds within a few transition bands of zero
+    velocity = rng.normal(0.0, 1e-3, (4, 3))
+    state = np.concatenate([position, velocity], axis=1)
+    torque = hold + rng.normal(0.0, 0.05, (4, 8))
+    got = rosenbrock_step(compiled_plant, state, torque, 1e-4, steps=8)
+    expected = state
+    for _ in range(8):
+        expected = rosenbrock_step(batch, expected, torque, 1e-4)
+    moved = np.abs(expected - state).max(axis=0)
+    assert (moved > 0).all()
+    assert (np.abs(got - expected) <= 1e-9 * moved).all()
