@@ -810,6 +810,20 @@ def friction_law(omega: np.ndarray, sharpness: float, viscous: np.ndarray,
 
 
 @_kernel
+def drive_law(w: np.ndarray, runs: np.ndarray, drives: np.ndarray, sharpness: float,
+              viscous: np.ndarray, coulomb: np.ndarray, offset: np.ndarray,
+              widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """:func:`law_at` at speeds ``w`` (Q, D) of D drives, drive ``d`` winch
+    ``drives[d]`` of run ``runs[d]``: a steep winch's law along its own path alone."""
+    out = np.empty(w.shape)
+    for q in range(w.shape[0]):
+        for d in range(w.shape[1]):
+            out[q, d] = law_at(w[q, d], runs[d], drives[d], sharpness, viscous, coulomb,
+                               offset, widths, rows, sizes)
+    return out
+
+
+@_kernel
 def rigid_rates(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
                 inertia: np.ndarray, reflected: np.ndarray, mass: float,
                 gravity_vector: np.ndarray, state: np.ndarray, torque: np.ndarray,

@@ -309,22 +309,21 @@ def friction_path_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float
     multi = steep.sum(axis=1) > 1
     single = steep & ~multi[:, None]
     if single.any():
-        # the path is solved on the runs with a steep winch alone (its arrays, nodes
-        # times drives, and the law's calls on them shrink to those runs); the others'
-        # friction is their law's
-        runs = np.flatnonzero(single.any(axis=1))
-        part = runs_of(plant, runs)
-        scaled = units[runs] / R[:, None]
+        # the path is solved on the steep winches alone (its arrays, nodes times
+        # drives, and the law's calls on them shrink to those winches: a run's other
+        # winches stay frozen at their speeds); the others' friction is their law's
+        runs, drives = np.nonzero(single)
+        scaled = units[runs, drives] / R[drives, None]
         mass = plant.mass * np.eye(3) + np.einsum("bni,n,bnj->bij", units[runs],
                                                   plant.winch.inertia / R ** 2, units[runs])
         # speed change of each winch per unit of its own friction: k^T M^-1 k / R^2
-        beta = np.einsum("bni,bin->bn", scaled,
-                         np.linalg.solve(mass, np.swapaxes(scaled, 1, 2)))
-        reach = 2.0 * np.abs(phi[:4, runs]).max(axis=0)
+        beta = np.einsum("bi,bi->b", scaled, np.linalg.solve(mass, scaled[..., None])[..., 0])
+        reach = 2.0 * np.abs(phi[:4, runs, drives]).max(axis=0)
         c0, c1 = np.zeros_like(omega), np.zeros_like(omega)
-        c0[runs], c1[runs] = friction_over_step(
-            lambda w: part.friction_torque(theta[runs], w), omega[runs],
-            rate[runs] + beta * phi[0, runs], beta, dt, reach)
+        c0[runs, drives], c1[runs, drives] = friction_over_step(
+            lambda w: plant.drive_friction(theta, omega, w, runs, drives),
+            omega[runs, drives], rate[runs, drives] + beta * phi[0, runs, drives], beta,
+            dt, reach)
         out = rk4_step(plant, state, u, dt, friction=lambda f: (single,
                                                                 c0 + c1 * (f - 0.5) * dt))
     elif not multi.all():

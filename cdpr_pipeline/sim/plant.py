@@ -326,6 +326,21 @@ class Plant:
             return compiled_law_torque(omega, law)
         return resisting_torque(self, theta, omega)
 
+    def drive_friction(self, theta: np.ndarray, omega: np.ndarray, w: np.ndarray,
+                       runs: np.ndarray, drives: np.ndarray) -> np.ndarray:
+        """:meth:`friction_torque` (Q, D) of D drives (winch ``drives[d]`` of run
+        ``runs[d]``) at speeds ``w`` (Q, D), every other drive at its speed ``omega``
+        and every drive at its angle ``theta`` (B, n): one winch's law along its path,
+        the rest frozen. By the compiled law where it serves (the drives alone),
+        else on the whole batch."""
+        law = self.rows_law(omega.shape[0])
+        if law is not None:
+            return compiled.drive_law(np.ascontiguousarray(w, dtype=float), runs, drives,
+                                      *law)
+        speeds = np.repeat(np.asarray(omega, dtype=float)[None], len(w), axis=0)
+        speeds[:, runs, drives] = w
+        return self.friction_torque(theta, speeds)[:, runs, drives]
+
     def rows_law(self, batch: int) -> tuple | None:
         """:attr:`_compiled_law` where it serves a batch of ``batch`` runs (its bumps act
         on every run, or it has one row per run), else None."""
