@@ -913,3 +913,61 @@ def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.n
         k2 = implicit_solve(damped, masses, f2 - 2.0 * k1)
         y = y + dt * (1.5 * k1 + 0.5 * k2)
     return y
+
+
+@_kernel
+def rk4_rigid(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
+              inertia: np.ndarray, reflected: np.ndarray, mass: float,
+              gravity_vector: np.ndarray, state: np.ndarray, torque: np.ndarray,
+              sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
+              offset: np.ndarray, widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray,
+              dt: float, k1: np.ndarray, mask: np.ndarray, c0: np.ndarray, c1: np.ndarray
+              ) -> np.ndarray:
+    """One RK4 step of ``dt`` (:func:`~cdpr_pipeline.sim.integrators.rk4_step`) of the
+    rigid plant without actuator lag whose friction is :func:`law_at`'s, its four
+    stages' rates by :func:`rigid_rates` in one call; ``k1`` the rates at ``state``
+    (an empty array: computed here); where ``mask`` (B, n; empty: nowhere) is set the
+    friction is ``c0 + c1 (t - dt / 2)`` over the step instead of the law."""
+    replaced = mask.shape[0] > 0
+    start = c0 + c1 * -0.5 * dt if replaced else c0
+    end = c0 + c1 * 0.5 * dt if replaced else c0
+    if k1.shape[0] == 0 or replaced:
+        k1 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
+                         gravity_vector, state, torque, sharpness, viscous, coulomb, offset,
+                         widths, rows, sizes, mask, start)
+    k2 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
+                     gravity_vector, state + 0.5 * dt * k1, torque, sharpness, viscous,
+                     coulomb, offset, widths, rows, sizes, mask, c0)
+    k3 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
+                     gravity_vector, state + 0.5 * dt * k2, torque, sharpness, viscous,
+                     coulomb, offset, widths, rows, sizes, mask, c0)
+    k4 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
+                     gravity_vector, state + dt * k3, torque, sharpness, viscous, coulomb,
+                     offset, widths, rows, sizes, mask, end)
+    return state + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+@_kernel
+def steep_winches(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
+                  position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
+                  sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
+                  offset: np.ndarray, widths: np.ndarray, rows: np.ndarray,
+                  sizes: np.ndarray, inertia: np.ndarray, mass: float, dt: float,
+                  accuracy: float) -> tuple:
+    """:func:`~cdpr_pipeline.sim.integrators._steep_winches` of the rigid plant whose
+    friction is :func:`law_at`'s, in one call: the winches' paths
+    (:func:`winch_paths`), the law at :func:`steep_probes`' speeds and
+    :func:`steep_judgement` with the reflected inertia's bound
+    ``1 / (m R^2 + I)``; returns the steep winches (B, n), unit vectors, speeds, their
+    rates, angles and the law at the probes (8, B, n)."""
+    units, omega, rate, theta = winch_paths(anchors, home_lengths, radius, position,
+                                            velocity, acceleration)
+    probes = steep_probes(omega, rate, dt)
+    phi = friction_law(probes, sharpness, viscous, coulomb, offset, widths, rows, sizes)
+    batch, n = omega.shape
+    bound = np.empty((batch, n))
+    for b in range(batch):
+        for i in range(n):
+            bound[b, i] = 1.0 / (mass * radius[i] ** 2 + inertia[i])
+    steep = steep_judgement(phi, omega, rate, dt, bound, accuracy)
+    return steep, units, omega, rate, theta, phi
