@@ -9,8 +9,14 @@ compares it against (:func:`~cdpr_pipeline.sim.controller.distribute_tensions_nu
 the kernels are compiled on first use and cached (``cache=True``) in the user's cache
 folder (:mod:`cdpr_pipeline.jit`).
 
-Only the model's fixed arithmetic is compiled; the friction law and a model's extra
-torques (an effect's callable) stay numpy calls of their own.
+The stepped plant's friction law is compiled where it is the Coulomb law with Gaussian
+(Stribeck) bumps (:func:`law_at`, the implementation of that law in the closed loop:
+no numpy twin, tested against the model's law to rounding and exact truths); being
+compiled, it runs inside the kernels of a rigid plant's rates, RK4 and ROS2 steps and
+steep-winch judgement (:func:`rigid_rates`, :func:`rk4_rigid`,
+:func:`ros2_rigid_steps`, :func:`steep_winches`), which compose the kernels above. A
+model's other extra torques (an effect's callable) stay numpy calls of their own, on
+the integrators' numpy paths.
 """
 
 from __future__ import annotations
