@@ -11,7 +11,7 @@ import pytest
 from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.sim import compiled
 from cdpr_pipeline.sim.effects import AsymmetricViscousFriction, StribeckFriction
-from cdpr_pipeline.sim.integrators import rosenbrock_step
+from cdpr_pipeline.sim.integrators import _steep_winches, rk4_step, rosenbrock_step
 from cdpr_pipeline.sim.kinematics import cable_geometry, tensions_for_force, winch_rates
 from cdpr_pipeline.sim.model_rows import plant_of_rows
 from cdpr_pipeline.sim.plant import Plant, resisting_torque
@@ -178,3 +178,47 @@ def test_the_compiled_coupled_steps_keep_a_rest_and_follow_the_implicit_step(see
     moved = np.abs(expected - state).max(axis=0)
     assert (moved > 0).all()
     assert (np.abs(got - expected) <= 1e-9 * moved).all()
+
+
+@pytest.mark.parametrize("sharpness", [np.inf, 500.0])
+def test_the_compiled_law_steps_are_the_models_steps(seed, sharpness):
+    """A rigid plant whose law is compiled (Stribeck bumps on some runs) against the
+    same model whose law numpy evaluates: its rates (with the friction replaced on some
+    winches), an RK4 step with a friction linear over the step on those winches, and
+    the steep-winch judgement of the friction-path step agree to rounding (the law's
+    ``tanh`` and ``exp`` differ in the last bit); a winch whose speed changes sign over
+    the step is steep."""
+    rng = np.random.default_rng(seed)
+    anchors, radius, position = _rig(rng, 8, 5)
+    winch = WinchParams(rng.uniform(0.01, 0.1, 8), rng.uniform(0.0, 0.5, 8),
+                        rng.uniform(0.1, 1.0, 8), rng.normal(0.0, 0.05, 8))
+    nominal = Plant(anchors, radius, 5.0, winch, sign_sharpness=sharpness,
+                    home=np.array([1.5, 1.5, 1.2]))
+    extended = nominal.replace(effects=(StribeckFriction(static_ratio=2.0,
+                                                         stribeck_velocity=0.5),))
+    batch = plant_of_rows(nominal, [nominal, extended, nominal, extended, extended])
+    fast = batch.replace(compiled_law=True)
+    assert fast.rows_law(5) is not None and batch.rows_law(5) is None
+    # two runs nearly at rest: their winches' speeds cross zero within the step
+    velocity = rng.normal(0.0, 0.05, (5, 3)) * np.array([1, 1, 1, 1e-4, 1e-4])[:, None]
+    state = np.concatenate([position, velocity], axis=1)
+    units = cable_geometry(anchors, position)[1]
+    torque = radius * tensions_for_force(units, -5.0 * nominal.gravity_vector) \
+        + rng.normal(0.0, 0.2, (5, 8))
+    mask = rng.random((5, 8)) < 0.3
+    c0, c1 = rng.normal(0.0, 0.3, (5, 8)), rng.normal(0.0, 100.0, (5, 8))
+    rates = fast.derivative(state, torque, (mask, c0))
+    expected = batch.derivative(state, torque, (mask, c0))
+    np.testing.assert_allclose(rates, expected, rtol=1e-12, atol=1e-12)
+    dt = 1e-3
+    for friction in (None, (mask, c0, c1)):
+        got = rk4_step(fast, state, torque, dt, friction=friction)
+        expected = rk4_step(batch, state, torque, dt, friction=friction)
+        moved = np.abs(expected - state).max(axis=0)
+        assert (np.abs(got - expected) <= 1e-10 * moved).all()
+    steep, (_, _, omega, rate, _, phi) = _steep_winches(fast, state, rates, dt, 0.5)
+    steep_numpy, (_, _, _, _, _, phi_numpy) = _steep_winches(batch, state, rates, dt, 0.5)
+    np.testing.assert_allclose(phi, phi_numpy, rtol=1e-12, atol=1e-14)
+    assert np.array_equal(steep, steep_numpy)
+    crossing = omega * (omega + dt * rate) <= 0.0
+    assert crossing.any() and steep[crossing].all()
