@@ -222,3 +222,32 @@ def test_the_compiled_law_steps_are_the_models_steps(seed, sharpness):
     assert np.array_equal(steep, steep_numpy)
     crossing = omega * (omega + dt * rate) <= 0.0
     assert crossing.any() and steep[crossing].all()
+
+
+def test_a_winchs_law_along_its_path_is_the_models_law_there(seed):
+    """:meth:`~cdpr_pipeline.sim.plant.Plant.drive_friction`: the law of some winches at
+    other speeds, the rest frozen, is the model's law at those speeds, whether compiled
+    (Stribeck bumps, to rounding) or numpy's (an effect that is no bump, exactly)."""
+    rng = np.random.default_rng(seed)
+    anchors, radius, _ = _rig(rng, 8, 1)
+    winch = WinchParams(rng.uniform(0.01, 0.1, 8), rng.uniform(0.0, 0.5, 8),
+                        rng.uniform(0.1, 1.0, 8), rng.normal(0.0, 0.05, 8))
+    nominal = Plant(anchors, radius, 5.0, winch, sign_sharpness=500.0)
+    extended = nominal.replace(effects=(StribeckFriction(static_ratio=2.0,
+                                                         stribeck_velocity=0.5),))
+    other = extended.replace(effects=(*extended.effects, AsymmetricViscousFriction()))
+    theta, omega = rng.normal(size=(4, 8)), rng.normal(0.0, 0.1, (4, 8))
+    runs, drives = np.array([0, 1, 3]), np.array([2, 7, 0])
+    w = rng.normal(0.0, 0.01, (6, 3))
+    for model, exact in ((plant_of_rows(nominal, [nominal, extended, extended, nominal]),
+                          False), (other, True)):
+        speeds = np.repeat(omega[None], 6, axis=0)
+        speeds[:, runs, drives] = w
+        expected = resisting_torque(model, theta, speeds)[:, runs, drives]
+        stepped = model.replace(compiled_law=True)
+        assert (stepped.rows_law(4) is None) == exact
+        got = stepped.drive_friction(theta, omega, w, runs, drives)
+        if exact:
+            assert np.array_equal(got, expected)
+        else:
+            np.testing.assert_allclose(got, expected, rtol=1e-14, atol=1e-15)
