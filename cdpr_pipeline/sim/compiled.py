@@ -9,12 +9,19 @@ compares it against (:func:`~cdpr_pipeline.sim.controller.distribute_tensions_nu
 the kernels are compiled on first use and cached (``cache=True``) in the user's cache
 folder (:mod:`cdpr_pipeline.jit`).
 
-Only the model's fixed arithmetic is compiled; the friction law and a model's extra
-torques (an effect's callable) stay numpy calls of their own.
+The stepped plant's friction law is compiled where it is the Coulomb law with Gaussian
+(Stribeck) bumps (:func:`law_at`, the implementation of that law in the closed loop:
+no numpy twin, tested against the model's law to rounding and exact truths); being
+compiled, it runs inside the kernels of a rigid plant's rates, RK4 and ROS2 steps and
+steep-winch judgement (:func:`rigid_rates`, :func:`rk4_rigid`,
+:func:`ros2_rigid_steps`, :func:`steep_winches`), which compose the kernels above. A
+model's other extra torques (an effect's callable) stay numpy calls of their own, on
+the integrators' numpy paths.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -766,41 +773,207 @@ def path_friction(w: np.ndarray, g: np.ndarray, direction: np.ndarray, omega: np
 
 
 @_kernel
-def bump_exponents(omega: np.ndarray, widths: np.ndarray) -> np.ndarray:
-    """The arguments ``-(w / width)^2`` (E, M, B, n) of E Gaussian bumps' exponentials
-    at speeds ``omega`` (M, B, n), ``widths`` (E, n): numpy's ``-(omega / width) ** 2``
-    (its square a product), whose exponentials numpy takes."""
+def law_at(w: float, b: int, i: int, sharpness: float, viscous: np.ndarray,
+           coulomb: np.ndarray, offset: np.ndarray, widths: np.ndarray, rows: np.ndarray,
+           sizes: np.ndarray) -> float:
+    """The friction law of Gaussian bumps at speed ``w`` of winch ``i`` of run ``b``:
+    ``F_v w + F_c s(w) + d`` plus each bump ``size exp(-(w / width)^2) s(w)`` where it
+    acts (``rows[e, b]`` nonzero; ``rows`` (E, 1): on every run), ``s`` the smooth sign
+    ``tanh(k w)`` of ``sharpness`` ``k`` (infinite: the hard sign, 0 at 0). The law of
+    :func:`~cdpr_pipeline.sim.plant.resisting_torque`, its ``tanh`` and ``exp`` the C
+    library's (numpy's own vectorised ones differ from them in the last bit on some
+    CPUs)."""
+    if sharpness == np.inf:
+        s = 1.0 if w > 0.0 else (-1.0 if w < 0.0 else w)
+    else:
+        x = sharpness * w
+        # beyond 20, tanh is 1 to the last bit (the C library's answer, without its call:
+        # a steep law's speeds lie there nearly always)
+        s = math.tanh(x) if abs(x) < 20.0 else (1.0 if x > 0.0 else -1.0)
+    total = viscous[i] * w + coulomb[i] * s + offset[i]
+    spread = rows.shape[1] > 1
+    for e in range(sizes.shape[0]):
+        if rows[e, b if spread else 0] != 0.0:
+            x = w / widths[e, i]
+            total += sizes[e, i] * math.exp(-(x * x)) * s
+    return total
+
+
+@_kernel
+def friction_law(omega: np.ndarray, sharpness: float, viscous: np.ndarray,
+                 coulomb: np.ndarray, offset: np.ndarray, widths: np.ndarray,
+                 rows: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """:func:`law_at` at speeds ``omega`` (M, B, n) of every winch of every run:
+    the stepped plant's law (:func:`~cdpr_pipeline.sim.plant.compiled_law_torque`)."""
     count, batch, n = omega.shape
-    out = np.empty((widths.shape[0], count, batch, n))
-    for e in range(widths.shape[0]):
-        for q in range(count):
-            for b in range(batch):
-                for i in range(n):
-                    x = omega[q, b, i] / widths[e, i]
-                    out[e, q, b, i] = -(x * x)
+    out = np.empty((count, batch, n))
+    for q in range(count):
+        for b in range(batch):
+            for i in range(n):
+                out[q, b, i] = law_at(omega[q, b, i], b, i, sharpness, viscous, coulomb,
+                                      offset, widths, rows, sizes)
     return out
 
 
 @_kernel
-def friction_law(omega: np.ndarray, sign: np.ndarray, exps: np.ndarray,
-                 viscous: np.ndarray, coulomb: np.ndarray, offset: np.ndarray,
-                 sizes: np.ndarray, rows: np.ndarray, out: np.ndarray) -> None:
-    """:func:`~cdpr_pipeline.sim.plant.resisting_torque` of Gaussian bumps
-    (:func:`~cdpr_pipeline.sim.plant.compiled_law_torque`), term for term in its order:
-    ``F_v w + F_c s`` plus ``d``, then each bump ``(size e) s`` where it acts (0 where
-    it does not), added in turn. ``omega, sign, out`` (M, B, n); ``exps`` (E, M, B, n)
-    the bumps' ``exp(-(w/width)^2)``; ``sizes`` (E, n); ``rows`` (E, B or 1)."""
-    count, batch, n = omega.shape
-    spread = rows.shape[1] > 1
-    for q in range(count):
+def drive_law(w: np.ndarray, runs: np.ndarray, drives: np.ndarray, sharpness: float,
+              viscous: np.ndarray, coulomb: np.ndarray, offset: np.ndarray,
+              widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """:func:`law_at` at speeds ``w`` (Q, D) of D drives, drive ``d`` winch
+    ``drives[d]`` of run ``runs[d]``: a steep winch's law along its own path alone."""
+    out = np.empty(w.shape)
+    for q in range(w.shape[0]):
+        for d in range(w.shape[1]):
+            out[q, d] = law_at(w[q, d], runs[d], drives[d], sharpness, viscous, coulomb,
+                               offset, widths, rows, sizes)
+    return out
+
+
+@_kernel
+def rigid_rates(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
+                inertia: np.ndarray, reflected: np.ndarray, mass: float,
+                gravity_vector: np.ndarray, state: np.ndarray, torque: np.ndarray,
+                sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
+                offset: np.ndarray, widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray,
+                mask: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """The state's rates (B, 6) of the rigid plant without actuator lag whose friction
+    is :func:`law_at`'s (:meth:`~cdpr_pipeline.sim.plant.Plant.derivative`): its
+    geometry (:func:`rigid_motion`), the law at the winch speeds, replaced by ``values``
+    where ``mask`` is set (B, n; an empty mask replaces none), and the platform's
+    acceleration (:func:`rigid_acceleration`), in one call."""
+    batch, n = state.shape[0], anchors.shape[0]
+    _, units, omega, curvature, _ = rigid_motion(anchors, home_lengths, radius,
+                                                 state[:, 0:3], state[:, 3:6])
+    resist = np.empty((batch, n))
+    replaced = mask.shape[0] > 0
+    for b in range(batch):
+        for i in range(n):
+            if replaced and mask[b, i]:
+                resist[b, i] = values[b, i]
+            else:
+                resist[b, i] = law_at(omega[b, i], b, i, sharpness, viscous, coulomb,
+                                      offset, widths, rows, sizes)
+    out = np.empty((batch, 6))
+    out[:, 0:3] = state[:, 3:6]
+    out[:, 3:6] = rigid_acceleration(units, torque, resist, curvature, radius, inertia,
+                                     reflected, mass, gravity_vector)
+    return out
+
+
+@_kernel
+def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
+                     inertia: np.ndarray, reflected: np.ndarray, mass: float,
+                     gravity_vector: np.ndarray, state: np.ndarray, torque: np.ndarray,
+                     sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
+                     offset: np.ndarray, widths: np.ndarray, rows: np.ndarray,
+                     sizes: np.ndarray, dt: float, gamma: float, steps: int) -> np.ndarray:
+    """``steps`` ROS2 steps of ``dt`` (:func:`~cdpr_pipeline.sim.integrators.
+    rosenbrock_step`) of the rigid plant without actuator lag whose friction is
+    :func:`law_at`'s, under the held ``torque`` (B, n): per step the rates
+    (:func:`rigid_rates`), the friction's secant slope (B, n) to the speeds an explicit
+    step would reach (:func:`secant_slopes`, from the law at ``omega +- delta``, the
+    step's end and ``omega``), ``W = M + gamma dt K^T diag(slope / R^2) K``
+    (:func:`implicit_matrices`), ``k1 = W^-1 M f(y)``, ``k2 = W^-1 M (f(y + dt k1) -
+    2 k1)`` (:func:`implicit_solve`) and ``y + dt (1.5 k1 + 0.5 k2)``; the whole loop
+    in one call (a coupled run takes four to eight steps a tick, each a dozen calls)."""
+    batch, n = state.shape[0], anchors.shape[0]
+    delta = 1e-2 / sharpness if sharpness != np.inf else 1e-6
+    no_mask = np.zeros((0, 0), dtype=np.bool_)
+    no_values = np.zeros((0, 0))
+    phi = np.empty((3, batch, n))
+    at_omega = np.empty((batch, n))
+    omega_end = np.empty((batch, n))
+    y = state.copy()
+    for _ in range(steps):
+        _, units, omega, curvature, _ = rigid_motion(anchors, home_lengths, radius,
+                                                     y[:, 0:3], y[:, 3:6])
         for b in range(batch):
             for i in range(n):
-                total = viscous[i] * omega[q, b, i] + coulomb[i] * sign[q, b, i]
-                total = total + offset[i]
-                for e in range(sizes.shape[0]):
-                    extra = sizes[e, i] * exps[e, q, b, i]
-                    extra = extra * sign[q, b, i]
-                    if rows[e, b if spread else 0] == 0.0:
-                        extra = 0.0
-                    total = total + extra
-                out[q, b, i] = total
+                at_omega[b, i] = law_at(omega[b, i], b, i, sharpness, viscous, coulomb,
+                                        offset, widths, rows, sizes)
+        f = np.empty((batch, 6))
+        f[:, 0:3] = y[:, 3:6]
+        f[:, 3:6] = rigid_acceleration(units, torque, at_omega, curvature, radius, inertia,
+                                       reflected, mass, gravity_vector)
+        for b in range(batch):
+            for i in range(n):
+                ka = (units[b, i, 0] * f[b, 3] + units[b, i, 1] * f[b, 4]
+                      + units[b, i, 2] * f[b, 5])
+                omega_end[b, i] = omega[b, i] + dt * ka / radius[i]
+                phi[0, b, i] = law_at(omega[b, i] + delta, b, i, sharpness, viscous,
+                                      coulomb, offset, widths, rows, sizes)
+                phi[1, b, i] = law_at(omega[b, i] - delta, b, i, sharpness, viscous,
+                                      coulomb, offset, widths, rows, sizes)
+                phi[2, b, i] = law_at(omega_end[b, i], b, i, sharpness, viscous, coulomb,
+                                      offset, widths, rows, sizes)
+        slope = secant_slopes(phi, at_omega, omega, omega_end, delta)
+        for b in range(batch):
+            for i in range(n):
+                slope[b, i] = slope[b, i] / radius[i] ** 2
+        masses, damped = implicit_matrices(units, reflected, slope, mass, gamma * dt)
+        k1 = implicit_solve(damped, masses, f)
+        stage = y + dt * k1
+        f2 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
+                         gravity_vector, stage, torque, sharpness, viscous, coulomb, offset,
+                         widths, rows, sizes, no_mask, no_values)
+        k2 = implicit_solve(damped, masses, f2 - 2.0 * k1)
+        y = y + dt * (1.5 * k1 + 0.5 * k2)
+    return y
+
+
+@_kernel
+def rk4_rigid(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
+              inertia: np.ndarray, reflected: np.ndarray, mass: float,
+              gravity_vector: np.ndarray, state: np.ndarray, torque: np.ndarray,
+              sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
+              offset: np.ndarray, widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray,
+              dt: float, k1: np.ndarray, mask: np.ndarray, c0: np.ndarray, c1: np.ndarray
+              ) -> np.ndarray:
+    """One RK4 step of ``dt`` (:func:`~cdpr_pipeline.sim.integrators.rk4_step`) of the
+    rigid plant without actuator lag whose friction is :func:`law_at`'s, its four
+    stages' rates by :func:`rigid_rates` in one call; ``k1`` the rates at ``state``
+    (an empty array: computed here); where ``mask`` (B, n; empty: nowhere) is set the
+    friction is ``c0 + c1 (t - dt / 2)`` over the step instead of the law."""
+    replaced = mask.shape[0] > 0
+    start = c0 + c1 * -0.5 * dt if replaced else c0
+    end = c0 + c1 * 0.5 * dt if replaced else c0
+    if k1.shape[0] == 0 or replaced:
+        k1 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
+                         gravity_vector, state, torque, sharpness, viscous, coulomb, offset,
+                         widths, rows, sizes, mask, start)
+    k2 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
+                     gravity_vector, state + 0.5 * dt * k1, torque, sharpness, viscous,
+                     coulomb, offset, widths, rows, sizes, mask, c0)
+    k3 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
+                     gravity_vector, state + 0.5 * dt * k2, torque, sharpness, viscous,
+                     coulomb, offset, widths, rows, sizes, mask, c0)
+    k4 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
+                     gravity_vector, state + dt * k3, torque, sharpness, viscous, coulomb,
+                     offset, widths, rows, sizes, mask, end)
+    return state + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+@_kernel
+def steep_winches(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
+                  position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
+                  sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
+                  offset: np.ndarray, widths: np.ndarray, rows: np.ndarray,
+                  sizes: np.ndarray, inertia: np.ndarray, mass: float, dt: float,
+                  accuracy: float) -> tuple:
+    """:func:`~cdpr_pipeline.sim.integrators._steep_winches` of the rigid plant whose
+    friction is :func:`law_at`'s, in one call: the winches' paths
+    (:func:`winch_paths`), the law at :func:`steep_probes`' speeds and
+    :func:`steep_judgement` with the reflected inertia's bound
+    ``1 / (m R^2 + I)``; returns the steep winches (B, n), unit vectors, speeds, their
+    rates, angles and the law at the probes (8, B, n)."""
+    units, omega, rate, theta = winch_paths(anchors, home_lengths, radius, position,
+                                            velocity, acceleration)
+    probes = steep_probes(omega, rate, dt)
+    phi = friction_law(probes, sharpness, viscous, coulomb, offset, widths, rows, sizes)
+    batch, n = omega.shape
+    bound = np.empty((batch, n))
+    for b in range(batch):
+        for i in range(n):
+            bound[b, i] = 1.0 / (mass * radius[i] ** 2 + inertia[i])
+    steep = steep_judgement(phi, omega, rate, dt, bound, accuracy)
+    return steep, units, omega, rate, theta, phi

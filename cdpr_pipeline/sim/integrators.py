@@ -8,7 +8,6 @@ steep at once."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 
@@ -16,6 +15,11 @@ from cdpr_pipeline.sim import compiled
 from cdpr_pipeline.sim.friction_path import friction_over_step
 from cdpr_pipeline.sim.model_rows import runs_of
 from cdpr_pipeline.sim.plant import Plant
+
+#: no rates given and no friction replaced, as :func:`~cdpr_pipeline.sim.compiled.
+#: rk4_rigid` takes them (empty arrays)
+_NO_RATES = np.zeros((0, 6))
+_NO_FRICTION = (np.zeros((0, 0), dtype=np.bool_), np.zeros((0, 0)), np.zeros((0, 0)))
 
 
 def lag_response(plant: Plant, u_drum: np.ndarray, u_cmd: np.ndarray,
@@ -42,12 +46,18 @@ def _impulse_shift(plant: Plant, start: np.ndarray, u_cmd: np.ndarray,
 
 def rk4_step(
     plant: Plant, state: np.ndarray, u: np.ndarray, dt: float | np.ndarray,
-    k1: np.ndarray | None = None, friction: Callable[[float], tuple] | None = None
+    k1: np.ndarray | None = None,
+    friction: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 ) -> np.ndarray:
     """One classical RK4 step under constant ``u``; ``k1`` (the derivative at ``state``)
     may be passed when the caller already has it (it is recomputed on a lagged plant, or
-    with ``friction``: the (mask, values) that replace the friction law at a stage, by
-    the stage's share of the step, as :meth:`Plant.derivative` takes them).
+    with ``friction``: ``(mask, c0, c1)``, the friction ``c0 + c1 (t - dt / 2)`` over
+    the step that replaces the law where ``mask`` (B, n) is set, each stage's values
+    as :meth:`Plant.derivative` takes them).
+
+    A rigid plant without lag whose law is compiled (:meth:`Plant.rows_law`) takes the
+    step in one compiled call (:func:`~cdpr_pipeline.sim.compiled.rk4_rigid`: its four
+    stages' rates, each one call already, and their combinations).
 
     An actuator lag's state is linear in the held command and is advanced by its exact
     solution (:func:`lag_response`), so a short lag sets no step size (it did: a 0.5 ms
@@ -55,8 +65,20 @@ def rk4_step(
     by one constant so that RK4's Simpson weights integrate the drum torque's exact
     impulse over the step: a lag far shorter than the step rises between the stages,
     where the stage values alone would miss part of it."""
-    held = (None, None, None) if friction is None else tuple(friction(f)
-                                                             for f in (0.0, 0.5, 1.0))
+    if not plant.lagged and not plant.elastic and np.ndim(dt) == 0:
+        law = plant.rows_law(state.shape[0])
+        if law is not None:
+            mask, c0, c1 = (_NO_FRICTION if friction is None else friction)
+            return compiled.rk4_rigid(
+                plant.anchors, plant.home_lengths, plant.drum_radius, plant.winch.inertia,
+                plant._reflected_inertia, float(plant.mass), plant.gravity_vector,
+                np.ascontiguousarray(state, dtype=float),
+                np.ascontiguousarray(np.broadcast_to(u, (state.shape[0], plant.n)),
+                                     dtype=float),
+                *law, float(dt), _NO_RATES if k1 is None else np.ascontiguousarray(k1),
+                mask, c0, c1)
+    held = (None, None, None) if friction is None else tuple(
+        (friction[0], friction[1] + friction[2] * (f - 0.5) * dt) for f in (0.0, 0.5, 1.0))
     if not plant.lagged:
         if k1 is None or friction is not None:
             k1 = plant.derivative(state, u, held[0])
@@ -129,7 +151,7 @@ def friction_slope(plant: Plant, theta: np.ndarray, omega: np.ndarray,
 
 
 def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
-                    k1: np.ndarray | None = None) -> np.ndarray:
+                    k1: np.ndarray | None = None, steps: int = 1) -> np.ndarray:
     """One ROS2 Rosenbrock-W step (Verwer et al. 1999: L-stable, second order for any
     approximate Jacobian) of a *rigid* plant, with the Jacobian of its friction only.
 
@@ -142,9 +164,26 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
     the band costs no sub-steps: sticking is damped out, not resolved. Everything else
     is as explicit as Heun's method. An actuator lag's state follows its exact solution,
     as in :func:`rk4_step`.
+
+    ``steps`` such steps of ``dt`` are taken (``k1``: the rates at ``state``, where the
+    caller has them). A plant without lag whose friction law is compiled
+    (:attr:`~cdpr_pipeline.sim.plant.Plant.compiled_law`, Gaussian bumps at most) takes
+    them in one compiled call (:func:`~cdpr_pipeline.sim.compiled.ros2_rigid_steps`:
+    a coupled run's steps were a dozen calls each, most of a steep law's closed loop).
     """
     if plant.elastic:
         raise ValueError("rosenbrock_step integrates rigid plants only")
+    law = plant.rows_law(state.shape[0])
+    if law is not None and not plant.lagged:
+        return compiled.ros2_rigid_steps(
+            plant.anchors, plant.home_lengths, plant.drum_radius, plant.winch.inertia,
+            plant._reflected_inertia, float(plant.mass), plant.gravity_vector,
+            np.ascontiguousarray(state, dtype=float),
+            np.ascontiguousarray(np.broadcast_to(u, (state.shape[0], plant.n)), dtype=float),
+            *law, float(dt), ROS2_GAMMA, int(steps))
+    for _ in range(steps - 1):
+        state = rosenbrock_step(plant, state, u, dt, k1)
+        k1 = None
     R = plant.drum_radius
     _, units, omega, curvature, theta = compiled.rigid_motion(
         plant.anchors, plant.home_lengths, R, state[:, 0:3], state[:, 3:6])
@@ -225,6 +264,13 @@ def _steep_winches(plant: Plant, state: np.ndarray, k1: np.ndarray, dt: float,
     (see :func:`friction_path_step`), and what that took: unit vectors, drum radii,
     speeds, their rates, winch angles and the friction at the probed speeds."""
     R = plant.drum_radius
+    law = plant.rows_law(state.shape[0])
+    if law is not None:
+        # the law compiled too: the whole judgement in one call
+        steep, units, omega, rate, theta, phi = compiled.steep_winches(
+            plant.anchors, plant.home_lengths, R, state[:, 0:3], state[:, 3:6], k1[:, 3:6],
+            *law, plant.winch.inertia, float(plant.mass), float(dt), float(accuracy))
+        return steep, (units, R, omega, rate, theta, phi)
     units, omega, rate, theta = compiled.winch_paths(plant.anchors, plant.home_lengths, R,
                                                      state[:, 0:3], state[:, 3:6], k1[:, 3:6])
     # the probed speeds and the judgement after the law's call compiled
@@ -292,24 +338,22 @@ def friction_path_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float
     multi = steep.sum(axis=1) > 1
     single = steep & ~multi[:, None]
     if single.any():
-        # the path is solved on the runs with a steep winch alone (its arrays, nodes
-        # times drives, and the law's calls on them shrink to those runs); the others'
-        # friction is their law's
-        runs = np.flatnonzero(single.any(axis=1))
-        part = runs_of(plant, runs)
-        scaled = units[runs] / R[:, None]
+        # the path is solved on the steep winches alone (its arrays, nodes times
+        # drives, and the law's calls on them shrink to those winches: a run's other
+        # winches stay frozen at their speeds); the others' friction is their law's
+        runs, drives = np.nonzero(single)
+        scaled = units[runs, drives] / R[drives, None]
         mass = plant.mass * np.eye(3) + np.einsum("bni,n,bnj->bij", units[runs],
                                                   plant.winch.inertia / R ** 2, units[runs])
         # speed change of each winch per unit of its own friction: k^T M^-1 k / R^2
-        beta = np.einsum("bni,bin->bn", scaled,
-                         np.linalg.solve(mass, np.swapaxes(scaled, 1, 2)))
-        reach = 2.0 * np.abs(phi[:4, runs]).max(axis=0)
+        beta = np.einsum("bi,bi->b", scaled, np.linalg.solve(mass, scaled[..., None])[..., 0])
+        reach = 2.0 * np.abs(phi[:4, runs, drives]).max(axis=0)
         c0, c1 = np.zeros_like(omega), np.zeros_like(omega)
-        c0[runs], c1[runs] = friction_over_step(
-            lambda w: part.friction_torque(theta[runs], w), omega[runs],
-            rate[runs] + beta * phi[0, runs], beta, dt, reach)
-        out = rk4_step(plant, state, u, dt, friction=lambda f: (single,
-                                                                c0 + c1 * (f - 0.5) * dt))
+        c0[runs, drives], c1[runs, drives] = friction_over_step(
+            lambda w: plant.drive_friction(theta, omega, w, runs, drives),
+            omega[runs, drives], rate[runs, drives] + beta * phi[0, runs, drives], beta,
+            dt, reach)
+        out = rk4_step(plant, state, u, dt, friction=(single, c0, c1))
     elif not multi.all():
         out = rk4_step(plant, state, u, dt, k1)
     else:       # every run is coupled (all at rest, as while settling): no RK4 step
@@ -318,8 +362,6 @@ def friction_path_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float
         # the coupled runs alone: their rows of the batch, on their own plant
         runs = np.flatnonzero(multi)
         part = runs_of(plant, runs)
-        moved = rosenbrock_step(part, state[runs], u[runs], dt / coupled, k1[runs])
-        for _ in range(coupled - 1):
-            moved = rosenbrock_step(part, moved, u[runs], dt / coupled)
-        out[runs] = moved
+        out[runs] = rosenbrock_step(part, state[runs], u[runs], dt / coupled, k1[runs],
+                                    steps=coupled)
     return out

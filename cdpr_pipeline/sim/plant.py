@@ -31,7 +31,6 @@ them apart by class.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -53,6 +52,9 @@ from cdpr_pipeline.sim.kinematics import (
 if TYPE_CHECKING:  # pragma: no cover
     from cdpr_pipeline.sim.effects import Effect
 
+#: no friction replaced (:meth:`Plant.derivative`'s ``friction`` None, as the compiled
+#: rates take it: an empty mask)
+_NO_REPLACEMENT = (np.zeros((0, 0), dtype=np.bool_), np.zeros((0, 0)))
 #: Default sharpness ``k`` of the smooth sign ``tanh(k x)`` (s/rad).
 SIGN_SHARPNESS = 20.0
 #: stiffness of a rigid cable among elastic ones in the elastic dynamics, as a multiple
@@ -81,28 +83,17 @@ def resisting_torque(model: Plant | Drives, theta: np.ndarray, omega: np.ndarray
     return torque
 
 
-def compiled_law_torque(model: Plant, omega: np.ndarray,
-                        bumps: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
-    """:func:`resisting_torque` of a model whose effects are Gaussian bumps
-    (``bumps``: :attr:`Plant._bumps`), on speeds ``omega`` (..., B, n): the signs and
-    the bumps' exponentials by numpy's own functions, as there, the rest by compiled
-    loops (:func:`~cdpr_pipeline.sim.compiled.bump_exponents`, the exponentials'
-    arguments; :func:`~cdpr_pipeline.sim.compiled.friction_law`) in that function's
-    order: the same numbers to the bit, at a third of the cost of its dozen numpy
-    calls."""
-    omega = np.ascontiguousarray(omega, dtype=float)
-    widths, rows, sizes = bumps
-    sign = smooth_sign(omega, model.sign_sharpness)
-    # (math.prod: numpy's took 6 of this function's 21 us, on a tuple of one or none)
-    shape = (math.prod(omega.shape[:-2]), *omega.shape[-2:])
-    flat = omega.reshape(shape)
-    exps = compiled.bump_exponents(flat, widths)
-    np.exp(exps, out=exps)
-    out = np.empty(shape)
-    w = model.winch
-    compiled.friction_law(flat, np.ascontiguousarray(sign, float).reshape(shape), exps,
-                          w.viscous, w.coulomb, w.offset, sizes, rows, out)
-    return out.reshape(omega.shape)
+def compiled_law_torque(omega: np.ndarray, law: tuple) -> np.ndarray:
+    """:func:`resisting_torque` of a model whose effects are Gaussian bumps, on speeds
+    ``omega`` (..., B, n), by one compiled loop (:func:`~cdpr_pipeline.sim.compiled.
+    friction_law`; ``law``: :attr:`Plant._compiled_law`): the stepped plant's law, a
+    dozen calls a control tick, where numpy's dozen calls each cost more than the
+    arithmetic. Its ``tanh`` and ``exp`` are the C library's, which may differ from
+    numpy's vectorised ones in the last bit."""
+    flat = np.ascontiguousarray(omega, dtype=float)
+    if flat.ndim != 3:
+        flat = flat.reshape(-1, *flat.shape[-2:])
+    return compiled.friction_law(flat, *law).reshape(np.shape(omega))
 
 
 def commanded_torque(drum_torque: np.ndarray, t: np.ndarray,
@@ -330,10 +321,42 @@ class Plant:
         """Everything that resists the winch besides inertia and tension (see
         :func:`resisting_torque`; with :attr:`compiled_law`, :func:`compiled_law_torque`
         where every effect is a Gaussian bump)."""
-        if self.compiled_law and self._bumps is not None and np.ndim(omega) >= 2 \
-                and self._bumps[1].shape[1] in (1, np.shape(omega)[-2]):
-            return compiled_law_torque(self, omega, self._bumps)
+        law = self.rows_law(np.shape(omega)[-2]) if np.ndim(omega) >= 2 else None
+        if law is not None:
+            return compiled_law_torque(omega, law)
         return resisting_torque(self, theta, omega)
+
+    def drive_friction(self, theta: np.ndarray, omega: np.ndarray, w: np.ndarray,
+                       runs: np.ndarray, drives: np.ndarray) -> np.ndarray:
+        """:meth:`friction_torque` (Q, D) of D drives (winch ``drives[d]`` of run
+        ``runs[d]``) at speeds ``w`` (Q, D), every other drive at its speed ``omega``
+        and every drive at its angle ``theta`` (B, n): one winch's law along its path,
+        the rest frozen. By the compiled law where it serves (the drives alone),
+        else on the whole batch."""
+        law = self.rows_law(omega.shape[0])
+        if law is not None:
+            return compiled.drive_law(np.ascontiguousarray(w, dtype=float), runs, drives,
+                                      *law)
+        speeds = np.repeat(np.asarray(omega, dtype=float)[None], len(w), axis=0)
+        speeds[:, runs, drives] = w
+        return self.friction_torque(theta, speeds)[:, runs, drives]
+
+    def rows_law(self, batch: int) -> tuple | None:
+        """:attr:`_compiled_law` where it serves a batch of ``batch`` runs (its bumps act
+        on every run, or it has one row per run), else None."""
+        law = self._compiled_law
+        return law if law is not None and law[5].shape[1] in (1, batch) else None
+
+    @cached_property
+    def _compiled_law(self) -> tuple | None:
+        """The friction law as :func:`~cdpr_pipeline.sim.compiled.law_at` takes it (the
+        Coulomb sign's sharpness, ``F_v``, ``F_c``, ``d`` and :attr:`_bumps`), where
+        :attr:`compiled_law` is set and every effect is a Gaussian bump; else None."""
+        if not self.compiled_law or self._bumps is None:
+            return None
+        w = self.winch
+        return (float(self.sign_sharpness), *(np.ascontiguousarray(a, dtype=float) for a in (
+            w.viscous, w.coulomb, w.offset, *self._bumps)))
 
     @cached_property
     def _bumps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -452,6 +475,18 @@ class Plant:
         """
         if not self.elastic and not self.lagged:
             # the closed loop's plant: a step takes five of these, each mostly overhead
+            law = self.rows_law(state.shape[0])
+            if law is not None:
+                # geometry, friction and acceleration in one compiled call
+                if np.shape(u_cmd) != (state.shape[0], self.n):
+                    u_cmd = np.broadcast_to(u_cmd, (state.shape[0], self.n))
+                mask, values = _NO_REPLACEMENT if friction is None else friction
+                return compiled.rigid_rates(
+                    self.anchors, self.home_lengths, self.drum_radius, self.winch.inertia,
+                    self._reflected_inertia, float(self.mass), self.gravity_vector, state,
+                    np.ascontiguousarray(u_cmd, dtype=float), *law,
+                    np.ascontiguousarray(mask, dtype=np.bool_),
+                    np.ascontiguousarray(values, dtype=float))
             p, v = state[:, 0:3], state[:, 3:6]
             out = np.empty_like(state)
             out[:, 0:3] = v

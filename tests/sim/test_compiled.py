@@ -11,7 +11,8 @@ import pytest
 from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.sim import compiled
 from cdpr_pipeline.sim.effects import AsymmetricViscousFriction, StribeckFriction
-from cdpr_pipeline.sim.kinematics import cable_geometry, winch_rates
+from cdpr_pipeline.sim.integrators import _steep_winches, rk4_step, rosenbrock_step
+from cdpr_pipeline.sim.kinematics import cable_geometry, tensions_for_force, winch_rates
 from cdpr_pipeline.sim.model_rows import plant_of_rows
 from cdpr_pipeline.sim.plant import Plant, resisting_torque
 
@@ -78,12 +79,15 @@ def test_numba_loads_with_the_first_kernel_not_with_the_plant():
 
 
 @pytest.mark.parametrize("sharpness", [np.inf, 20.0, 3000.0])
-def test_the_compiled_friction_law_is_numpys_to_the_bit(seed, sharpness):
+def test_the_compiled_friction_law_is_the_models_law(seed, sharpness):
     """The stepped plant's friction (:attr:`~cdpr_pipeline.sim.plant.Plant.compiled_law`)
     of a batch whose runs follow the nominal model or one with Stribeck bumps (one on
     some winches, one on all), on speeds of one batch and of several stacked, some at
-    exactly zero: :func:`~cdpr_pipeline.sim.plant.resisting_torque`'s numbers in every
-    bit; an effect that is no bump leaves the law to numpy."""
+    exactly zero: :func:`~cdpr_pipeline.sim.plant.resisting_torque`'s law to rounding
+    (its ``tanh`` and ``exp`` are the C library's, numpy's vectorised ones may differ in
+    the last bit), exactly the offset at zero speed under the hard sign, and exactly
+    ``F_v w + F_c sign(w) + d`` where the smooth sign has saturated and no bump acts;
+    an effect that is no bump leaves the law to numpy."""
     rng = np.random.default_rng(seed)
     anchors, radius, _ = _rig(rng, 8, 1)
     winch = WinchParams(rng.uniform(0.01, 0.1, 8), rng.uniform(0.0, 0.5, 8),
@@ -97,17 +101,153 @@ def test_the_compiled_friction_law_is_numpys_to_the_bit(seed, sharpness):
     plant = batch.replace(compiled_law=True)
     assert plant._bumps is not None
     theta = rng.normal(size=(5, 8))
+    # the largest bump sizes: a bound of each law's terms, for rounding's share
+    bumps = np.abs(extended.effects[0].extra(nominal)) + np.abs(extended.effects[1].extra(
+        nominal))
     for shape in [(5, 8), (4, 5, 8)]:
         omega = rng.normal(0.0, 1.0, shape) * 10.0 ** rng.uniform(-4.0, 1.0, shape)
         omega[..., 3] = 0.0
         got = plant.friction_torque(theta, omega)
         expected = resisting_torque(batch, theta, omega)
         assert got.shape == expected.shape
-        assert np.array_equal(got, expected)
-        assert not np.array_equal(got, resisting_torque(nominal, theta, omega))   # bumps
+        scale = np.abs(winch.viscous * omega) + winch.coulomb + np.abs(winch.offset) + bumps
+        np.testing.assert_array_less(np.abs(got - expected), 4 * np.finfo(float).eps * scale)
+        assert not np.allclose(got, resisting_torque(nominal, theta, omega))   # bumps
+        if np.isinf(sharpness):
+            assert np.array_equal(got[..., 3], np.broadcast_to(winch.offset[3], got[..., 3].shape))
+        # tanh(x) is 1 to the last bit beyond x = 20 (and the hard sign is 0 at 0)
+        with np.errstate(invalid="ignore"):
+            saturated = (omega == 0.0) | (np.abs(omega) * sharpness >= 20.0)
+        nominal_runs = np.zeros(shape, bool)
+        nominal_runs[..., [0, 2], :] = True         # the runs without bumps
+        exact = saturated & nominal_runs
+        assert exact.any()
+        law = winch.viscous * omega + winch.coulomb * np.sign(omega) + winch.offset
+        assert np.array_equal(got[exact], law[exact])
     other = extended.replace(effects=(*extended.effects, AsymmetricViscousFriction()),
                              compiled_law=True)
     assert other._bumps is None
     omega = rng.normal(size=(5, 8))
     assert np.array_equal(other.friction_torque(theta, omega),
                           resisting_torque(other, theta, omega))
+
+
+@pytest.mark.parametrize("sharpness", [np.inf, 500.0])
+def test_the_compiled_coupled_steps_keep_a_rest_and_follow_the_implicit_step(seed, sharpness):
+    """The coupled runs' ROS2 steps in one compiled call (a rigid plant without lag whose
+    law is compiled, Stribeck bumps on some runs): a platform at rest under the torques
+    that hold it (cables' tensions and the offset; a smooth law's friction is zero at
+    zero speed) stays there to rounding; moving runs near the law's steep part, and the
+    hard sign's rest, agree after eight steps with the same steps of the plant whose
+    law numpy evaluates (the path of other effects' laws) to a billionth of their
+    motion."""
+    rng = np.random.default_rng(seed)
+    anchors, radius, position = _rig(rng, 8, 4)
+    winch = WinchParams(rng.uniform(0.01, 0.1, 8), rng.uniform(0.0, 0.5, 8),
+                        rng.uniform(0.1, 1.0, 8), rng.normal(0.0, 0.05, 8))
+    nominal = Plant(anchors, radius, 5.0, winch, sign_sharpness=sharpness,
+                    home=np.array([1.5, 1.5, 1.2]))
+    extended = nominal.replace(effects=(StribeckFriction(static_ratio=2.0,
+                                                         stribeck_velocity=0.5),))
+    batch = plant_of_rows(nominal, [nominal, extended, nominal, extended])
+    compiled_plant = batch.replace(compiled_law=True)
+    assert compiled_plant.rows_law(4) is not None and batch.rows_law(4) is None
+    # at rest: K^T t = -m g, u = R t + d
+    units = cable_geometry(anchors, position)[1]
+    tension = tensions_for_force(units, -5.0 * nominal.gravity_vector)
+    hold = radius * tension + winch.offset
+    rest = np.concatenate([position, np.zeros((4, 3))], axis=1)
+    held = rosenbrock_step(compiled_plant, rest, hold, 1e-4, steps=8)
+    if np.isfinite(sharpness):
+        assert np.abs(held - rest).max() < 1e-15
+    else:
+        # a hard sign's stages see the speed's rounding (1e-20 m/s) on either side of
+        # its jump: the step damps what that leaves, as the numpy-law step does
+        same = rest
+        for _ in range(8):
+            same = rosenbrock_step(batch, same, hold, 1e-4)
+        assert np.abs(held - same).max() <= 1e-9 * np.abs(same - rest).max()
+    # moving, the winches' speeds within a few transition bands of zero
+    velocity = rng.normal(0.0, 1e-3, (4, 3))
+    state = np.concatenate([position, velocity], axis=1)
+    torque = hold + rng.normal(0.0, 0.05, (4, 8))
+    got = rosenbrock_step(compiled_plant, state, torque, 1e-4, steps=8)
+    expected = state
+    for _ in range(8):
+        expected = rosenbrock_step(batch, expected, torque, 1e-4)
+    moved = np.abs(expected - state).max(axis=0)
+    assert (moved > 0).all()
+    assert (np.abs(got - expected) <= 1e-9 * moved).all()
+
+
+@pytest.mark.parametrize("sharpness", [np.inf, 500.0])
+def test_the_compiled_law_steps_are_the_models_steps(seed, sharpness):
+    """A rigid plant whose law is compiled (Stribeck bumps on some runs) against the
+    same model whose law numpy evaluates: its rates (with the friction replaced on some
+    winches), an RK4 step with a friction linear over the step on those winches, and
+    the steep-winch judgement of the friction-path step agree to rounding (the law's
+    ``tanh`` and ``exp`` differ in the last bit); a winch whose speed changes sign over
+    the step is steep."""
+    rng = np.random.default_rng(seed)
+    anchors, radius, position = _rig(rng, 8, 5)
+    winch = WinchParams(rng.uniform(0.01, 0.1, 8), rng.uniform(0.0, 0.5, 8),
+                        rng.uniform(0.1, 1.0, 8), rng.normal(0.0, 0.05, 8))
+    nominal = Plant(anchors, radius, 5.0, winch, sign_sharpness=sharpness,
+                    home=np.array([1.5, 1.5, 1.2]))
+    extended = nominal.replace(effects=(StribeckFriction(static_ratio=2.0,
+                                                         stribeck_velocity=0.5),))
+    batch = plant_of_rows(nominal, [nominal, extended, nominal, extended, extended])
+    fast = batch.replace(compiled_law=True)
+    assert fast.rows_law(5) is not None and batch.rows_law(5) is None
+    # two runs nearly at rest: their winches' speeds cross zero within the step
+    velocity = rng.normal(0.0, 0.05, (5, 3)) * np.array([1, 1, 1, 1e-4, 1e-4])[:, None]
+    state = np.concatenate([position, velocity], axis=1)
+    units = cable_geometry(anchors, position)[1]
+    torque = radius * tensions_for_force(units, -5.0 * nominal.gravity_vector) \
+        + rng.normal(0.0, 0.2, (5, 8))
+    mask = rng.random((5, 8)) < 0.3
+    c0, c1 = rng.normal(0.0, 0.3, (5, 8)), rng.normal(0.0, 100.0, (5, 8))
+    rates = fast.derivative(state, torque, (mask, c0))
+    expected = batch.derivative(state, torque, (mask, c0))
+    np.testing.assert_allclose(rates, expected, rtol=1e-12, atol=1e-12)
+    dt = 1e-3
+    for friction in (None, (mask, c0, c1)):
+        got = rk4_step(fast, state, torque, dt, friction=friction)
+        expected = rk4_step(batch, state, torque, dt, friction=friction)
+        moved = np.abs(expected - state).max(axis=0)
+        assert (np.abs(got - expected) <= 1e-10 * moved).all()
+    steep, (_, _, omega, rate, _, phi) = _steep_winches(fast, state, rates, dt, 0.5)
+    steep_numpy, (_, _, _, _, _, phi_numpy) = _steep_winches(batch, state, rates, dt, 0.5)
+    np.testing.assert_allclose(phi, phi_numpy, rtol=1e-12, atol=1e-14)
+    assert np.array_equal(steep, steep_numpy)
+    crossing = omega * (omega + dt * rate) <= 0.0
+    assert crossing.any() and steep[crossing].all()
+
+
+def test_a_winchs_law_along_its_path_is_the_models_law_there(seed):
+    """:meth:`~cdpr_pipeline.sim.plant.Plant.drive_friction`: the law of some winches at
+    other speeds, the rest frozen, is the model's law at those speeds, whether compiled
+    (Stribeck bumps, to rounding) or numpy's (an effect that is no bump, exactly)."""
+    rng = np.random.default_rng(seed)
+    anchors, radius, _ = _rig(rng, 8, 1)
+    winch = WinchParams(rng.uniform(0.01, 0.1, 8), rng.uniform(0.0, 0.5, 8),
+                        rng.uniform(0.1, 1.0, 8), rng.normal(0.0, 0.05, 8))
+    nominal = Plant(anchors, radius, 5.0, winch, sign_sharpness=500.0)
+    extended = nominal.replace(effects=(StribeckFriction(static_ratio=2.0,
+                                                         stribeck_velocity=0.5),))
+    other = extended.replace(effects=(*extended.effects, AsymmetricViscousFriction()))
+    theta, omega = rng.normal(size=(4, 8)), rng.normal(0.0, 0.1, (4, 8))
+    runs, drives = np.array([0, 1, 3]), np.array([2, 7, 0])
+    w = rng.normal(0.0, 0.01, (6, 3))
+    for model, exact in ((plant_of_rows(nominal, [nominal, extended, extended, nominal]),
+                          False), (other, True)):
+        speeds = np.repeat(omega[None], 6, axis=0)
+        speeds[:, runs, drives] = w
+        expected = resisting_torque(model, theta, speeds)[:, runs, drives]
+        stepped = model.replace(compiled_law=True)
+        assert (stepped.rows_law(4) is None) == exact
+        got = stepped.drive_friction(theta, omega, w, runs, drives)
+        if exact:
+            assert np.array_equal(got, expected)
+        else:
+            np.testing.assert_allclose(got, expected, rtol=1e-14, atol=1e-15)
