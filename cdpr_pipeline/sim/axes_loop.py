@@ -27,7 +27,7 @@ import numpy as np
 
 from cdpr_pipeline.data.axis_controller import AxisController
 from cdpr_pipeline.sim.friction_path import friction_over_step
-from cdpr_pipeline.sim.model_rows import runs_of
+from cdpr_pipeline.sim.model_rows import DrivesOfRows, runs_of
 from cdpr_pipeline.sim.plant import Drives
 from cdpr_pipeline.sim.simulator import MAX_SUBSTEPS, SimulationCostError, lag_response
 
@@ -215,6 +215,16 @@ def substeps_for(model: Drives, control_dt: float, speed: np.ndarray, span: np.n
     return steps
 
 
+def with_compiled_law(model: Drives | DrivesOfRows) -> Drives | DrivesOfRows:
+    """``model`` reading its friction law by the compiled kernel where it can
+    (:attr:`~cdpr_pipeline.sim.plant.Drives.compiled_law`: a Coulomb law with Gaussian
+    bumps, the same numbers to rounding): the stepped loop reads the law a dozen times a
+    sub-step on a few runs, where numpy's calls cost more than the arithmetic."""
+    if isinstance(model, DrivesOfRows):
+        return DrivesOfRows(tuple(with_compiled_law(m) for m in model.models), model.index)
+    return model.replace(compiled_law=True)
+
+
 def _advance(model: Drives, q: np.ndarray, v: np.ndarray, drive: np.ndarray | None,
              command: np.ndarray, dt: float, substeps: int,
              affine: AffineFriction | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
@@ -321,16 +331,22 @@ def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h:
     alpha = force[at] * beta
     reach = 2.0 * np.abs(np.concatenate([start[:1], rest[:3]])).max(axis=0)[at]
 
-    # the law is read on the runs with a steep entry alone (the model of those runs)
-    runs = np.unique(at[0])
-    part, row = runs_of(model, runs), np.searchsorted(runs, at[0])
+    if isinstance(model, Drives) and model.rows_law(v.shape[0]) is not None:
+        def friction(w: np.ndarray) -> np.ndarray:
+            # the compiled law at the gathered entries alone
+            return model.drive_friction(middle, v, w, at[0], at[1])
+    else:
+        # the law is read on the runs with a steep entry alone (the model of those runs)
+        runs = np.unique(at[0])
+        part, row = runs_of(model, runs), np.searchsorted(runs, at[0])
 
-    def friction(w: np.ndarray) -> np.ndarray:
-        # the law at the gathered entries' speeds: every entry of those runs at its
-        # start speed, the steep ones at ``w`` (the law is the model's, per run and axis)
-        full = np.repeat(v[runs][None], len(w), axis=0)
-        full[:, row, at[1]] = w
-        return part.friction_torque(middle[runs], full)[:, row, at[1]]
+        def friction(w: np.ndarray) -> np.ndarray:
+            # the law at the gathered entries' speeds: every entry of those runs at its
+            # start speed, the steep ones at ``w`` (the law is the model's, per run and
+            # axis)
+            full = np.repeat(v[runs][None], len(w), axis=0)
+            full[:, row, at[1]] = w
+            return part.friction_torque(middle[runs], full)[:, row, at[1]]
 
     v0 = v[at]
     c0, c1 = friction_over_step(friction, v0, alpha, beta, h, reach, at_start=rest[3][at])
@@ -463,6 +479,7 @@ class AxesLoop:
             base = base + _on_ticks(refs.external, dec, hold=True)
         substeps = self.substeps_needed(refs)
         affine = AffineFriction.of(model) if affine_friction(model) else None
+        model = with_compiled_law(model)
         kp, kd, gain = (c.per_axis(k, n) for k in ("kp", "kd", "drive_gain"))
         kv = c.per_axis("kv", n) if c.velocity_loop else None
         ki = c.per_axis("ki", n) if c.velocity_loop else None
