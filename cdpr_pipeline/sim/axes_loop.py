@@ -91,7 +91,8 @@ def _newton_speeds(v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray,
                   h: float, affine: AffineFriction | None = None,
-                  first: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  first: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """One sub-step of ``h`` seconds of every axis under a held ``force`` (B, n).
 
     Solves ``I (v1 - v) / h = force - (1 - th) R(q, v) - th R(q, v1)`` per axis, ``th``
@@ -105,7 +106,7 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
     to convergence from rest after a reversal or a start. With ``affine``
     (:func:`affine_friction`) the solution is in closed form. Position:
     ``q1 = q + h (v + v1) / 2``. ``first``: the friction at ``q`` and the speeds of
-    :func:`_newton_speeds`, where the caller has it.
+    :func:`_newton_speeds`, with its ``at`` and ``dv``, where the caller has them.
     """
     inertia = model.winch.inertia
     if affine is not None:
@@ -130,9 +131,12 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
                 v1 = np.where(event, solved, v1)
         return q + 0.5 * h * (v + v1), v1
     qs = q[None]
-    speeds, at, dv = _newton_speeds(v)
+    if first is None:
+        speeds, at, dv = _newton_speeds(v)
+        up, down, r_v, r_dv = model.friction_torque(qs, speeds)
+    else:
+        (up, down, r_v, r_dv), at, dv = first
     direction = np.sign(at)
-    up, down, r_v, r_dv = model.friction_torque(qs, speeds) if first is None else first
     theta = _theta(inertia, (r_dv - r_v) / dv, v, h)
     y = inertia * v + h * force - h * (1.0 - theta) * r_v
     ht = h * theta
@@ -310,18 +314,19 @@ def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h:
         q1, v1 = implicit_step(model, q, v, force, h, affine)
         return _affine_reversal(affine, inertia, q, v, force, h, q1, v1)
     spread = 1e-3 * np.abs(v) + 1e-12
-    newton = _newton_speeds(v)[0]
+    newton, newton_at, newton_dv = _newton_speeds(v)
     # the friction at the step's start, for this test and the implicit step, in one call
     start = model.friction_torque(q, np.concatenate([[v, v - spread, v + spread], newton]))
     end = v + h * (force - start[0]) / inertia
-    rest = model.friction_torque(middle, np.stack([end, np.full_like(v, REST_SPEED),
-                                                   np.full_like(v, -REST_SPEED), v]))
+    # (newton[:2]: every entry just above and below rest)
+    rest = model.friction_torque(middle, np.stack([end, newton[0], newton[1], v]))
     with np.errstate(divide="ignore", invalid="ignore"):
         secant = np.where(end != v, (rest[0] - start[0]) / (end - v), 0.0)
     slope = np.maximum(np.abs(secant), np.abs(start[2] - start[1]) / (2.0 * spread))
     hard = model.sign_sharpness is None or not np.isfinite(model.sign_sharpness)
     steep = (v * end < 0.0) | ((h * slope / inertia > 0.5) & ((v != 0.0) | (not hard)))
-    q1, v1 = implicit_step(model, q, v, force, h, affine, first=start[3:])
+    q1, v1 = implicit_step(model, q, v, force, h, affine, first=(start[3:], newton_at,
+                                                                 newton_dv))
     if not steep.any():
         return q1, v1
     # the path only for the steep entries, gathered (most entries of a batch are far
