@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdpr_pipeline.data.axis_controller import AxisController
+from cdpr_pipeline.sim import compiled
 from cdpr_pipeline.sim.friction_path import friction_over_step
 from cdpr_pipeline.sim.model_rows import DrivesOfRows, runs_of
 from cdpr_pipeline.sim.plant import Drives
@@ -136,6 +137,13 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
         up, down, r_v, r_dv = model.friction_torque(qs, speeds)
     else:
         (up, down, r_v, r_dv), at, dv = first
+        law = model.rows_law(v.shape[0]) if isinstance(model, Drives) else None
+        if law is not None:
+            # the same arithmetic compiled, entry by entry (a dozen numpy calls a
+            # sub-step on a few runs cost more than the arithmetic)
+            v1 = compiled.implicit_axes(v, force, h, inertia, first[0], at, dv,
+                                        REST_SPEED, MAX_NEWTON, NEWTON_TOLERANCE, *law)
+            return q + 0.5 * h * (v + v1), v1
     direction = np.sign(at)
     theta = _theta(inertia, (r_dv - r_v) / dv, v, h)
     y = inertia * v + h * force - h * (1.0 - theta) * r_v
