@@ -137,7 +137,7 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
         up, down, r_v, r_dv = model.friction_torque(qs, speeds)
     else:
         (up, down, r_v, r_dv), at, dv = first
-        law = model.rows_law(v.shape[0]) if isinstance(model, Drives) else None
+        law = model.rows_law(v.shape[0])
         if law is not None:
             # the same arithmetic compiled, entry by entry (a dozen numpy calls a
             # sub-step on a few runs cost more than the arithmetic)
@@ -344,7 +344,7 @@ def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h:
     alpha = force[at] * beta
     reach = 2.0 * np.abs(np.concatenate([start[:1], rest[:3]])).max(axis=0)[at]
 
-    if isinstance(model, Drives) and model.rows_law(v.shape[0]) is not None:
+    if model.rows_law(v.shape[0]) is not None:
         def friction(w: np.ndarray) -> np.ndarray:
             # the compiled law at the gathered entries alone
             return model.drive_friction(middle, v, w, at[0], at[1])
