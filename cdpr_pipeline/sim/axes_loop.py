@@ -26,8 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdpr_pipeline.data.axis_controller import AxisController
+from cdpr_pipeline.sim import compiled
 from cdpr_pipeline.sim.friction_path import friction_over_step
-from cdpr_pipeline.sim.model_rows import runs_of
+from cdpr_pipeline.sim.model_rows import DrivesOfRows, runs_of
 from cdpr_pipeline.sim.plant import Drives
 from cdpr_pipeline.sim.simulator import MAX_SUBSTEPS, SimulationCostError, lag_response
 
@@ -91,7 +92,8 @@ def _newton_speeds(v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray,
                   h: float, affine: AffineFriction | None = None,
-                  first: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  first: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """One sub-step of ``h`` seconds of every axis under a held ``force`` (B, n).
 
     Solves ``I (v1 - v) / h = force - (1 - th) R(q, v) - th R(q, v1)`` per axis, ``th``
@@ -105,7 +107,7 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
     to convergence from rest after a reversal or a start. With ``affine``
     (:func:`affine_friction`) the solution is in closed form. Position:
     ``q1 = q + h (v + v1) / 2``. ``first``: the friction at ``q`` and the speeds of
-    :func:`_newton_speeds`, where the caller has it.
+    :func:`_newton_speeds`, with its ``at`` and ``dv``, where the caller has them.
     """
     inertia = model.winch.inertia
     if affine is not None:
@@ -130,9 +132,19 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
                 v1 = np.where(event, solved, v1)
         return q + 0.5 * h * (v + v1), v1
     qs = q[None]
-    speeds, at, dv = _newton_speeds(v)
+    if first is None:
+        speeds, at, dv = _newton_speeds(v)
+        up, down, r_v, r_dv = model.friction_torque(qs, speeds)
+    else:
+        (up, down, r_v, r_dv), at, dv = first
+        law = model.rows_law(v.shape[0])
+        if law is not None:
+            # the same arithmetic compiled, entry by entry (a dozen numpy calls a
+            # sub-step on a few runs cost more than the arithmetic)
+            v1 = compiled.implicit_axes(v, force, h, inertia, first[0], at, dv,
+                                        REST_SPEED, MAX_NEWTON, NEWTON_TOLERANCE, *law)
+            return q + 0.5 * h * (v + v1), v1
     direction = np.sign(at)
-    up, down, r_v, r_dv = model.friction_torque(qs, speeds) if first is None else first
     theta = _theta(inertia, (r_dv - r_v) / dv, v, h)
     y = inertia * v + h * force - h * (1.0 - theta) * r_v
     ht = h * theta
@@ -213,6 +225,16 @@ def substeps_for(model: Drives, control_dt: float, speed: np.ndarray, span: np.n
             f"({1 / control_dt:.4g} Hz), over the cap of {cap}: {cause} has a time scale "
             f"of {1 / rates[cause]:.3g} s")
     return steps
+
+
+def with_compiled_law(model: Drives | DrivesOfRows) -> Drives | DrivesOfRows:
+    """``model`` reading its friction law by the compiled kernel where it can
+    (:attr:`~cdpr_pipeline.sim.plant.Drives.compiled_law`: a Coulomb law with Gaussian
+    bumps, the same numbers to rounding): the stepped loop reads the law a dozen times a
+    sub-step on a few runs, where numpy's calls cost more than the arithmetic."""
+    if isinstance(model, DrivesOfRows):
+        return DrivesOfRows(tuple(with_compiled_law(m) for m in model.models), model.index)
+    return model.replace(compiled_law=True)
 
 
 def _advance(model: Drives, q: np.ndarray, v: np.ndarray, drive: np.ndarray | None,
@@ -300,18 +322,19 @@ def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h:
         q1, v1 = implicit_step(model, q, v, force, h, affine)
         return _affine_reversal(affine, inertia, q, v, force, h, q1, v1)
     spread = 1e-3 * np.abs(v) + 1e-12
-    newton = _newton_speeds(v)[0]
+    newton, newton_at, newton_dv = _newton_speeds(v)
     # the friction at the step's start, for this test and the implicit step, in one call
     start = model.friction_torque(q, np.concatenate([[v, v - spread, v + spread], newton]))
     end = v + h * (force - start[0]) / inertia
-    rest = model.friction_torque(middle, np.stack([end, np.full_like(v, REST_SPEED),
-                                                   np.full_like(v, -REST_SPEED), v]))
+    # (newton[:2]: every entry just above and below rest)
+    rest = model.friction_torque(middle, np.stack([end, newton[0], newton[1], v]))
     with np.errstate(divide="ignore", invalid="ignore"):
         secant = np.where(end != v, (rest[0] - start[0]) / (end - v), 0.0)
     slope = np.maximum(np.abs(secant), np.abs(start[2] - start[1]) / (2.0 * spread))
     hard = model.sign_sharpness is None or not np.isfinite(model.sign_sharpness)
     steep = (v * end < 0.0) | ((h * slope / inertia > 0.5) & ((v != 0.0) | (not hard)))
-    q1, v1 = implicit_step(model, q, v, force, h, affine, first=start[3:])
+    q1, v1 = implicit_step(model, q, v, force, h, affine, first=(start[3:], newton_at,
+                                                                 newton_dv))
     if not steep.any():
         return q1, v1
     # the path only for the steep entries, gathered (most entries of a batch are far
@@ -321,16 +344,22 @@ def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h:
     alpha = force[at] * beta
     reach = 2.0 * np.abs(np.concatenate([start[:1], rest[:3]])).max(axis=0)[at]
 
-    # the law is read on the runs with a steep entry alone (the model of those runs)
-    runs = np.unique(at[0])
-    part, row = runs_of(model, runs), np.searchsorted(runs, at[0])
+    if model.rows_law(v.shape[0]) is not None:
+        def friction(w: np.ndarray) -> np.ndarray:
+            # the compiled law at the gathered entries alone
+            return model.drive_friction(middle, v, w, at[0], at[1])
+    else:
+        # the law is read on the runs with a steep entry alone (the model of those runs)
+        runs = np.unique(at[0])
+        part, row = runs_of(model, runs), np.searchsorted(runs, at[0])
 
-    def friction(w: np.ndarray) -> np.ndarray:
-        # the law at the gathered entries' speeds: every entry of those runs at its
-        # start speed, the steep ones at ``w`` (the law is the model's, per run and axis)
-        full = np.repeat(v[runs][None], len(w), axis=0)
-        full[:, row, at[1]] = w
-        return part.friction_torque(middle[runs], full)[:, row, at[1]]
+        def friction(w: np.ndarray) -> np.ndarray:
+            # the law at the gathered entries' speeds: every entry of those runs at its
+            # start speed, the steep ones at ``w`` (the law is the model's, per run and
+            # axis)
+            full = np.repeat(v[runs][None], len(w), axis=0)
+            full[:, row, at[1]] = w
+            return part.friction_torque(middle[runs], full)[:, row, at[1]]
 
     v0 = v[at]
     c0, c1 = friction_over_step(friction, v0, alpha, beta, h, reach, at_start=rest[3][at])
@@ -463,6 +492,7 @@ class AxesLoop:
             base = base + _on_ticks(refs.external, dec, hold=True)
         substeps = self.substeps_needed(refs)
         affine = AffineFriction.of(model) if affine_friction(model) else None
+        model = with_compiled_law(model)
         kp, kd, gain = (c.per_axis(k, n) for k in ("kp", "kd", "drive_gain"))
         kv = c.per_axis("kv", n) if c.velocity_loop else None
         ki = c.per_axis("ki", n) if c.velocity_loop else None

@@ -14,7 +14,9 @@ The stepped plant's friction law is compiled where it is the Coulomb law with Ga
 no numpy twin, tested against the model's law to rounding and exact truths); being
 compiled, it runs inside the kernels of a rigid plant's rates, RK4 and ROS2 steps and
 steep-winch judgement (:func:`rigid_rates`, :func:`rk4_rigid`,
-:func:`ros2_rigid_steps`, :func:`steep_winches`), which compose the kernels above. A
+:func:`ros2_rigid_steps`, :func:`steep_winches`), which compose the kernels above, and
+inside the drive axes' implicit step (:func:`implicit_axes`, its numpy reference
+:func:`~cdpr_pipeline.sim.axes_loop.implicit_step`). A
 model's other extra torques (an effect's callable) stay numpy calls of their own, on
 the integrators' numpy paths.
 """
@@ -826,6 +828,57 @@ def drive_law(w: np.ndarray, runs: np.ndarray, drives: np.ndarray, sharpness: fl
         for d in range(w.shape[1]):
             out[q, d] = law_at(w[q, d], runs[d], drives[d], sharpness, viscous, coulomb,
                                offset, widths, rows, sizes)
+    return out
+
+
+@_kernel
+def implicit_axes(v: np.ndarray, force: np.ndarray, h: float, inertia: np.ndarray,
+                  first: np.ndarray, at: np.ndarray, dv: np.ndarray, rest_speed: float,
+                  max_newton: int, tolerance: float, sharpness: float,
+                  viscous: np.ndarray, coulomb: np.ndarray, offset: np.ndarray,
+                  widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """The speeds (B, n) after :func:`~cdpr_pipeline.sim.axes_loop.implicit_step` (its
+    numpy reference, the arithmetic in its order) of axes whose law is :func:`law_at`'s,
+    entry by entry: ``first`` (4, B, n) the law just above and below rest, at ``at``
+    and at ``at + dv`` (:func:`~cdpr_pipeline.sim.axes_loop._newton_speeds`)."""
+    batch, n = v.shape
+    out = np.empty((batch, n))
+    for b in range(batch):
+        for i in range(n):
+            mass = inertia[i]
+            up, down, r_v, r_dv = first[0, b, i], first[1, b, i], first[2, b, i], \
+                first[3, b, i]
+            v0, f, a, step = v[b, i], force[b, i], at[b, i], dv[b, i]
+            direction = 1.0 if a > 0.0 else (-1.0 if a < 0.0 else a)
+            # _theta
+            stiff = h * max((r_dv - r_v) / step, 0.0)
+            theta = 1.0 if v0 == 0.0 else max(0.5, 1.0 - mass / max(stiff, 1e-300))
+            y = mass * v0 + h * f - h * (1.0 - theta) * r_v
+            ht = h * theta
+            positive, negative = y > ht * up, y < ht * down
+            if not ((positive and v0 > 0.0) or (negative and v0 < 0.0)):
+                ht = h
+                y = mass * v0 + h * f
+                positive, negative = y > ht * up, y < ht * down
+            side = 1.0 if positive else -1.0
+            stuck = not (positive or negative)
+            here = direction == side
+            v1 = a if here else side * rest_speed
+            if not here:
+                r_v = up if positive else down
+            for _ in range(max_newton):
+                slope = max(mass + ht * (r_dv - r_v) / step, 0.5 * mass)
+                nxt = max((v1 - (mass * v1 + ht * r_v - y) / slope) * side, rest_speed) * side
+                settled = here or stuck or abs(nxt - v1) <= tolerance * abs(v1) + rest_speed
+                v1 = nxt
+                if settled:
+                    break
+                step = (1e-6 * abs(v1) + 1e-9) * side
+                r_v = law_at(v1, b, i, sharpness, viscous, coulomb, offset, widths, rows,
+                             sizes)
+                r_dv = law_at(v1 + step, b, i, sharpness, viscous, coulomb, offset, widths,
+                              rows, sizes)
+            out[b, i] = v1 * (0.0 if stuck else 1.0)
     return out
 
 

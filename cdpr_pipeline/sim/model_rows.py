@@ -195,6 +195,12 @@ class DrivesOfRows:
     def _runs(self) -> list[np.ndarray]:
         return [np.flatnonzero(self.index == k) for k in range(len(self.models))]
 
+    def rows_law(self, batch: int) -> None:
+        """None: no one compiled law serves the batch (:meth:`~cdpr_pipeline.sim.plant.
+        FrictionLaw.rows_law`); each model reads its own, compiled or not, on its runs
+        (:meth:`friction_torque`)."""
+        return None
+
     def friction_torque(self, theta: np.ndarray, omega: np.ndarray) -> np.ndarray:
         """Each model's resisting force on its own runs (axis -2 of both arrays)."""
         theta, omega = np.asarray(theta, float), np.asarray(omega, float)

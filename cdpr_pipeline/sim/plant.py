@@ -130,8 +130,75 @@ def _checked_lag(time_constant: Any, n: int) -> float | np.ndarray:
     return value
 
 
+class FrictionLaw:
+    """The winch side's friction law of a model (a cable robot's :class:`Plant` or
+    :class:`Drives`): :func:`resisting_torque`, or with the model's ``compiled_law``
+    set and every effect a Gaussian bump, the compiled law
+    (:func:`compiled_law_torque`, the same numbers to rounding)."""
+
+    def friction_torque(self, theta: np.ndarray, omega: np.ndarray) -> np.ndarray:
+        """Everything that resists the winch besides inertia and tension (see
+        :func:`resisting_torque`; with :attr:`compiled_law`, :func:`compiled_law_torque`
+        where every effect is a Gaussian bump)."""
+        law = self.rows_law(np.shape(omega)[-2]) if np.ndim(omega) >= 2 else None
+        if law is not None:
+            return compiled_law_torque(omega, law)
+        return resisting_torque(self, theta, omega)
+
+    def drive_friction(self, theta: np.ndarray, omega: np.ndarray, w: np.ndarray,
+                       runs: np.ndarray, drives: np.ndarray) -> np.ndarray:
+        """:meth:`friction_torque` (Q, D) of D drives (winch ``drives[d]`` of run
+        ``runs[d]``) at speeds ``w`` (Q, D), every other drive at its speed ``omega``
+        and every drive at its angle ``theta`` (B, n): one winch's law along its path,
+        the rest frozen. By the compiled law where it serves (the drives alone),
+        else on the whole batch."""
+        law = self.rows_law(omega.shape[0])
+        if law is not None:
+            return compiled.drive_law(np.ascontiguousarray(w, dtype=float), runs, drives,
+                                      *law)
+        speeds = np.repeat(np.asarray(omega, dtype=float)[None], len(w), axis=0)
+        speeds[:, runs, drives] = w
+        return self.friction_torque(theta, speeds)[:, runs, drives]
+
+    def rows_law(self, batch: int) -> tuple | None:
+        """:attr:`_compiled_law` where it serves a batch of ``batch`` runs (its bumps act
+        on every run, or it has one row per run), else None."""
+        law = self._compiled_law
+        return law if law is not None and law[5].shape[1] in (1, batch) else None
+
+    @cached_property
+    def _compiled_law(self) -> tuple | None:
+        """The friction law as :func:`~cdpr_pipeline.sim.compiled.law_at` takes it (the
+        Coulomb sign's sharpness, ``F_v``, ``F_c``, ``d`` and :attr:`_bumps`), where
+        :attr:`compiled_law` is set and every effect is a Gaussian bump; else None."""
+        if not self.compiled_law or self._bumps is None:
+            return None
+        w = self.winch
+        sharpness = np.inf if self.sign_sharpness is None else float(self.sign_sharpness)
+        return (sharpness, *(np.ascontiguousarray(a, dtype=float) for a in (
+            w.viscous, w.coulomb, w.offset, *self._bumps)))
+
+    @cached_property
+    def _bumps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The effects as Gaussian bumps (:meth:`~cdpr_pipeline.sim.effects.base.Effect.
+        gaussian_bump`): their widths (E, n), the runs each acts on (E, B; B is 1
+        where every bump acts on every run) and their sizes (E, n); None where an
+        effect is not one."""
+        bumps = [e.gaussian_bump(self) for e in self.effects]
+        if any(b is None for b in bumps):
+            return None
+        batch = max([1, *(len(b[2]) for b in bumps if b[2] is not None)])
+        rows = np.ones((len(bumps), batch))
+        for k, bump in enumerate(bumps):
+            if bump[2] is not None:
+                rows[k] = bump[2]
+        sizes = np.array([np.broadcast_to(b[0], (self.n,)) for b in bumps], float)
+        widths = np.array([np.broadcast_to(b[1], (self.n,)) for b in bumps], float)
+        return widths.reshape(-1, self.n), rows, sizes.reshape(-1, self.n)
+
+
 @dataclass(frozen=True)
-class Plant:
+class Plant(FrictionLaw):
     """Physical parameters of the true (or nominal) rig.
 
     Attributes
@@ -317,65 +384,6 @@ class Plant:
         return cable_geometry(self.anchors, self.home)[0]
 
     # ------------------------------------------------------------------ winch side
-    def friction_torque(self, theta: np.ndarray, omega: np.ndarray) -> np.ndarray:
-        """Everything that resists the winch besides inertia and tension (see
-        :func:`resisting_torque`; with :attr:`compiled_law`, :func:`compiled_law_torque`
-        where every effect is a Gaussian bump)."""
-        law = self.rows_law(np.shape(omega)[-2]) if np.ndim(omega) >= 2 else None
-        if law is not None:
-            return compiled_law_torque(omega, law)
-        return resisting_torque(self, theta, omega)
-
-    def drive_friction(self, theta: np.ndarray, omega: np.ndarray, w: np.ndarray,
-                       runs: np.ndarray, drives: np.ndarray) -> np.ndarray:
-        """:meth:`friction_torque` (Q, D) of D drives (winch ``drives[d]`` of run
-        ``runs[d]``) at speeds ``w`` (Q, D), every other drive at its speed ``omega``
-        and every drive at its angle ``theta`` (B, n): one winch's law along its path,
-        the rest frozen. By the compiled law where it serves (the drives alone),
-        else on the whole batch."""
-        law = self.rows_law(omega.shape[0])
-        if law is not None:
-            return compiled.drive_law(np.ascontiguousarray(w, dtype=float), runs, drives,
-                                      *law)
-        speeds = np.repeat(np.asarray(omega, dtype=float)[None], len(w), axis=0)
-        speeds[:, runs, drives] = w
-        return self.friction_torque(theta, speeds)[:, runs, drives]
-
-    def rows_law(self, batch: int) -> tuple | None:
-        """:attr:`_compiled_law` where it serves a batch of ``batch`` runs (its bumps act
-        on every run, or it has one row per run), else None."""
-        law = self._compiled_law
-        return law if law is not None and law[5].shape[1] in (1, batch) else None
-
-    @cached_property
-    def _compiled_law(self) -> tuple | None:
-        """The friction law as :func:`~cdpr_pipeline.sim.compiled.law_at` takes it (the
-        Coulomb sign's sharpness, ``F_v``, ``F_c``, ``d`` and :attr:`_bumps`), where
-        :attr:`compiled_law` is set and every effect is a Gaussian bump; else None."""
-        if not self.compiled_law or self._bumps is None:
-            return None
-        w = self.winch
-        return (float(self.sign_sharpness), *(np.ascontiguousarray(a, dtype=float) for a in (
-            w.viscous, w.coulomb, w.offset, *self._bumps)))
-
-    @cached_property
-    def _bumps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """The effects as Gaussian bumps (:meth:`~cdpr_pipeline.sim.effects.base.Effect.
-        gaussian_bump`): their widths (E, n), the runs each acts on (E, B; B is 1
-        where every bump acts on every run) and their sizes (E, n); None where an
-        effect is not one."""
-        bumps = [e.gaussian_bump(self) for e in self.effects]
-        if any(b is None for b in bumps):
-            return None
-        batch = max([1, *(len(b[2]) for b in bumps if b[2] is not None)])
-        rows = np.ones((len(bumps), batch))
-        for k, bump in enumerate(bumps):
-            if bump[2] is not None:
-                rows[k] = bump[2]
-        sizes = np.array([np.broadcast_to(b[0], (self.n,)) for b in bumps], float)
-        widths = np.array([np.broadcast_to(b[1], (self.n,)) for b in bumps], float)
-        return widths.reshape(-1, self.n), rows, sizes.reshape(-1, self.n)
-
     def reeled_length(self, geometric: np.ndarray, tension: np.ndarray) -> np.ndarray:
         """Reeled-out (unstretched) cable length that spans ``geometric`` under
         ``tension`` at rest: ``l / (1 + t / EA)`` for elastic cables, ``l`` for rigid."""
@@ -602,7 +610,7 @@ class Plant:
 
 
 @dataclass(frozen=True)
-class Drives:
+class Drives(FrictionLaw):
     """Independent drive axes (``kind: axes``): the winch side of the plant without
     cables, ``u = I q'' + F_v q' + F_c s(q') + d`` plus effects, optionally behind a
     first-order actuator. Friction effects act on it exactly as on a winch."""
@@ -623,6 +631,9 @@ class Drives:
     effects: tuple[Effect, ...] = ()
     #: per axis its units (:attr:`Rig.channel_units`); empty: every axis prismatic
     units: tuple[ChannelUnits, ...] = ()
+    #: :meth:`friction_torque` by the compiled kernel where it can (the closed loop's
+    #: stepped axes, :mod:`~cdpr_pipeline.sim.axes_loop`: the same numbers to rounding)
+    compiled_law: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "actuator_time_constant",
@@ -662,9 +673,6 @@ class Drives:
         for effect in effects:
             model = effect.apply(model)
         return model
-
-    def friction_torque(self, theta: np.ndarray, omega: np.ndarray) -> np.ndarray:
-        return resisting_torque(self, theta, omega)
 
     def inverse_dynamics(self, theta: np.ndarray, omega: np.ndarray, alpha: np.ndarray,
                          t: np.ndarray) -> dict[str, np.ndarray]:

@@ -119,6 +119,34 @@ def test_the_closed_form_and_the_newton_path_agree(monkeypatch):
     assert np.linalg.norm(newton.force - closed.force) < 1e-5 * np.linalg.norm(closed.force)
 
 
+@pytest.mark.parametrize("sharpness", [None, 500.0])
+def test_the_compiled_law_steps_the_models_law(monkeypatch, sharpness):
+    """The closed loop steps the model's law by the compiled kernel
+    (:func:`~cdpr_pipeline.sim.axes_loop.with_compiled_law`: a Coulomb law, hard or
+    ``tanh``, with Stribeck bumps, one on some axes): the positions and forces of the
+    numpy law to rounding (measured: 4e-13 of the largest position, 1e-13 of the
+    largest force)."""
+    base = Drives(WinchParams([2.0, 0.5, 5.0], [5.0, 1.0, 30.0], [3.0, 0.4, 6.0],
+                              [0.2, 0.0, -0.5]), sign_sharpness=sharpness)
+    model = base.with_effects([
+        EFFECTS["stribeck_friction"](static_ratio=2.0, stribeck_velocity=0.05),
+        EFFECTS["stribeck_friction"](static_ratio=None, cables=[1], extra_static=[0.3],
+                                     stribeck_velocity=[0.01])])
+    assert axes_loop.with_compiled_law(model).rows_law(2) is not None
+    assert model.rows_law(2) is None
+    refs = _references()
+    compiled = AxesLoop(model, PD, 1000.0, feedforward=base).run(refs)
+    monkeypatch.setattr(axes_loop, "with_compiled_law", lambda m: m)
+    numpy_law = AxesLoop(model, PD, 1000.0, feedforward=base).run(refs)
+    assert not np.array_equal(compiled.position, AxesLoop(
+        base, PD, 1000.0, feedforward=base).run(refs).position)      # the bumps act
+    motion = np.max(np.abs(numpy_law.position))
+    np.testing.assert_allclose(compiled.position, numpy_law.position, rtol=0,
+                               atol=1e-11 * motion)
+    np.testing.assert_allclose(compiled.force, numpy_law.force, rtol=0,
+                               atol=1e-11 * np.max(np.abs(numpy_law.force)))
+
+
 def test_a_velocity_loop_with_limit_and_external_force():
     """A P position loop around a PI velocity loop through a drive gain: the force never
     exceeds the limit, and a recorded external force is part of the force applied."""
