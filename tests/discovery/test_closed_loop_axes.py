@@ -21,18 +21,20 @@ from cdpr_pipeline.testing.lab_cases import fast_settings
 
 @pytest.fixture(scope="module")
 def loaded_axes(tmp_path_factory, seed_of, request):
-    """Two prismatic axes with a hidden position-dependent load on both, the controller
-    stated in the schema (PD + the nominal model as feedforward)."""
+    """Two axes with a hidden position-dependent load on one or both (drawn), the
+    controller stated in the schema (PD + the nominal model as feedforward): the
+    dataset's path and the loaded axes (0-based)."""
     seed = seed_of(request.node)
     rig = random_axes_rig(seed, n_axes=2, rate_hz=500.0).replace(controller_schema=True)
     out = tmp_path_factory.mktemp("axes") / "ds"
-    simulate_axes_dataset(out, rig, ["position_dependent_load"], n_runs=3, duration_s=10.0,
-                          seed=seed)
-    return out
+    truth = simulate_axes_dataset(out, rig, ["position_dependent_load"], n_runs=3,
+                                  duration_s=10.0, seed=seed)
+    return out, truth.effects[0].channels
 
 
 def test_diagnose_re_simulates_axes_in_closed_loop(loaded_axes):
-    data = load_dataset(loaded_axes)
+    path, loaded = loaded_axes
+    data = load_dataset(path)
     d = diagnose(data, fast_settings(freeform=None, closed_loop=True))
     cl = d.closed_loop
     assert cl.available and cl.mode == "closed_loop"
@@ -47,10 +49,16 @@ def test_diagnose_re_simulates_axes_in_closed_loop(loaded_axes):
     assert record["mode"] == "closed_loop" and record["units"] == ["m", "m"]
     assert {"rms_before", "rms_after", "max_before", "max_after"} <= \
         set(record["runs"][d.heldout[0]]["position"])
-    assert d.causes, "a position-dependent load on both axes is found"
+    assert d.causes, "the position-dependent load is found"
     held = cl.runs[d.heldout[0]]
-    # the extended model's closed loop is nearer the measured force than the nominal's
-    assert held.torque_relative_pct[1] < held.torque_relative_pct[0]
+    # the extended model's closed loop is nearer the measured force than the nominal's on
+    # each loaded axis. (Not the run's relative error over every axis: that is the
+    # unloaded axis's where it carries far larger forces, and its closed loop differs
+    # between the two models by the integration's sub-steps only: CDPR_TEST_SEED=1, a
+    # load on axis 1 at 0.07 N RMS beside 450 N on axis 2, 0.043 -> 0.00088 N on axis 1,
+    # 7.9319 -> 7.9330 N on axis 2, 1.75521 -> 1.75543 % over both.)
+    for k in loaded:
+        assert held.torque_rms[1][k] < held.torque_rms[0][k], (k, held.torque_rms)
     # and as the feedforward it tracks better than the nominal model (item 8)
     ff = cl.feedforward
     assert ff is not None and set(ff.rms) == set(d.heldout)
