@@ -132,6 +132,16 @@ def test_the_compiled_friction_law_is_the_models_law(seed, sharpness):
                           resisting_torque(other, theta, omega))
 
 
+def _nominal_and_stribeck(rng, anchors, radius, sharpness):
+    """An 8-cable plant of random winches and the same plant with a Stribeck bump."""
+    winch = WinchParams(rng.uniform(0.01, 0.1, 8), rng.uniform(0.0, 0.5, 8),
+                        rng.uniform(0.1, 1.0, 8), rng.normal(0.0, 0.05, 8))
+    nominal = Plant(anchors, radius, 5.0, winch, sign_sharpness=sharpness,
+                    home=np.array([1.5, 1.5, 1.2]))
+    return nominal, nominal.replace(effects=(StribeckFriction(static_ratio=2.0,
+                                                               stribeck_velocity=0.5),))
+
+
 @pytest.mark.parametrize("sharpness", [np.inf, 500.0])
 def test_the_compiled_coupled_steps_keep_a_rest_and_follow_the_implicit_step(seed, sharpness):
     """The coupled runs' ROS2 steps in one compiled call (a rigid plant without lag whose
@@ -143,12 +153,8 @@ def test_the_compiled_coupled_steps_keep_a_rest_and_follow_the_implicit_step(see
     motion."""
     rng = np.random.default_rng(seed)
     anchors, radius, position = _rig(rng, 8, 4)
-    winch = WinchParams(rng.uniform(0.01, 0.1, 8), rng.uniform(0.0, 0.5, 8),
-                        rng.uniform(0.1, 1.0, 8), rng.normal(0.0, 0.05, 8))
-    nominal = Plant(anchors, radius, 5.0, winch, sign_sharpness=sharpness,
-                    home=np.array([1.5, 1.5, 1.2]))
-    extended = nominal.replace(effects=(StribeckFriction(static_ratio=2.0,
-                                                         stribeck_velocity=0.5),))
+    nominal, extended = _nominal_and_stribeck(rng, anchors, radius, sharpness)
+    winch = nominal.winch
     batch = plant_of_rows(nominal, [nominal, extended, nominal, extended])
     compiled_plant = batch.replace(compiled_law=True)
     assert compiled_plant.rows_law(4) is not None and batch.rows_law(4) is None
@@ -190,12 +196,7 @@ def test_the_compiled_law_steps_are_the_models_steps(seed, sharpness):
     the step is steep."""
     rng = np.random.default_rng(seed)
     anchors, radius, position = _rig(rng, 8, 5)
-    winch = WinchParams(rng.uniform(0.01, 0.1, 8), rng.uniform(0.0, 0.5, 8),
-                        rng.uniform(0.1, 1.0, 8), rng.normal(0.0, 0.05, 8))
-    nominal = Plant(anchors, radius, 5.0, winch, sign_sharpness=sharpness,
-                    home=np.array([1.5, 1.5, 1.2]))
-    extended = nominal.replace(effects=(StribeckFriction(static_ratio=2.0,
-                                                         stribeck_velocity=0.5),))
+    nominal, extended = _nominal_and_stribeck(rng, anchors, radius, sharpness)
     batch = plant_of_rows(nominal, [nominal, extended, nominal, extended, extended])
     fast = batch.replace(compiled_law=True)
     assert fast.rows_law(5) is not None and batch.rows_law(5) is None
