@@ -359,7 +359,12 @@ def _summary(err: dict[str, dict[str, np.ndarray]], names: Sequence[str], signal
 
 
 def _run_errors(tr: Trajectory, before: dict[str, np.ndarray], after: dict[str, np.ndarray],
-                held: bool, crosstest: bool = False) -> RunMotionErrors:
+                held: bool, units: Sequence[str], crosstest: bool = False
+                ) -> RunMotionErrors:
+    """The run's errors (:class:`~cdpr_pipeline.discovery.results.RunMotionErrors`);
+    ``units`` the force unit of every channel: the force's relative error is taken over
+    the channels of each unit apart (a rig of rotary and prismatic axes: N m and N are
+    never added)."""
     def rms(e: np.ndarray) -> tuple[float, ...]:
         return tuple(float(v) for v in np.sqrt(np.mean(e ** 2, axis=0)))
 
@@ -368,10 +373,13 @@ def _run_errors(tr: Trajectory, before: dict[str, np.ndarray], after: dict[str, 
 
     torque_rms = relative = None
     if "torque" in before:
-        norm = max(float(np.linalg.norm(tr.torques)), 1e-300)
         torque_rms = (rms(before["torque"]), rms(after["torque"]))
-        relative = (100 * float(np.linalg.norm(before["torque"])) / norm,
-                    100 * float(np.linalg.norm(after["torque"])) / norm)
+        relative = {}
+        for unit in dict.fromkeys(units):
+            columns = [i for i, u in enumerate(units) if u == unit]
+            norm = max(float(np.linalg.norm(tr.torques[:, columns])), 1e-300)
+            relative[unit] = tuple(100 * float(np.linalg.norm(e["torque"][:, columns])) / norm
+                                   for e in (before, after))
     return RunMotionErrors(held, (rms(before["position"]), rms(after["position"])),
                            (peak(before["position"]), peak(after["position"])),
                            torque_rms, relative, crosstest)
@@ -453,8 +461,9 @@ def compare_motion(nominal: Model, extended: Model, rig: Rig,
     else:
         return ClosedLoopComparison(False, why_not), [], None
     held = set(held_names)
+    forces = force_units(rig)
     runs = {tr.name: _run_errors(tr, err_nom[tr.name], err_ext[tr.name], tr.name in held,
-                                 tr.name in aside)
+                                 forces, tr.name in aside)
             for tr in trajectories}
     rows = []
     signals = ("position", "torque") if mode == "closed_loop" else ("position",)

@@ -9,7 +9,7 @@ discovery.report` places them, with the figure of :mod:`~cdpr_pipeline.discovery
 from __future__ import annotations
 
 import html
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from cdpr_pipeline.discovery.diagnosis import Diagnosis
@@ -46,6 +46,16 @@ def _part(run: Any) -> str:
     return "held out" if run.heldout else "training"
 
 
+def _relative(by_unit: Mapping[str, tuple[float, float]]) -> str:
+    """A run's force relative error, nominal → extended, per force unit where its
+    channels have several (N and N m are never added)."""
+    if len(by_unit) == 1:
+        (before, after), = by_unit.values()
+        return f"{before:.2f} → {after:.2f} %"
+    return "; ".join(f"{unit}: {before:.2f} → {after:.2f} %"
+                     for unit, (before, after) in by_unit.items())
+
+
 def _runs_table(d: Diagnosis) -> str:
     cl = d.closed_loop
     rows = []
@@ -58,13 +68,13 @@ def _runs_table(d: Diagnosis) -> str:
                    _pair(run.position_rms[0][i], run.position_rms[1][i], scale, shown),
                    _pair(run.position_max[0][i], run.position_max[1][i], scale, shown)]
             if run.torque_relative_pct is not None:
-                row.append(f"{run.torque_relative_pct[0]:.2f} → "
-                           f"{run.torque_relative_pct[1]:.2f} %" if i == 0 else "")
+                row.append(_relative(run.torque_relative_pct) if i == 0 else "")
             rows.append(row)
     header = ["run", "part", "coordinate", "position error RMS, nominal → extended",
               "largest position error, nominal → extended"]
     if cl.mode == "closed_loop":
-        header.append("force relative error, nominal → extended")
+        header.append("force relative error, nominal → extended (per unit where "
+                      "they differ)")
     return _table(rows, header)
 
 

@@ -273,15 +273,26 @@ class RunMotionErrors:
     """One run's measured minus simulated signals, nominal (``before``) and extended
     (``after``) model: position RMS and largest absolute error per coordinate (m, or the
     axis's unit), and in closed loop the force or torque RMS per channel and its
-    relative error ``100 |u - u_sim| / |u|`` (%) over the run."""
+    relative error ``100 |u - u_sim| / |u|`` (%) over the run, per force unit (the
+    channels of one unit together: N and N m are never added)."""
 
     heldout: bool
     position_rms: tuple[tuple[float, ...], tuple[float, ...]]
     position_max: tuple[tuple[float, ...], tuple[float, ...]]
     torque_rms: tuple[tuple[float, ...], tuple[float, ...]] | None = None
-    torque_relative_pct: tuple[float, float] | None = None
+    #: by force unit (N, N m) the relative error of the channels of that unit, (before,
+    #: after)
+    torque_relative_pct: Mapping[str, tuple[float, float]] | None = None
     #: set aside as an untouched cross-test (no fit or choice saw it)
     crosstest: bool = False
+
+    @property
+    def torque_relative_pct_all(self) -> tuple[float, float] | None:
+        """The force's relative error (before, after) over every channel where they all
+        share one unit; None where they do not (or without force)."""
+        if self.torque_relative_pct is None or len(self.torque_relative_pct) != 1:
+            return None
+        return next(iter(self.torque_relative_pct.values()))
 
     def as_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -291,10 +302,15 @@ class RunMotionErrors:
                          "max_before": _floats(self.position_max[0]),
                          "max_after": _floats(self.position_max[1])}}
         if self.torque_rms is not None:
-            out["torque"] = {"rms_before": _floats(self.torque_rms[0]),
-                             "rms_after": _floats(self.torque_rms[1]),
-                             "relative_error_pct_before": float(self.torque_relative_pct[0]),
-                             "relative_error_pct_after": float(self.torque_relative_pct[1])}
+            whole = self.torque_relative_pct_all
+            out["torque"] = {
+                "rms_before": _floats(self.torque_rms[0]),
+                "rms_after": _floats(self.torque_rms[1]),
+                "relative_error_pct_before": None if whole is None else float(whole[0]),
+                "relative_error_pct_after": None if whole is None else float(whole[1]),
+                "relative_error_pct_by_unit": {
+                    unit: {"before": float(pair[0]), "after": float(pair[1])}
+                    for unit, pair in self.torque_relative_pct.items()}}
         return out
 
 

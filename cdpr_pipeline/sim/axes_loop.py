@@ -137,12 +137,18 @@ def implicit_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray
         up, down, r_v, r_dv = model.friction_torque(qs, speeds)
     else:
         (up, down, r_v, r_dv), at, dv = first
-        law = model.rows_law(v.shape[0])
-        if law is not None:
+        parts = compiled_parts(model, v.shape[0])
+        if parts is not None:
             # the same arithmetic compiled, entry by entry (a dozen numpy calls a
-            # sub-step on a few runs cost more than the arithmetic)
-            v1 = compiled.implicit_axes(v, force, h, inertia, first[0], at, dv,
-                                        REST_SPEED, MAX_NEWTON, NEWTON_TOLERANCE, *law)
+            # sub-step on a few runs cost more than the arithmetic), each model's runs
+            # by one call with its own inertia and law (contiguous arrays: one compiled
+            # version of the kernel)
+            v1 = np.empty(v.shape)
+            for runs, part, law in parts:
+                v1[runs] = compiled.implicit_axes(
+                    v[runs], force[runs], h, part.winch.inertia,
+                    np.ascontiguousarray(first[0][:, runs]), at[runs], dv[runs],
+                    REST_SPEED, MAX_NEWTON, NEWTON_TOLERANCE, *law)
             return q + 0.5 * h * (v + v1), v1
     direction = np.sign(at)
     theta = _theta(inertia, (r_dv - r_v) / dv, v, h)
@@ -235,6 +241,30 @@ def with_compiled_law(model: Drives | DrivesOfRows) -> Drives | DrivesOfRows:
     if isinstance(model, DrivesOfRows):
         return DrivesOfRows(tuple(with_compiled_law(m) for m in model.models), model.index)
     return model.replace(compiled_law=True)
+
+
+def compiled_parts(model: Drives | DrivesOfRows, batch: int
+                   ) -> list[tuple[slice | np.ndarray, Drives, tuple]] | None:
+    """The runs of a batch of ``batch`` runs by the model they follow, each with that
+    model and its compiled law (:meth:`~cdpr_pipeline.sim.plant.FrictionLaw.rows_law`),
+    where every model of the batch has one (:func:`with_compiled_law`); else None. One
+    model: all runs (a slice); several (:class:`~cdpr_pipeline.sim.model_rows.
+    DrivesOfRows`): each model's runs (:attr:`~cdpr_pipeline.sim.model_rows.DrivesOfRows.
+    run_selectors`), those of a model no run follows left out. The implicit step takes
+    each part by one compiled call with its model's inertia and law, the steep path
+    reads each entry's law by its run's model."""
+    if not isinstance(model, DrivesOfRows):
+        law = model.rows_law(batch)
+        return None if law is None else [(slice(None), model, law)]
+    parts = []
+    for part, runs, taken in zip(model.models, model.runs_by_model, model.run_selectors,
+                                 strict=True):
+        if runs.size:
+            law = part.rows_law(runs.size)
+            if law is None:
+                return None
+            parts.append((taken, part, law))
+    return parts
 
 
 def _advance(model: Drives, q: np.ndarray, v: np.ndarray, drive: np.ndarray | None,
@@ -344,9 +374,9 @@ def path_step(model: Drives, q: np.ndarray, v: np.ndarray, force: np.ndarray, h:
     alpha = force[at] * beta
     reach = 2.0 * np.abs(np.concatenate([start[:1], rest[:3]])).max(axis=0)[at]
 
-    if model.rows_law(v.shape[0]) is not None:
+    if compiled_parts(model, v.shape[0]) is not None:
         def friction(w: np.ndarray) -> np.ndarray:
-            # the compiled law at the gathered entries alone
+            # the compiled law at the gathered entries alone (each its run's model's)
             return model.drive_friction(middle, v, w, at[0], at[1])
     else:
         # the law is read on the runs with a steep entry alone (the model of those runs)

@@ -136,7 +136,9 @@ class DrivesOfRows:
     plus drive torques). What the axes' closed loop (:class:`~cdpr_pipeline.sim.
     axes_loop.AxesLoop`) reads of a model, per run: the inertia and lags (B, n), and the
     resisting force, each model's on its own runs (the batch is the second-last axis of
-    every friction call). The closed form of an affine friction takes one model: such a
+    every friction call); where every model's law is compiled, the implicit step takes
+    each model's runs by one compiled call (:func:`~cdpr_pipeline.sim.axes_loop.
+    compiled_parts`). The closed form of an affine friction takes one model: such a
     model is refused here. The sub-steps are chosen per model
     (:func:`~cdpr_pipeline.sim.axes_loop.substeps_for` reads one model) and passed to
     the loop.
@@ -192,8 +194,19 @@ class DrivesOfRows:
         return {}
 
     @cached_property
-    def _runs(self) -> list[np.ndarray]:
-        return [np.flatnonzero(self.index == k) for k in range(len(self.models))]
+    def runs_by_model(self) -> tuple[np.ndarray, ...]:
+        """The runs (indices) that follow each of :attr:`models`, in their order (empty
+        for a model none of these runs follows)."""
+        return tuple(np.flatnonzero(self.index == k) for k in range(len(self.models)))
+
+    @cached_property
+    def run_selectors(self) -> tuple[slice | np.ndarray, ...]:
+        """:attr:`runs_by_model` as each model's runs are best taken from a batch's
+        arrays: a slice where they are consecutive (a view, not a copy: the closed
+        loop takes them a few times a sub-step), else the indices."""
+        return tuple(slice(int(runs[0]), int(runs[-1]) + 1)
+                     if runs.size and np.all(np.diff(runs) == 1) else runs
+                     for runs in self.runs_by_model)
 
     def rows_law(self, batch: int) -> None:
         """None: no one compiled law serves the batch (:meth:`~cdpr_pipeline.sim.plant.
@@ -205,9 +218,25 @@ class DrivesOfRows:
         """Each model's resisting force on its own runs (axis -2 of both arrays)."""
         theta, omega = np.asarray(theta, float), np.asarray(omega, float)
         out = np.empty(np.broadcast_shapes(theta.shape, omega.shape))
-        for model, runs in zip(self.models, self._runs, strict=True):
+        for model, runs in zip(self.models, self.run_selectors, strict=True):
             out[..., runs, :] = model.friction_torque(theta[..., runs, :],
                                                       omega[..., runs, :])
+        return out
+
+    def drive_friction(self, theta: np.ndarray, omega: np.ndarray, w: np.ndarray,
+                       runs: np.ndarray, drives: np.ndarray) -> np.ndarray:
+        """:meth:`~cdpr_pipeline.sim.plant.FrictionLaw.drive_friction` (Q, D) of D axes
+        (axis ``drives[d]`` of run ``runs[d]``) at speeds ``w`` (Q, D), each read by
+        its own run's model (every other axis frozen at ``omega``, every axis at
+        ``theta``, (B, n) both)."""
+        w = np.asarray(w, dtype=float)
+        out = np.empty(w.shape)
+        owner = self.index[runs]
+        for k, model in enumerate(self.models):
+            at = np.flatnonzero(owner == k)
+            if at.size:
+                out[:, at] = model.drive_friction(theta, omega, w[:, at], runs[at],
+                                                  drives[at])
         return out
 
 

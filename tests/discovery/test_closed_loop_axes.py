@@ -8,12 +8,15 @@ or free-form); seeds are drawn from the commit (``CDPR_TEST_SEED`` replays one).
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.trajectory import Trajectory
-from cdpr_pipeline.discovery.closed_loop import motion_horizon
+from cdpr_pipeline.discovery.closed_loop import _run_errors, motion_horizon
+from cdpr_pipeline.discovery.closed_loop_report import _relative
 from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.testing.independent_sim.axes import random_axes_rig, simulate_axes_dataset
 from cdpr_pipeline.testing.lab_cases import fast_settings
@@ -67,6 +70,38 @@ def test_diagnose_re_simulates_axes_in_closed_loop(loaded_axes):
     assert "feedforward" in record and "rms_extended_feedforward" in \
         record["feedforward"]["runs"][d.heldout[0]]
     assert d.plots.closed_loop is not None and d.plots.closed_loop.t[-1] > 1.0
+
+
+def test_a_runs_force_error_is_taken_per_unit():
+    """A rotary axis (N m) beside two prismatic ones (N): the run's force relative error
+    is ``100 |u - u_sim| / |u|`` over the channels of each unit alone (N m and N are
+    never added: over all three the prismatic axes' hundreds of N would hide the rotary
+    axis's 10 %); where every channel shares one unit it is also the run's one figure."""
+    samples = 50
+    measured = np.tile([3.0, 400.0, 300.0], (samples, 1))
+    before = {"position": np.zeros((samples, 3)),
+              "torque": np.tile([0.3, 40.0, 0.0], (samples, 1))}
+    after = {"position": np.zeros((samples, 3)),
+             "torque": np.tile([0.15, 0.0, 20.0], (samples, 1))}
+    run = _run_errors(SimpleNamespace(torques=measured), before, after, True,
+                      ("N m", "N", "N"))
+    assert set(run.torque_relative_pct) == {"N m", "N"}
+    assert run.torque_relative_pct["N m"] == pytest.approx((10.0, 5.0), rel=1e-12)
+    assert run.torque_relative_pct["N"] == pytest.approx((8.0, 4.0), rel=1e-12)
+    # the report's cell: each unit's figure apart
+    assert _relative(run.torque_relative_pct) == "N m: 10.00 → 5.00 %; N: 8.00 → 4.00 %"
+    record = run.as_dict()["torque"]
+    assert record["relative_error_pct_before"] is None is record["relative_error_pct_after"]
+    assert record["relative_error_pct_by_unit"]["N m"] == pytest.approx(
+        {"before": 10.0, "after": 5.0}, rel=1e-12)
+    one_unit = _run_errors(SimpleNamespace(torques=measured), before, after, True,
+                           ("N",) * 3).as_dict()["torque"]
+    whole = 100 * np.linalg.norm([0.3, 40.0]) / np.linalg.norm([3.0, 400.0, 300.0])
+    assert one_unit["relative_error_pct_before"] == pytest.approx(whole, rel=1e-12)
+    assert _relative({"N": (5.0, 2.5)}) == "5.00 → 2.50 %"
+    assert one_unit["relative_error_pct_by_unit"] == {
+        "N": {"before": one_unit["relative_error_pct_before"],
+              "after": one_unit["relative_error_pct_after"]}}
 
 
 def test_without_a_stated_controller_the_motion_is_compared_n_steps_ahead(tmp_path, seed):

@@ -69,7 +69,7 @@ def test_causes_chosen_without_the_cross_test_file_lower_its_closed_loop_force_e
     assert d.as_json()["split"]["crosstest"] == ["001_pulses"]
     run = d.closed_loop.runs["001_pulses"]
     assert run.crosstest and not run.heldout
-    before, after = run.torque_relative_pct
+    before, after = run.torque_relative_pct["N"]
     print(f"cross-test closed-loop force error: nominal {before:.2f} %, extended "
           f"{after:.2f} %")
     assert d.causes and after < before

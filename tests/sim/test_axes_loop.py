@@ -11,14 +11,17 @@ from cdpr_pipeline.data.axis_controller import AxisController
 from cdpr_pipeline.data.io import load_dataset
 from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.discovery.closed_loop import resimulate
-from cdpr_pipeline.sim import axes_loop
+from cdpr_pipeline.sim import axes_loop, compiled
 from cdpr_pipeline.sim.axes_loop import (
     AxesLoop,
     AxesReferences,
+    compiled_parts,
     forced_response,
     substeps_for,
+    with_compiled_law,
 )
 from cdpr_pipeline.sim.effects import EFFECTS
+from cdpr_pipeline.sim.model_rows import DrivesOfRows
 from cdpr_pipeline.sim.plant import Drives, nominal_plant
 from cdpr_pipeline.testing.independent_sim.axes import random_axes_rig, simulate_axes_dataset
 
@@ -145,6 +148,70 @@ def test_the_compiled_law_steps_the_models_law(monkeypatch, sharpness):
                                atol=1e-11 * motion)
     np.testing.assert_allclose(compiled.force, numpy_law.force, rtol=0,
                                atol=1e-11 * np.max(np.abs(numpy_law.force)))
+
+
+@pytest.mark.parametrize("sharpness", [None, 500.0])
+def test_a_batch_of_models_steps_each_by_its_compiled_law(monkeypatch, seed, sharpness):
+    """The nominal model beside an extended one with its own inertia, viscous friction,
+    a Stribeck bump and a lag (not the nominal plus drive torques), in one batch as the
+    closed-loop comparison runs them (:class:`~cdpr_pipeline.sim.model_rows.
+    DrivesOfRows`): each model's runs take the compiled implicit step with that model's
+    inertia and law (:func:`~cdpr_pipeline.sim.axes_loop.compiled_parts`), every run
+    moves as its model moves alone, and as the batch moved by the numpy step (the
+    batch's step before), to rounding (measured on 16 draws: equal to the last bit)."""
+    rng = np.random.default_rng(seed)
+    n = 3
+    axes = WinchParams(inertia=rng.uniform(0.5, 20.0, n), viscous=rng.uniform(1.0, 50.0, n),
+                       coulomb=rng.uniform(0.2, 8.0, n), offset=rng.uniform(-1.0, 1.0, n))
+    nominal = Drives(axes, sign_sharpness=sharpness)
+    if sharpness is None:     # the hard sign alone is stepped in closed form, not batched
+        nominal = nominal.with_effects([EFFECTS["stribeck_friction"](
+            static_ratio=rng.uniform(1.2, 2.0), stribeck_velocity=rng.uniform(0.01, 0.1))])
+    changed = WinchParams(inertia=axes.inertia * rng.uniform(0.7, 1.3, n),
+                          viscous=axes.viscous * rng.uniform(0.7, 1.3, n),
+                          coulomb=axes.coulomb, offset=axes.offset)
+    extended = nominal.replace(winch=changed).with_effects([
+        EFFECTS["stribeck_friction"](static_ratio=rng.uniform(1.5, 2.5),
+                                     stribeck_velocity=rng.uniform(0.02, 0.2)),
+        EFFECTS["actuator_lag"](time_constant_s=rng.uniform(0.002, 0.01))])
+    band = 2 * np.pi * 5.0
+    controller = AxisController.from_dict(
+        {"type": "position_loop", "rate_hz": 1000.0, "kp": (axes.inertia * band ** 2).tolist(),
+         "kd": (1.6 * axes.inertia * band).tolist(), "feedforward": "nominal"}, n)
+    refs = _references(batch=2, seed=seed)
+    both = AxesReferences(np.concatenate([refs.reference] * 2, axis=1),
+                          np.concatenate([refs.position] * 2), np.zeros((4, n)))
+    batch = DrivesOfRows.of([nominal, nominal, extended, extended])
+    believed = [nominal, nominal, nominal, extended]
+    parts = compiled_parts(with_compiled_law(batch), 4)
+    assert [p[1].winch.inertia.tolist() for p in parts] == \
+        [axes.inertia.tolist(), changed.inertia.tolist()]
+
+    def alone(model, belief):
+        return AxesLoop(model, controller, 1000.0, feedforward=belief,
+                        substeps=1).run(refs).position
+
+    # (alone first: the kernels' first call compiles them all and puts them in place)
+    nominal_alone, extended_alone = alone(nominal, nominal), alone(extended, believed[2:])
+    sizes = []
+
+    def counted(v, *args):
+        sizes.append(v.shape[0])
+        return implicit_axes(v, *args)
+
+    implicit_axes = compiled.implicit_axes
+    monkeypatch.setattr(compiled, "implicit_axes", counted)
+    joint = AxesLoop(batch, controller, 1000.0, feedforward=believed,
+                     substeps=1).run(both).position
+    assert set(sizes) == {2}          # each model's two runs by one compiled call
+    motion = np.max(np.abs(joint))
+    np.testing.assert_allclose(joint[:, :2], nominal_alone, rtol=0, atol=1e-12 * motion)
+    np.testing.assert_allclose(joint[:, 2:], extended_alone, rtol=0, atol=1e-12 * motion)
+    assert np.abs(joint[:, 2:] - joint[:, :2]).max() > 1e-4 * motion   # the models differ
+    monkeypatch.setattr(axes_loop, "compiled_parts", lambda model, batch: None)
+    numpy_step = AxesLoop(batch, controller, 1000.0, feedforward=believed,
+                          substeps=1).run(both).position
+    np.testing.assert_allclose(joint, numpy_step, rtol=0, atol=1e-11 * motion)
 
 
 def test_a_velocity_loop_with_limit_and_external_force():

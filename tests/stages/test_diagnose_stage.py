@@ -147,7 +147,10 @@ def test_foreign_rig_is_diagnosed(tmp_path, cfg):
     # give the same record to the bit), and when the held-out intervals came to take
     # their draws from their level (validity.bootstrap_draws: 20 000 at the first step's
     # 20 candidates, where this test's n_boot override gave 200; the override went with
-    # n_boot): only the candidates' intervals moved, every decision stayed. Regenerated:
+    # n_boot): only the candidates' intervals moved, every decision stayed, and when a
+    # run's closed-loop force error came to be given per force unit too (each run's
+    # torque block gained relative_error_pct_by_unit, its one unit's figures those of
+    # the run, every number as it was). Regenerated:
     # run_diagnosis with this
     # configuration under OPENBLAS_CORETYPE=Haswell, the record without "dataset".
     expected = json.loads((Path(__file__).parent / "foreign_rig_diagnosis.json").read_text())

@@ -155,9 +155,13 @@ def records(kind_cases):
         closed_loop=ClosedLoopComparison(
             True, None, errors, errors, "closed_loop",
             {"000_run": RunMotionErrors(True, ((0.001,), (0.0005,)), ((0.002,), (0.001,)),
-                                        ((1.0,), (0.5,)), (5.0, 2.5), False),
+                                        ((1.0,), (0.5,)), {"N": (5.0, 2.5)}, False),
              "001_aside": RunMotionErrors(False, ((0.001,), (0.0005,)),
-                                          ((0.002,), (0.001,)), crosstest=True)},
+                                          ((0.002,), (0.001,)), crosstest=True),
+             # rotary and prismatic axes: the force's relative error per unit alone
+             "002_mixed": RunMotionErrors(False, ((0.001,), (0.0005,)),
+                                          ((0.002,), (0.001,)), ((1.0, 2.0), (0.5, 1.0)),
+                                          {"N m": (5.0, 2.5), "N": (3.0, 1.5)})},
             None, ("q1",), ("m",),
             FeedforwardTracking({"000_run": ((0.001,), (0.0005,))},
                                 {"000_run": ((0.002,), (0.001,))})),
