@@ -14,7 +14,7 @@ Sizes of effects are written as a *quantity* of the channel they act on
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -103,3 +103,28 @@ def with_unit(value: float, unit: str, fmt: str = ".4g") -> str:
     """
     text = format(value, fmt)
     return f"{text} {unit}" if unit else text
+
+
+def shares_by_unit(squares: Sequence[float], units: Sequence[str] | None = None
+                   ) -> tuple[float, ...]:
+    """Each column's share of a residual's sum of squares, taken among the columns of
+    its own unit: squares add only in one unit (N with N, N m with N m), so on a rig
+    with linear and rotary axes each unit's columns share their own error. ``units``
+    None: one unit for all. A unit whose columns have no error gives shares of 0.
+
+    Examples
+    --------
+    >>> shares_by_unit([1.0, 3.0, 2.0], ["N m", "N m", "N"])
+    (0.25, 0.75, 1.0)
+    >>> shares_by_unit([1.0, 3.0])
+    (0.25, 0.75)
+    """
+    squares = [float(s) for s in squares]
+    units = [""] * len(squares) if units is None else list(units)
+    if len(units) != len(squares):
+        raise ValueError(f"{len(squares)} columns but {len(units)} units")
+    total: dict[str, float] = {}
+    for s, u in zip(squares, units, strict=True):
+        total[u] = total.get(u, 0.0) + s
+    return tuple(s / total[u] if total[u] > 0 else 0.0
+                 for s, u in zip(squares, units, strict=True))

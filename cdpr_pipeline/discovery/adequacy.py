@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from cdpr_pipeline.data.reading import MAX_CUTOFF_FRACTION, TRIM_PERIODS, RegressionSettings
+from cdpr_pipeline.data.units import shares_by_unit
 from cdpr_pipeline.discovery.bands import power_band_hz, row_noise
 from cdpr_pipeline.discovery.residuals import Residuals, channel_names, measured_rows
 from cdpr_pipeline.discovery.results import ResidualValidity, Unexplained, UnexplainedColumn
@@ -81,13 +82,16 @@ def validity_alpha(alpha: float, n_columns: int) -> float:
 
 def heldout_columns(res: Residuals, held: list[RunSignals],
                     validity: dict[str, ResidualValidity], alpha: float,
-                    channel: str = "torque") -> tuple[UnexplainedColumn, ...]:
+                    channel: str = "torque", units: Sequence[str] | None = None
+                    ) -> tuple[UnexplainedColumn, ...]:
     """Every held-out column of ``channel``: its RMS error relative to its measured
     signal (%), its share of the held-out error, the band holding 80 % of its residual
     power above the noise floor (:func:`~cdpr_pipeline.discovery.bands.power_band_hz`),
     the validity tests it fails (Ljung-Box at ``alpha`` over the columns), and its RMS
     error over the measurement noise its rows carry
-    (:func:`~cdpr_pipeline.discovery.bands.row_noise`).
+    (:func:`~cdpr_pipeline.discovery.bands.row_noise`). The share is taken among the
+    columns of its unit (``units``, one per column; None: one unit), as
+    :func:`~cdpr_pipeline.data.units.shares_by_unit` says.
 
     The band lies within the band the rows keep: an error above it leaves there only
     what its slower passes put in it. (The unfiltered full-rate residual is no guide:
@@ -95,7 +99,7 @@ def heldout_columns(res: Residuals, held: list[RunSignals],
     model cannot follow.)"""
     r = res.stacked(channel)
     measured = measured_rows(held, channel)
-    total = float(np.sum(r ** 2)) or 1.0
+    shares = shares_by_unit(np.sum(r ** 2, axis=0), units)
     level = validity_alpha(alpha, r.shape[1])
     rms = np.sqrt(np.mean(r ** 2, axis=0))
     noise_ratio = rms / np.maximum(row_noise(held, channel), 1e-300)
@@ -105,9 +109,10 @@ def heldout_columns(res: Residuals, held: list[RunSignals],
     for i, name in enumerate(channel_names(channel, r.shape[1])):
         rel = 100 * float(rms[i] / max(np.sqrt(np.mean(measured[:, i] ** 2)), 1e-300))
         out.append(UnexplainedColumn(
-            name, rel, float(np.sum(r[:, i] ** 2)) / total,
+            name, rel, shares[i],
             power_band_hz(np.concatenate([x[channel][:, i] for x in res.by_run]), rate),
-            tuple(failed_tests(validity[name], level)), float(noise_ratio[i])))
+            tuple(failed_tests(validity[name], level)), float(noise_ratio[i]),
+            "" if units is None else units[i]))
     return tuple(out)
 
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from cdpr_pipeline.data.rig import Rig
 from cdpr_pipeline.data.trajectory import Trajectory
+from cdpr_pipeline.data.units import shares_by_unit
 from cdpr_pipeline.discovery.plots import ClosedLoopPlot
 from cdpr_pipeline.discovery.residuals import Model, channel_names
 from cdpr_pipeline.discovery.results import (
@@ -470,12 +471,13 @@ def compare_motion(nominal: Model, extended: Model, rig: Rig,
     summaries = {}
     for sig_name in signals:
         allb = np.concatenate([err_nom[n][sig_name] for n in err_nom if n not in aside])
-        total = float(np.sum(allb ** 2)) or 1.0
         cols = coordinates if sig_name == "position" else \
             channel_names("torque", allb.shape[1])
+        # each column's share among the columns of its unit (m with m, rad with rad)
+        shares = shares_by_unit(np.sum(allb ** 2, axis=0),
+                                position_units(rig) if sig_name == "position" else forces)
         rows += [Discrepancy(f"{mode}_{sig_name}", col,
-                             float(np.sqrt(np.mean(allb[:, i] ** 2))),
-                             float(np.sum(allb[:, i] ** 2) / total))
+                             float(np.sqrt(np.mean(allb[:, i] ** 2))), shares[i])
                  for i, col in enumerate(cols)]
         summaries[sig_name] = ClosedLoopErrors(_summary(err_nom, held_names, sig_name),
                                                _summary(err_ext, held_names, sig_name))

@@ -124,9 +124,12 @@ class UnexplainedColumn:
     failed_tests: tuple[str, ...]
     #: its RMS error over the measurement noise its rows carry
     noise_ratio: float = float("nan")
+    #: its unit (its share is taken among the columns of this unit)
+    unit: str = ""
 
     def as_dict(self) -> dict[str, Any]:
-        return {"channel": self.channel, "relative_error_pct": self.relative_error_pct,
+        return {"channel": self.channel, "unit": self.unit,
+                "relative_error_pct": self.relative_error_pct,
                 "noise_ratio": self.noise_ratio, "share_of_error": self.share_of_error,
                 "band_hz": None if self.band_hz is None else list(self.band_hz),
                 "failed_tests": list(self.failed_tests)}
@@ -148,9 +151,20 @@ class Unexplained:
     analysed_hz: float = float("nan")
 
     @property
-    def share_of_error(self) -> float:
-        """The columns' share of the held-out residual energy of ``signal``."""
-        return float(sum(c.share_of_error for c in self.columns))
+    def share_of_error_by_unit(self) -> dict[str, float]:
+        """Per unit of the columns, their share of the held-out residual energy of
+        ``signal``'s columns in that unit (squares add only in one unit)."""
+        out: dict[str, float] = {}
+        for c in self.columns:
+            out[c.unit] = out.get(c.unit, 0.0) + float(c.share_of_error)
+        return out
+
+    @property
+    def share_of_error(self) -> float | None:
+        """The columns' share of the held-out residual energy of ``signal``; None where
+        they are in several units (:attr:`share_of_error_by_unit` then)."""
+        shares = self.share_of_error_by_unit
+        return next(iter(shares.values())) if len(shares) == 1 else None
 
     @property
     def band_hz(self) -> tuple[float, float] | None:
@@ -161,6 +175,7 @@ class Unexplained:
     def as_dict(self) -> dict[str, Any]:
         return {"signal": self.signal, "channels": [c.channel for c in self.columns],
                 "share_of_error": self.share_of_error,
+                "share_of_error_by_unit": self.share_of_error_by_unit,
                 "band_hz": None if self.band_hz is None else list(self.band_hz),
                 "failed_tests": sorted({t for c in self.columns for t in c.failed_tests}),
                 "analysed_band_hz": [0.0, self.analysed_hz],

@@ -285,7 +285,7 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
             f"The nominal model does not explain the held-out measurements, and no "
             f"candidate effect improves them {short} (verdict: unexplained): the "
             f"held-out {signal_words(u.signal, nominal)} residual of {where} holds "
-            f"{100 * u.share_of_error:.0f} % of the error"
+            f"{_share_words(u)} of the error"
             + ("" if band is None else f", most of it at {band[0]:.3g}-{band[1]:.3g} Hz of "
                f"the 0-{u.analysed_hz:.3g} Hz the regression analyses")
             + f", beyond the {u.noise_ratio:g} times the noise no effect-free dataset "
@@ -311,3 +311,11 @@ def summary_sentence(causes: Sequence[Judgement], nominal: Model, gain: HeldoutG
                                       zip(causes[1:], sizes[1:], strict=True)) + "."
     text += f" Extending the model: {gain_text(gain)} on the {signal_words(gain.signal, nominal)}."
     return text
+
+
+def _share_words(u: Unexplained) -> str:
+    """``80 %``, or per unit on a rig with both: ``80 % (N m) and 60 % (N)``."""
+    if u.share_of_error is not None:
+        return f"{100 * u.share_of_error:.0f} %"
+    return " and ".join(f"{100 * share:.0f} % ({unit})"
+                        for unit, share in u.share_of_error_by_unit.items())

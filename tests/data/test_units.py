@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from cdpr_pipeline.data.rig import AxesRig, WinchParams
-from cdpr_pipeline.data.units import ChannelUnits
+from cdpr_pipeline.data.units import ChannelUnits, shares_by_unit
 
 
 def _axes(**extra) -> AxesRig:
@@ -43,3 +43,19 @@ def test_quantities_have_the_channels_units(quantity, rotary, prismatic):
 def test_an_unknown_quantity_is_an_error():
     with pytest.raises(ValueError, match="unknown quantity"):
         ChannelUnits().of("furlongs")
+
+
+def test_shares_of_error_are_taken_within_each_unit():
+    from_n_m = [4.0, 1.0]
+    from_n = [2.0, 6.0]
+    units = ["N m", "N m", "N", "N"]
+    shares = shares_by_unit(from_n_m + from_n, units)
+    assert shares == pytest.approx([0.8, 0.2, 0.25, 0.75])
+    # the N columns written in mN (squares 1e6 larger) share the same error: a sum across
+    # units would hand them all of it
+    rescaled = shares_by_unit(from_n_m + [1e6 * s for s in from_n], units)
+    assert rescaled == pytest.approx(shares)
+    assert shares_by_unit([1.0, 3.0]) == pytest.approx([0.25, 0.75])
+    assert shares_by_unit([0.0, 0.0], ["N", "N"]) == (0.0, 0.0)
+    with pytest.raises(ValueError, match="2 columns but 1 units"):
+        shares_by_unit([1.0, 2.0], ["N"])

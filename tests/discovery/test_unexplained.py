@@ -24,7 +24,7 @@ from cdpr_pipeline.discovery.adequacy import heldout_columns, unexplained_residu
 from cdpr_pipeline.discovery.bands import row_noise
 from cdpr_pipeline.discovery.diagnosis import DiagnosisSettings, summary_sentence
 from cdpr_pipeline.discovery.residuals import Residuals
-from cdpr_pipeline.discovery.results import HeldoutGain
+from cdpr_pipeline.discovery.results import HeldoutGain, Unexplained, UnexplainedColumn
 from cdpr_pipeline.discovery.signals import dataset_signals
 from cdpr_pipeline.testing.foreign_cases import FAST, foreign_case, foreign_settings
 
@@ -175,6 +175,25 @@ def test_none_claims_adequacy_within_the_calibrated_gate():
     assert ADEQUATE in failing and "verdict: none" in failing
     assert "u2" in failing and "3.4 times the measurement noise" in failing
     assert "below 12 times" in failing
+
+
+def test_an_unexplained_share_is_taken_per_unit_on_a_rig_with_both():
+    """On a rig with a rotary and a prismatic axis the unexplained columns' share of the
+    error is their unit's: squares in N and N m do not add."""
+    columns = (UnexplainedColumn("u1", 5.0, 0.9, (1.0, 2.0), ("ljung_box",), 30.0, "N m"),
+               UnexplainedColumn("u2", 4.0, 0.6, None, ("ljung_box",), 25.0, "N"))
+    mixed = Unexplained("torque", columns, 0.1, 0.01, 20.0, 40.0)
+    assert mixed.share_of_error is None
+    assert mixed.share_of_error_by_unit == {"N m": 0.9, "N": 0.6}
+    record = mixed.as_dict()
+    assert record["share_of_error"] is None and [c["unit"] for c in record["columns"]] == \
+        ["N m", "N"]
+    gain = HeldoutGain("torque", 1.0, 1.0, 0.0, (-0.1, 0.1), {})
+    sentence = summary_sentence([], None, gain, unexplained=mixed)
+    assert "90 % (N m) and 60 % (N) of the error" in sentence
+    one = Unexplained("torque", columns[:1], 0.1, 0.01, 20.0, 40.0)
+    assert one.share_of_error == 0.9
+    assert "90 % of the error" in summary_sentence([], None, gain, unexplained=one)
 
 
 @pytest.mark.slow

@@ -142,7 +142,10 @@ def records(kind_cases):
         out[name] = diagnosis_record(case.diagnosis, str(case.dataset.root), case.split)
     d = kind_cases["axes"].diagnosis
     nominal = d.nominal
-    column = UnexplainedColumn("u1", 5.0, 0.9, (1.0, 2.0), ("ee", "ljung_box"), 30.0)
+    # a rotary and a prismatic column: each shares its own unit's error
+    columns = (UnexplainedColumn("u1", 5.0, 0.9, (1.0, 2.0), ("ee", "ljung_box"), 30.0,
+                                 "N m"),
+               UnexplainedColumn("u2", 4.0, 0.6, None, ("ee",), 25.0, "N"))
     errors = ClosedLoopErrors((0.001, 0.002, 0.001), (0.0005, 0.001, 0.0005))
     # the band the motion gave, as a record following the residual holds it: without the
     # wider band's blocks this draw may already carry (``motion`` where the wider band
@@ -150,7 +153,7 @@ def records(kind_cases):
     motion = {k: v for k, v in d.band.get("motion", d.band).items() if k != "tried"}
     extra = dataclasses.replace(
         d, unusable=Unusable(150.0, 100.0, nominal.winch.as_dict(), kept=True),
-        unexplained=Unexplained("torque", (column,), 0.1, 0.01, 20.0, 40.0),
+        unexplained=Unexplained("torque", columns, 0.1, 0.01, 20.0, 40.0),
         blackbox=BlackBoxShare("torque", 0.2, 0.9),
         closed_loop=ClosedLoopComparison(
             True, None, errors, errors, "closed_loop",

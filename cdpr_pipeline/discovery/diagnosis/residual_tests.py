@@ -5,8 +5,11 @@ tests whiten with."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
+from cdpr_pipeline.data.units import shares_by_unit
 from cdpr_pipeline.discovery.diagnosis.settings import DiagnosisSettings
 from cdpr_pipeline.discovery.plots import ColumnPlot
 from cdpr_pipeline.discovery.residuals import (
@@ -100,11 +103,16 @@ def _innovations(res: Residuals, channel: str, noise: dict[str, NoiseModel]) -> 
 
 
 def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
-                  settings: DiagnosisSettings, noise: dict[str, NoiseModel]
+                  settings: DiagnosisSettings, noise: dict[str, NoiseModel],
+                  force_units: Sequence[str] | None = None
                   ) -> tuple[list[Discrepancy], dict[str, ColumnPlot]]:
     """Per channel column of the nominal model: residual size, share, band, whiteness
     (of the innovations), what it follows, and the correlation tests. Also returns each
-    column's plot data, with what the extended model explains of its residual."""
+    column's plot data, with what the extended model explains of its residual.
+
+    A torque column's share is taken among the columns of its unit (``force_units``,
+    one per column; None: one unit), as :func:`~cdpr_pipeline.data.units.shares_by_unit`
+    says; cable lengths share one unit."""
     res = residuals(nominal, nominal, signals)
     ext = residuals(extended, nominal, signals)
     out, plots = [], {}
@@ -112,7 +120,8 @@ def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
     for ch in res.channels:
         stacked = res.stacked(ch)
         innovations = _innovations(res, ch, noise)
-        total = float(np.sum(stacked ** 2)) or 1.0
+        shares = shares_by_unit(np.sum(stacked ** 2, axis=0),
+                                force_units if ch == "torque" else None)
         full = _full_rate_residual(nominal, longest, ch)
         for i, name in enumerate(channel_names(ch, stacked.shape[1])):
             r = stacked[:, i]
@@ -131,7 +140,7 @@ def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
             lags = _lags(settings.max_lag, len(innovations))
             tests = correlation_tests(innovations[:, i], inputs, lags)
             out.append(Discrepancy(ch, name, float(np.sqrt(np.mean(r ** 2))),
-                                   float(np.sum(r ** 2) / total), bands,
+                                   shares[i], bands,
                                    ljung_box_pvalue(innovations[:, i], lags),
                                    tuple(follows), corr, tests))
             plots[name] = ColumnPlot(r, r - ext.stacked(ch)[:, i], sigs)

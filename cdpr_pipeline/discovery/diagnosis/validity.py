@@ -35,8 +35,10 @@ def run(state: DiagnosisState) -> None:
     settings, nominal, extended = state.settings, state.nominal, state.extended
     train, held, channel = state.train, state.held, state.channel
     state.noise = fit_noise(extended, nominal, train)
+    # shares of the error are taken per unit (a rig may have N and N m channels)
+    units = [u.force for u in state.dataset.rig.channel_units]
     state.found, state.columns = discrepancies(nominal, extended, state.signals, settings,
-                                               state.noise)
+                                               state.noise, units)
     state.nominal_metrics = model_metrics(nominal, nominal, train, held)
     state.validity = ValidityComparison(
         channel,
@@ -47,7 +49,8 @@ def run(state: DiagnosisState) -> None:
     # fails (adequacy): no cause, and a material column failing a test, is `unexplained`
     analysed_hz = analysed_band_hz(settings.regression, float(state.dataset.rig.sample_rate_hz))
     state.held_columns = heldout_columns(state.before_held, held, state.validity.before,
-                                         settings.selection.alpha, channel)
+                                         settings.selection.alpha, channel,
+                                         units if channel == "torque" else None)
     state.failing = [c.channel for c in state.held_columns if c.failed_tests]
     state.unexplained = None if state.causes else unexplained_residual(
         state.held_columns, settings.unexplained_noise_ratio,
