@@ -10,9 +10,12 @@ come out within 0.1 % (last case). What is left with the generator's sensors is 
 on a slow axis (``I / F_v`` of 1 to 2 s) the viscous torque is a few % of the torque, and
 the torque noise (0.5 % of the typical torque) alone spreads F_v by 0.6 to 1.2 % (one
 standard deviation over 30 noise draws of one rig, no bias; 250 Hz and 100 Hz), so 2 %
-cannot hold on every draw. F_v is held to 2 % or to four of those spreads, whichever is
-larger, the spread read from the reported standard deviation times
-:data:`STD_UNDERSTATEMENT`; inertia and Coulomb of every axis to 2 %.
+cannot hold on every draw. With sensor noise every parameter is held to 2 % or to four
+of those spreads, whichever is larger, the spread read from its reported standard
+deviation times :data:`STD_UNDERSTATEMENT` (measured for F_v, assumed for the others, as
+``test_foreign_cdpr`` does); without noise, to 2 %. (The inertia was held to 2 % alone:
+on the 100 Hz corner with an inertia of 1e-3, its torque is a small part of the torque
+and noise spread it beyond that once in 200 draws, seed 732271689, 3.3 %.)
 """
 
 from __future__ import annotations
@@ -49,11 +52,12 @@ def test_default_identification_of_foreign_axes(tmp_path, n_axes, rate, inertia,
     out = json.loads((tmp_path / "id" / "identification.json").read_text())
     case = f"seed {seed}, {rig.n} axes at {rig.rate_hz:g} Hz, noise {noise}"
     assert out["heldout_runs"], case              # one run: a held-out time block
-    spread = STD_UNDERSTATEMENT * np.asarray(out["std"]["viscous"]) / rig.viscous
     for key in ("inertia", "viscous", "coulomb"):
-        tol = np.maximum(0.02, 4 * spread) if key == "viscous" and noise else 0.02
+        spread = STD_UNDERSTATEMENT * np.asarray(out["std"][key]) / getattr(rig, key)
+        tol = np.maximum(0.02, 4 * spread) if noise else 0.02
         err = np.asarray(out["params"][key]) / getattr(rig, key) - 1
-        assert np.all(np.abs(err) <= tol), f"{key}: {case}: errors {np.round(100 * err, 2)} %"
+        assert np.all(np.abs(err) <= tol), \
+            f"{key}: {case}: errors {np.round(100 * err, 2)} %, allowed {np.round(100 * tol, 2)} %"
     # an offset is often near zero: compared with the Coulomb level instead
     assert np.all(np.abs(np.asarray(out["params"]["offset"]) - rig.offset)
                   <= 0.02 * rig.coulomb), case
