@@ -28,7 +28,8 @@ class WinchRegression:
     cables: the winch-torque directions ``R N`` of internal cable forces at each row
     (``N`` the null space of ``K^T``), which the motion cannot tell: the target holds
     ``U* + R N lambda`` with ``lambda`` unknown per row
-    (:meth:`without_internal_forces`).
+    (:meth:`without_internal_forces`). Each winch's entry is scaled by its row's kept
+    share (the offset column), as its target is.
     """
 
     phi: np.ndarray

@@ -119,7 +119,10 @@ class _MotionRows:
         if internal is not None:
             # directions at the rows' own samples (the zero-phase decimation keeps every
             # q-th sample of the trimmed signal in place)
-            self.internal = internal[trim:len(t) - trim][::max(1, int(settings.decimate))]
+            rows = internal[trim:len(t) - trim][::max(1, int(settings.decimate))]
+            # the target holds filt(keep_i u_i): near winch i's dropped samples only the
+            # kept share of its internal-force torque, ``one`` (column "1") of it
+            self.internal = rows * self.phi[..., 3, None]
 
     def _rows(self, x: np.ndarray) -> np.ndarray:
         """``x`` trimmed and, with decimation, decimated."""

@@ -15,7 +15,16 @@ tensions leave in every winch's target (inertia up to 22 % off); they are fitted
 row and taken out (``WinchRegression.without_internal_forces``). That costs information
 each winch's own standard deviation does not count (errors reached 6.4-7.6 of those
 over 18 rigs), so the reported one is scaled by the joint fit's (``std_scale``,
-1.1-3x; then within 3.1 over the rigs checked).
+1.1-3x; then within 3.1 over the rigs checked). A winch's target is its filtered *kept*
+torque (stick and reversal samples out), so near its dropped samples it holds only the
+kept share of its internal-force torque; the rows' directions carry that share too
+(``regressors._MotionRows``). With bare directions some rigs were off by 10-16 of
+their reported deviations at no noise as with it (seed 1328649510: viscous of winch 3
+3.3 % low; seed 346: inertia of winch 4 5-6 % low), and error / reported deviation was
+3.2 (inertia, viscous; 2.5 Coulomb, 4.0 offset; root mean square over 351 rigs, seeds
+1-351) against 2.1-2.6 with 3 cables; with the share 2.1, 2.5, 2.1, 2.4 (226 rigs,
+seeds 1-229: none needs more than 2.1 of STD_UNDERSTATEMENT beyond the floor; 2 of the
+351 needed more than 2.5 before).
 
 What is left is noise, read from the reported standard deviation times
 :data:`STD_UNDERSTATEMENT` (the LSM's assumes white rows); every parameter is held to
