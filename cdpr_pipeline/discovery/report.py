@@ -58,6 +58,17 @@ def _pct(v: float) -> str:
     return f"{v:.1f} %"
 
 
+def _share_header(signal_units: list[tuple[str, str]]) -> str:
+    """The share column's header. A column's share is taken among its signal's columns
+    of its own unit (:func:`~cdpr_pipeline.data.units.shares_by_unit`); where a signal
+    has columns in two units (a rig with rotary and linear axes) the header says so."""
+    units: dict[str, set[str]] = {}
+    for signal, unit in signal_units:
+        units.setdefault(signal, set()).add(unit)
+    mixed = any(len(u) > 1 for u in units.values())
+    return "share of its unit's error (%)" if mixed else "share of the error (%)"
+
+
 def _unexplained_parts(d: Diagnosis) -> list[str]:
     """Where an ``unexplained`` residual sits: one row per held-out column."""
     u = d.unexplained
@@ -72,7 +83,8 @@ def _unexplained_parts(d: Diagnosis) -> list[str]:
             f"{u.noise_ratio:g} times the measurement noise, beyond what effect-free data "
             f"show) and no candidate explains why.</p>",
             _table(rows, ["channel", "error (% of the measured signal)",
-                          "error / measurement noise", "share of the error (%)",
+                          "error / measurement noise",
+                          _share_header([("", c.unit) for c in u.columns]),
                           "band (full-rate residual)", "failed tests"])]
 
 
@@ -135,7 +147,9 @@ def _discrepancies(d: Diagnosis) -> list[str]:
              ", ".join(e.correlates_with[:3])]
             for e in d.discrepancies]
     return ["<h2>What the nominal model gets wrong</h2>",
-            _table(rows, ["signal", "channel", "RMS error", "share of the error (%)",
+            _table(rows, ["signal", "channel", "RMS error",
+                          _share_header([(e.signal, column_unit(d, e))
+                                         for e in d.discrepancies]),
                           "band", "whiteness p", "follows"])]
 
 

@@ -122,7 +122,7 @@ class _MotionRows:
             rows = internal[trim:len(t) - trim][::max(1, int(settings.decimate))]
             # the target holds filt(keep_i u_i): near winch i's dropped samples only the
             # kept share of its internal-force torque, ``one`` (column "1") of it
-            self.internal = rows * self.phi[..., 3, None]
+            self.internal = rows * self.phi[..., COLUMNS.index("1"), None]
 
     def _rows(self, x: np.ndarray) -> np.ndarray:
         """``x`` trimmed and, with decimation, decimated."""

@@ -11,7 +11,7 @@ import pytest
 
 from cdpr_pipeline.discovery.diagnosis import diagnose
 from cdpr_pipeline.discovery.plots import Plots
-from cdpr_pipeline.discovery.report import render
+from cdpr_pipeline.discovery.report import _share_header, render
 from cdpr_pipeline.discovery.selection import Judgement, Selection
 from cdpr_pipeline.sim.effects import PayloadMassError
 from cdpr_pipeline.testing.lab_cases import fast_settings, lab_dataset, rng_for
@@ -57,3 +57,14 @@ def test_the_report_renders_the_causes_and_figures_of_the_typed_diagnosis(paper_
     # the figure's RMSE is the gain's
     assert np.sqrt(np.mean(ba.after ** 2)) == pytest.approx(record["gain"]["after"])
     assert plots.closed_loop is None                 # fast_settings: no closed loop
+
+
+def test_the_share_header_says_per_unit_where_a_signal_has_two_units():
+    """Shares add only within a unit (``shares_by_unit``): a table whose signal has
+    N m and N columns says each share is of its unit's error; one unit per signal (a
+    cable robot's torque in N m beside its lengths in m) keeps the plain header."""
+    assert _share_header([("torque", "N m"), ("torque", "N m"), ("length", "m")]) \
+        == "share of the error (%)"
+    assert _share_header([("torque", "N m"), ("torque", "N")]) \
+        == "share of its unit's error (%)"
+    assert _share_header([]) == "share of the error (%)"
