@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from cdpr_pipeline.discovery.diagnosis import diagnose
-from cdpr_pipeline.sim.effects import EFFECTS, Effect, make_effect
+from cdpr_pipeline.discovery.report import render
+from cdpr_pipeline.sim.effects import EFFECTS, Effect, make_effect, per_winch
 from cdpr_pipeline.testing.lab_cases import (
     contribution_errors,
     fast_settings,
@@ -49,7 +50,6 @@ def check_parameters(effect: Effect, cause: dict, d, data, case: str = "") -> No
     elif name == "cable_elasticity":
         # per cable (found alike or one per cable); a rigid cable found, if at all, far
         # stiffer than the elastic ones
-        from cdpr_pipeline.sim.effects import per_winch
         true = per_winch(effect.ea_n, effect.cables, 3, fill=np.inf)
         fitted = per_winch(p["ea_n"], p.get("cables"), 3, fill=np.inf)
         elastic = np.isfinite(true)
@@ -57,7 +57,6 @@ def check_parameters(effect: Effect, cause: dict, d, data, case: str = "") -> No
         assert np.all(fitted[~elastic] > 10 * true[elastic].max())
     elif name == "drum_radius_error":
         # per drum: a drum not named has no error in the fit
-        from cdpr_pipeline.sim.effects import per_winch
         fitted = per_winch(p["relative"], p.get("cables"), 3)   # the lab: 3 drums
         true = per_winch(effect.relative, effect.cables, 3)
         assert fitted == pytest.approx(true, abs=0.002)
@@ -91,8 +90,6 @@ def test_no_effect_gives_none(paper_rig, seed):
     assert record["verdict"] == "none", f"seed {seed}: false alarm {d.sentence}"
     assert record["causes"] == []
     assert record["gain"]["after"] == record["gain"]["before"]
-    from cdpr_pipeline.discovery.report import render
-
     assert "Verdict: none." in render(d)
 
 
