@@ -777,11 +777,13 @@ def path_friction(w: np.ndarray, g: np.ndarray, direction: np.ndarray, omega: np
 @_kernel
 def law_at(w: float, b: int, i: int, sharpness: float, viscous: np.ndarray,
            coulomb: np.ndarray, offset: np.ndarray, widths: np.ndarray, rows: np.ndarray,
-           sizes: np.ndarray) -> float:
+           sizes: np.ndarray, odd: np.ndarray) -> float:
     """The friction law of Gaussian bumps at speed ``w`` of winch ``i`` of run ``b``:
     ``F_v w + F_c s(w) + d`` plus each bump ``size exp(-(w / width)^2) s(w)`` where it
     acts (``rows[e, b]`` nonzero; ``rows`` (E, 1): on every run), ``s`` the smooth sign
-    ``tanh(k w)`` of ``sharpness`` ``k`` (infinite: the hard sign, 0 at 0). The law of
+    ``tanh(k w)`` of ``sharpness`` ``k`` (infinite: the hard sign, 0 at 0); a bump whose
+    ``odd[e]`` is zero is even, ``size exp(-(w / width)^2)`` (a free-form term
+    ``gauss(omega, width)``), the others odd (a Stribeck bump). The law of
     :func:`~cdpr_pipeline.sim.plant.resisting_torque`, its ``tanh`` and ``exp`` the C
     library's (numpy's own vectorised ones differ from them in the last bit on some
     CPUs)."""
@@ -797,14 +799,17 @@ def law_at(w: float, b: int, i: int, sharpness: float, viscous: np.ndarray,
     for e in range(sizes.shape[0]):
         if rows[e, b if spread else 0] != 0.0:
             x = w / widths[e, i]
-            total += sizes[e, i] * math.exp(-(x * x)) * s
+            if odd[e] != 0.0:
+                total += sizes[e, i] * math.exp(-(x * x)) * s
+            else:
+                total += sizes[e, i] * math.exp(-(x * x))
     return total
 
 
 @_kernel
 def friction_law(omega: np.ndarray, sharpness: float, viscous: np.ndarray,
                  coulomb: np.ndarray, offset: np.ndarray, widths: np.ndarray,
-                 rows: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+                 rows: np.ndarray, sizes: np.ndarray, odd: np.ndarray) -> np.ndarray:
     """:func:`law_at` at speeds ``omega`` (M, B, n) of every winch of every run:
     the stepped plant's law (:func:`~cdpr_pipeline.sim.plant.compiled_law_torque`)."""
     count, batch, n = omega.shape
@@ -813,21 +818,22 @@ def friction_law(omega: np.ndarray, sharpness: float, viscous: np.ndarray,
         for b in range(batch):
             for i in range(n):
                 out[q, b, i] = law_at(omega[q, b, i], b, i, sharpness, viscous, coulomb,
-                                      offset, widths, rows, sizes)
+                                      offset, widths, rows, sizes, odd)
     return out
 
 
 @_kernel
 def drive_law(w: np.ndarray, runs: np.ndarray, drives: np.ndarray, sharpness: float,
               viscous: np.ndarray, coulomb: np.ndarray, offset: np.ndarray,
-              widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+              widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray, odd: np.ndarray
+              ) -> np.ndarray:
     """:func:`law_at` at speeds ``w`` (Q, D) of D drives, drive ``d`` winch
     ``drives[d]`` of run ``runs[d]``: a steep winch's law along its own path alone."""
     out = np.empty(w.shape)
     for q in range(w.shape[0]):
         for d in range(w.shape[1]):
             out[q, d] = law_at(w[q, d], runs[d], drives[d], sharpness, viscous, coulomb,
-                               offset, widths, rows, sizes)
+                               offset, widths, rows, sizes, odd)
     return out
 
 
@@ -836,7 +842,8 @@ def implicit_axes(v: np.ndarray, force: np.ndarray, h: float, inertia: np.ndarra
                   first: np.ndarray, at: np.ndarray, dv: np.ndarray, rest_speed: float,
                   max_newton: int, tolerance: float, sharpness: float,
                   viscous: np.ndarray, coulomb: np.ndarray, offset: np.ndarray,
-                  widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+                  widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray,
+                  odd: np.ndarray) -> np.ndarray:
     """The speeds (B, n) after :func:`~cdpr_pipeline.sim.axes_loop.implicit_step` (its
     numpy reference, the arithmetic in its order) of axes whose law is :func:`law_at`'s,
     entry by entry: ``first`` (4, B, n) the law just above and below rest, at ``at``
@@ -875,9 +882,9 @@ def implicit_axes(v: np.ndarray, force: np.ndarray, h: float, inertia: np.ndarra
                     break
                 step = (1e-6 * abs(v1) + 1e-9) * side
                 r_v = law_at(v1, b, i, sharpness, viscous, coulomb, offset, widths, rows,
-                             sizes)
+                             sizes, odd)
                 r_dv = law_at(v1 + step, b, i, sharpness, viscous, coulomb, offset, widths,
-                              rows, sizes)
+                              rows, sizes, odd)
             out[b, i] = v1 * (0.0 if stuck else 1.0)
     return out
 
@@ -888,7 +895,7 @@ def rigid_rates(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarra
                 gravity_vector: np.ndarray, state: np.ndarray, torque: np.ndarray,
                 sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
                 offset: np.ndarray, widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray,
-                mask: np.ndarray, values: np.ndarray) -> np.ndarray:
+                odd: np.ndarray, mask: np.ndarray, values: np.ndarray) -> np.ndarray:
     """The state's rates (B, 6) of the rigid plant without actuator lag whose friction
     is :func:`law_at`'s (:meth:`~cdpr_pipeline.sim.plant.Plant.derivative`): its
     geometry (:func:`rigid_motion`), the law at the winch speeds, replaced by ``values``
@@ -905,7 +912,7 @@ def rigid_rates(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarra
                 resist[b, i] = values[b, i]
             else:
                 resist[b, i] = law_at(omega[b, i], b, i, sharpness, viscous, coulomb,
-                                      offset, widths, rows, sizes)
+                                      offset, widths, rows, sizes, odd)
     out = np.empty((batch, 6))
     out[:, 0:3] = state[:, 3:6]
     out[:, 3:6] = rigid_acceleration(units, torque, resist, curvature, radius, inertia,
@@ -919,7 +926,8 @@ def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.n
                      gravity_vector: np.ndarray, state: np.ndarray, torque: np.ndarray,
                      sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
                      offset: np.ndarray, widths: np.ndarray, rows: np.ndarray,
-                     sizes: np.ndarray, dt: float, gamma: float, steps: int) -> np.ndarray:
+                     sizes: np.ndarray, odd: np.ndarray, dt: float, gamma: float,
+                     steps: int) -> np.ndarray:
     """``steps`` ROS2 steps of ``dt`` (:func:`~cdpr_pipeline.sim.integrators.
     rosenbrock_step`) of the rigid plant without actuator lag whose friction is
     :func:`law_at`'s, under the held ``torque`` (B, n): per step the rates
@@ -943,7 +951,7 @@ def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.n
         for b in range(batch):
             for i in range(n):
                 at_omega[b, i] = law_at(omega[b, i], b, i, sharpness, viscous, coulomb,
-                                        offset, widths, rows, sizes)
+                                        offset, widths, rows, sizes, odd)
         f = np.empty((batch, 6))
         f[:, 0:3] = y[:, 3:6]
         f[:, 3:6] = rigid_acceleration(units, torque, at_omega, curvature, radius, inertia,
@@ -954,11 +962,11 @@ def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.n
                       + units[b, i, 2] * f[b, 5])
                 omega_end[b, i] = omega[b, i] + dt * ka / radius[i]
                 phi[0, b, i] = law_at(omega[b, i] + delta, b, i, sharpness, viscous,
-                                      coulomb, offset, widths, rows, sizes)
+                                      coulomb, offset, widths, rows, sizes, odd)
                 phi[1, b, i] = law_at(omega[b, i] - delta, b, i, sharpness, viscous,
-                                      coulomb, offset, widths, rows, sizes)
+                                      coulomb, offset, widths, rows, sizes, odd)
                 phi[2, b, i] = law_at(omega_end[b, i], b, i, sharpness, viscous, coulomb,
-                                      offset, widths, rows, sizes)
+                                      offset, widths, rows, sizes, odd)
         slope = secant_slopes(phi, at_omega, omega, omega_end, delta)
         for b in range(batch):
             for i in range(n):
@@ -968,7 +976,7 @@ def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.n
         stage = y + dt * k1
         f2 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
                          gravity_vector, stage, torque, sharpness, viscous, coulomb, offset,
-                         widths, rows, sizes, no_mask, no_values)
+                         widths, rows, sizes, odd, no_mask, no_values)
         k2 = implicit_solve(damped, masses, f2 - 2.0 * k1)
         y = y + dt * (1.5 * k1 + 0.5 * k2)
     return y
@@ -980,29 +988,33 @@ def rk4_rigid(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
               gravity_vector: np.ndarray, state: np.ndarray, torque: np.ndarray,
               sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
               offset: np.ndarray, widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray,
-              dt: float, k1: np.ndarray, mask: np.ndarray, c0: np.ndarray, c1: np.ndarray
-              ) -> np.ndarray:
+              odd: np.ndarray, dt: float, k1: np.ndarray, mask: np.ndarray, c0: np.ndarray,
+              c1: np.ndarray) -> np.ndarray:
     """One RK4 step of ``dt`` (:func:`~cdpr_pipeline.sim.integrators.rk4_step`) of the
-    rigid plant without actuator lag whose friction is :func:`law_at`'s, its four
-    stages' rates by :func:`rigid_rates` in one call; ``k1`` the rates at ``state``
-    (an empty array: computed here); where ``mask`` (B, n; empty: nowhere) is set the
-    friction is ``c0 + c1 (t - dt / 2)`` over the step instead of the law."""
+    rigid plant whose friction is :func:`law_at`'s, its four stages' rates by
+    :func:`rigid_rates` in one call; ``state`` (B, 6) the platform's position and
+    velocity, ``torque`` the drum torques, (1, B, n) held over the step or (4, B, n)
+    one per stage (an actuator lag's, which the caller advances by its exact solution);
+    ``k1`` the rates at ``state`` (an empty array: computed here); where ``mask``
+    (B, n; empty: nowhere) is set the friction is ``c0 + c1 (t - dt / 2)`` over the
+    step instead of the law."""
     replaced = mask.shape[0] > 0
     start = c0 + c1 * -0.5 * dt if replaced else c0
     end = c0 + c1 * 0.5 * dt if replaced else c0
+    last = torque.shape[0] - 1
     if k1.shape[0] == 0 or replaced:
         k1 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
-                         gravity_vector, state, torque, sharpness, viscous, coulomb, offset,
-                         widths, rows, sizes, mask, start)
+                         gravity_vector, state, torque[0], sharpness, viscous, coulomb,
+                         offset, widths, rows, sizes, odd, mask, start)
     k2 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
-                     gravity_vector, state + 0.5 * dt * k1, torque, sharpness, viscous,
-                     coulomb, offset, widths, rows, sizes, mask, c0)
+                     gravity_vector, state + 0.5 * dt * k1, torque[min(1, last)], sharpness,
+                     viscous, coulomb, offset, widths, rows, sizes, odd, mask, c0)
     k3 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
-                     gravity_vector, state + 0.5 * dt * k2, torque, sharpness, viscous,
-                     coulomb, offset, widths, rows, sizes, mask, c0)
+                     gravity_vector, state + 0.5 * dt * k2, torque[min(2, last)], sharpness,
+                     viscous, coulomb, offset, widths, rows, sizes, odd, mask, c0)
     k4 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
-                     gravity_vector, state + dt * k3, torque, sharpness, viscous, coulomb,
-                     offset, widths, rows, sizes, mask, end)
+                     gravity_vector, state + dt * k3, torque[last], sharpness, viscous,
+                     coulomb, offset, widths, rows, sizes, odd, mask, end)
     return state + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
@@ -1011,8 +1023,8 @@ def steep_winches(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndar
                   position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
                   sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
                   offset: np.ndarray, widths: np.ndarray, rows: np.ndarray,
-                  sizes: np.ndarray, inertia: np.ndarray, mass: float, dt: float,
-                  accuracy: float) -> tuple:
+                  sizes: np.ndarray, odd: np.ndarray, inertia: np.ndarray, mass: float,
+                  dt: float, accuracy: float) -> tuple:
     """:func:`~cdpr_pipeline.sim.integrators._steep_winches` of the rigid plant whose
     friction is :func:`law_at`'s, in one call: the winches' paths
     (:func:`winch_paths`), the law at :func:`steep_probes`' speeds and
@@ -1022,7 +1034,8 @@ def steep_winches(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndar
     units, omega, rate, theta = winch_paths(anchors, home_lengths, radius, position,
                                             velocity, acceleration)
     probes = steep_probes(omega, rate, dt)
-    phi = friction_law(probes, sharpness, viscous, coulomb, offset, widths, rows, sizes)
+    phi = friction_law(probes, sharpness, viscous, coulomb, offset, widths, rows, sizes,
+                       odd)
     batch, n = omega.shape
     bound = np.empty((batch, n))
     for b in range(batch):

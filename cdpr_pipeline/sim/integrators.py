@@ -55,9 +55,9 @@ def rk4_step(
     the step that replaces the law where ``mask`` (B, n) is set, each stage's values
     as :meth:`Plant.derivative` takes them).
 
-    A rigid plant without lag whose law is compiled (:meth:`Plant.rows_law`) takes the
-    step in one compiled call (:func:`~cdpr_pipeline.sim.compiled.rk4_rigid`: its four
-    stages' rates, each one call already, and their combinations).
+    A rigid plant whose law is compiled (:meth:`Plant.rows_law`) takes the step in one
+    compiled call (:func:`~cdpr_pipeline.sim.compiled.rk4_rigid`: its four stages'
+    rates, each one call already, and their combinations; a lag's stage torques given).
 
     An actuator lag's state is linear in the held command and is advanced by its exact
     solution (:func:`lag_response`), so a short lag sets no step size (it did: a 0.5 ms
@@ -65,18 +65,34 @@ def rk4_step(
     by one constant so that RK4's Simpson weights integrate the drum torque's exact
     impulse over the step: a lag far shorter than the step rises between the stages,
     where the stage values alone would miss part of it."""
-    if not plant.lagged and not plant.elastic and np.ndim(dt) == 0:
+    if not plant.elastic and np.ndim(dt) == 0:
         law = plant.rows_law(state.shape[0])
         if law is not None:
             mask, c0, c1 = (_NO_FRICTION if friction is None else friction)
-            return compiled.rk4_rigid(
+            if not plant.lagged:
+                return compiled.rk4_rigid(
+                    plant.anchors, plant.home_lengths, plant.drum_radius,
+                    plant.winch.inertia, plant._reflected_inertia, float(plant.mass),
+                    plant.gravity_vector, np.ascontiguousarray(state, dtype=float),
+                    np.ascontiguousarray(np.broadcast_to(u, (1, state.shape[0], plant.n)),
+                                         dtype=float),
+                    *law, float(dt), _NO_RATES if k1 is None else np.ascontiguousarray(k1),
+                    mask, c0, c1)
+            # the lag's torque at the four stages (as below), the mechanics compiled
+            start = state[:, 6:]
+            half = lag_response(plant, start, u, 0.5 * dt)
+            full = lag_response(plant, start, u, dt)
+            shift = _impulse_shift(plant, start, u, dt, (start + 4.0 * half + full) / 6.0)
+            stages = np.stack([start, half, half, full]) + shift
+            out = np.empty_like(state)
+            out[:, 0:6] = compiled.rk4_rigid(
                 plant.anchors, plant.home_lengths, plant.drum_radius, plant.winch.inertia,
                 plant._reflected_inertia, float(plant.mass), plant.gravity_vector,
-                np.ascontiguousarray(state, dtype=float),
-                np.ascontiguousarray(np.broadcast_to(u, (state.shape[0], plant.n)),
-                                     dtype=float),
-                *law, float(dt), _NO_RATES if k1 is None else np.ascontiguousarray(k1),
-                mask, c0, c1)
+                np.ascontiguousarray(state[:, 0:6], dtype=float),
+                np.ascontiguousarray(plant.drum_input(stages, u), dtype=float),
+                *law, float(dt), _NO_RATES, mask, c0, c1)
+            out[:, 6:] = full
+            return out
     held = (None, None, None) if friction is None else tuple(
         (friction[0], friction[1] + friction[2] * (f - 0.5) * dt) for f in (0.0, 0.5, 1.0))
     if not plant.lagged:
