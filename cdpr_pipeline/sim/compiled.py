@@ -10,15 +10,17 @@ the kernels are compiled on first use and cached (``cache=True``) in the user's 
 folder (:mod:`cdpr_pipeline.jit`).
 
 The stepped plant's friction law is compiled where it is the Coulomb law with Gaussian
-(Stribeck) bumps (:func:`law_at`, the implementation of that law in the closed loop:
-no numpy twin, tested against the model's law to rounding and exact truths); being
-compiled, it runs inside the kernels of a rigid plant's rates, RK4 and ROS2 steps and
-steep-winch judgement (:func:`rigid_rates`, :func:`rk4_rigid`,
-:func:`ros2_rigid_steps`, :func:`steep_winches`), which compose the kernels above, and
-inside the drive axes' implicit step (:func:`implicit_axes`, its numpy reference
-:func:`~cdpr_pipeline.sim.axes_loop.implicit_step`). A
-model's other extra torques (an effect's callable) stay numpy calls of their own, on
-the integrators' numpy paths.
+bumps, odd (Stribeck's) or even (a free-form ``gauss(omega, c)`` term) (:func:`law_at`,
+the implementation of that law in the closed loop: no numpy twin, tested against the
+model's law to rounding and exact truths); being compiled, it runs inside the kernels
+of a rigid plant's rates, RK4 and ROS2 steps and steep-winch judgement
+(:func:`rigid_rates`, :func:`rk4_rigid`, :func:`ros2_rigid_steps`,
+:func:`steep_winches`), which compose the kernels above, and inside the drive axes'
+implicit step (:func:`implicit_axes`, its numpy reference
+:func:`~cdpr_pipeline.sim.axes_loop.implicit_step`). An actuator lag's state stays
+numpy's (its exact solution, a few calls a step): :func:`rk4_rigid` takes its drum
+torque at each stage. A model's other extra torques (an effect's callable) stay numpy
+calls of their own, on the integrators' numpy paths.
 """
 
 from __future__ import annotations
@@ -896,9 +898,11 @@ def rigid_rates(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarra
                 sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
                 offset: np.ndarray, widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray,
                 odd: np.ndarray, mask: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """The state's rates (B, 6) of the rigid plant without actuator lag whose friction
-    is :func:`law_at`'s (:meth:`~cdpr_pipeline.sim.plant.Plant.derivative`): its
-    geometry (:func:`rigid_motion`), the law at the winch speeds, replaced by ``values``
+    """The platform's rates (B, 6) of the rigid plant whose friction is :func:`law_at`'s
+    under the drum torques ``torque`` (B, n; a lagged drive's its lag state)
+    (:meth:`~cdpr_pipeline.sim.plant.Plant.derivative`; ``state``'s first six columns
+    are read): its geometry (:func:`rigid_motion`), the law at the winch speeds,
+    replaced by ``values``
     where ``mask`` is set (B, n; an empty mask replaces none), and the platform's
     acceleration (:func:`rigid_acceleration`), in one call."""
     batch, n = state.shape[0], anchors.shape[0]

@@ -44,6 +44,18 @@ def _impulse_shift(plant: Plant, start: np.ndarray, u_cmd: np.ndarray,
     return np.where(lagged, mean - quadrature, 0.0)
 
 
+def _mechanics(state: np.ndarray, stepped: np.ndarray) -> np.ndarray:
+    """``state`` with the platform's position and velocity ``stepped`` (B, 6) by a
+    compiled step of a plant without lag: a batch's runs without lag taken apart from
+    runs with one (:func:`~cdpr_pipeline.sim.model_rows.runs_of`) keep their unused lag
+    state as it is."""
+    if state.shape[1] == 6:
+        return stepped
+    out = state.copy()
+    out[:, 0:6] = stepped
+    return out
+
+
 def rk4_step(
     plant: Plant, state: np.ndarray, u: np.ndarray, dt: float | np.ndarray,
     k1: np.ndarray | None = None,
@@ -70,14 +82,15 @@ def rk4_step(
         if law is not None:
             mask, c0, c1 = (_NO_FRICTION if friction is None else friction)
             if not plant.lagged:
-                return compiled.rk4_rigid(
+                return _mechanics(state, compiled.rk4_rigid(
                     plant.anchors, plant.home_lengths, plant.drum_radius,
                     plant.winch.inertia, plant._reflected_inertia, float(plant.mass),
-                    plant.gravity_vector, np.ascontiguousarray(state, dtype=float),
+                    plant.gravity_vector, np.ascontiguousarray(state[:, 0:6], dtype=float),
                     np.ascontiguousarray(np.broadcast_to(u, (1, state.shape[0], plant.n)),
                                          dtype=float),
-                    *law, float(dt), _NO_RATES if k1 is None else np.ascontiguousarray(k1),
-                    mask, c0, c1)
+                    *law, float(dt),
+                    _NO_RATES if k1 is None else np.ascontiguousarray(k1[:, 0:6]),
+                    mask, c0, c1))
             # the lag's torque at the four stages (as below), the mechanics compiled
             start = state[:, 6:]
             half = lag_response(plant, start, u, 0.5 * dt)
@@ -191,12 +204,12 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
         raise ValueError("rosenbrock_step integrates rigid plants only")
     law = plant.rows_law(state.shape[0])
     if law is not None and not plant.lagged:
-        return compiled.ros2_rigid_steps(
+        return _mechanics(state, compiled.ros2_rigid_steps(
             plant.anchors, plant.home_lengths, plant.drum_radius, plant.winch.inertia,
             plant._reflected_inertia, float(plant.mass), plant.gravity_vector,
-            np.ascontiguousarray(state, dtype=float),
+            np.ascontiguousarray(state[:, 0:6], dtype=float),
             np.ascontiguousarray(np.broadcast_to(u, (state.shape[0], plant.n)), dtype=float),
-            *law, float(dt), ROS2_GAMMA, int(steps))
+            *law, float(dt), ROS2_GAMMA, int(steps)))
     for _ in range(steps - 1):
         state = rosenbrock_step(plant, state, u, dt, k1)
         k1 = None
