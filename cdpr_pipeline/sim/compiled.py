@@ -933,8 +933,11 @@ def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.n
                      sizes: np.ndarray, odd: np.ndarray, dt: float, gamma: float,
                      steps: int) -> np.ndarray:
     """``steps`` ROS2 steps of ``dt`` (:func:`~cdpr_pipeline.sim.integrators.
-    rosenbrock_step`) of the rigid plant without actuator lag whose friction is
-    :func:`law_at`'s, under the held ``torque`` (B, n): per step the rates
+    rosenbrock_step`) of the rigid plant whose friction is :func:`law_at`'s, ``state``
+    (B, 6) the platform's position and velocity, under the drum torques ``torque``:
+    (1, 1, B, n) held over every step, or (steps, 2, B, n) each step's at its two
+    stages (an actuator lag's, which the caller advances by its exact solution); per
+    step the rates
     (:func:`rigid_rates`), the friction's secant slope (B, n) to the speeds an explicit
     step would reach (:func:`secant_slopes`, from the law at ``omega +- delta``, the
     step's end and ``omega``), ``W = M + gamma dt K^T diag(slope / R^2) K``
@@ -949,7 +952,9 @@ def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.n
     at_omega = np.empty((batch, n))
     omega_end = np.empty((batch, n))
     y = state.copy()
-    for _ in range(steps):
+    last_step, last_stage = torque.shape[0] - 1, torque.shape[1] - 1
+    for step in range(steps):
+        held = torque[min(step, last_step)]
         _, units, omega, curvature, _ = rigid_motion(anchors, home_lengths, radius,
                                                      y[:, 0:3], y[:, 3:6])
         for b in range(batch):
@@ -958,8 +963,8 @@ def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.n
                                         offset, widths, rows, sizes, odd)
         f = np.empty((batch, 6))
         f[:, 0:3] = y[:, 3:6]
-        f[:, 3:6] = rigid_acceleration(units, torque, at_omega, curvature, radius, inertia,
-                                       reflected, mass, gravity_vector)
+        f[:, 3:6] = rigid_acceleration(units, held[0], at_omega, curvature, radius,
+                                       inertia, reflected, mass, gravity_vector)
         for b in range(batch):
             for i in range(n):
                 ka = (units[b, i, 0] * f[b, 3] + units[b, i, 1] * f[b, 4]
@@ -979,7 +984,8 @@ def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.n
         k1 = implicit_solve(damped, masses, f)
         stage = y + dt * k1
         f2 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
-                         gravity_vector, stage, torque, sharpness, viscous, coulomb, offset,
+                         gravity_vector, stage, held[last_stage], sharpness, viscous,
+                         coulomb, offset,
                          widths, rows, sizes, odd, no_mask, no_values)
         k2 = implicit_solve(damped, masses, f2 - 2.0 * k1)
         y = y + dt * (1.5 * k1 + 0.5 * k2)

@@ -195,21 +195,38 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
     as in :func:`rk4_step`.
 
     ``steps`` such steps of ``dt`` are taken (``k1``: the rates at ``state``, where the
-    caller has them). A plant without lag whose friction law is compiled
+    caller has them). A plant whose friction law is compiled
     (:attr:`~cdpr_pipeline.sim.plant.Plant.compiled_law`, Gaussian bumps at most) takes
     them in one compiled call (:func:`~cdpr_pipeline.sim.compiled.ros2_rigid_steps`:
-    a coupled run's steps were a dozen calls each, most of a steep law's closed loop).
+    a coupled run's steps were a dozen calls each, most of a steep law's closed loop),
+    a lag's torque at every step's stages given.
     """
     if plant.elastic:
         raise ValueError("rosenbrock_step integrates rigid plants only")
     law = plant.rows_law(state.shape[0])
-    if law is not None and not plant.lagged:
-        return _mechanics(state, compiled.ros2_rigid_steps(
+    if law is not None:
+        mechanics = np.ascontiguousarray(state[:, 0:6], dtype=float)
+        if not plant.lagged:
+            return _mechanics(state, compiled.ros2_rigid_steps(
+                plant.anchors, plant.home_lengths, plant.drum_radius, plant.winch.inertia,
+                plant._reflected_inertia, float(plant.mass), plant.gravity_vector,
+                mechanics, np.ascontiguousarray(np.broadcast_to(
+                    u, (1, 1, state.shape[0], plant.n)), dtype=float),
+                *law, float(dt), ROS2_GAMMA, int(steps)))
+        # the lag's torque at each step's two stages (its exact solution, as below:
+        # independent of the mechanics, so all of them at once), the mechanics compiled
+        ends = lag_response(plant, state[:, 6:], u, dt * np.arange(steps + 1.0)[:, None, None])
+        starts, fulls = ends[:-1], ends[1:]
+        shift = _impulse_shift(plant, starts, u, dt, (starts + fulls) / 2.0)
+        out = np.empty_like(state)
+        out[:, 0:6] = compiled.ros2_rigid_steps(
             plant.anchors, plant.home_lengths, plant.drum_radius, plant.winch.inertia,
-            plant._reflected_inertia, float(plant.mass), plant.gravity_vector,
-            np.ascontiguousarray(state[:, 0:6], dtype=float),
-            np.ascontiguousarray(np.broadcast_to(u, (state.shape[0], plant.n)), dtype=float),
-            *law, float(dt), ROS2_GAMMA, int(steps)))
+            plant._reflected_inertia, float(plant.mass), plant.gravity_vector, mechanics,
+            np.ascontiguousarray(plant.drum_input(np.stack([starts + shift, fulls + shift],
+                                                           axis=1), u), dtype=float),
+            *law, float(dt), ROS2_GAMMA, int(steps))
+        out[:, 6:] = fulls[-1]
+        return out
     for _ in range(steps - 1):
         state = rosenbrock_step(plant, state, u, dt, k1)
         k1 = None
