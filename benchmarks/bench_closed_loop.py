@@ -18,7 +18,13 @@ the recorded desired paths, as the diagnosis's closed-loop phase does, by
 - ``phase``: the diagnosis's closed-loop phase itself
   (:func:`~cdpr_pipeline.discovery.closed_loop.compare_motion`: the nominal model, an
   extended one, the model plus a Stribeck bump, and the extended model under its own
-  feedforward on a held-out run), its CPU seconds per model (halved).
+  feedforward on a held-out run), its CPU seconds per model (halved);
+- ``diagnosed``: the same phase with what a diagnosis of a steep law often extends the
+  model by (:data:`DIAGNOSED`: the Stribeck bump, a free-form ``gauss(omega, c)`` term
+  and actuator lags), and ``diagnosed, numpy law``: that phase with the friction law
+  of a model with a free-form term read by numpy calls
+  (:meth:`~cdpr_pipeline.sim.plant.FrictionLaw.rows_law` None: the path such a model
+  took before free-form bumps and lagged plants were compiled), in the same process.
 
 A drive axes' shape is ``AXESax:RATE:LAW``: the axes of :mod:`benchmarks.bench_axes_loop`
 (the first ``AXES`` of them) along its default references under a PD controller with
@@ -51,8 +57,8 @@ from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.discovery.closed_loop import compare_motion
 from cdpr_pipeline.sim.axes_loop import AxesLoop, AxesReferences
 from cdpr_pipeline.sim.axis_references import AxisReferenceSet
-from cdpr_pipeline.sim.effects import EFFECTS
-from cdpr_pipeline.sim.plant import Drives, nominal_plant
+from cdpr_pipeline.sim.effects import EFFECTS, SymbolicWinchTorque
+from cdpr_pipeline.sim.plant import Drives, FrictionLaw, Plant, nominal_plant
 from cdpr_pipeline.sim.sensors import Sensors
 from cdpr_pipeline.sim.simulator import BatchSimulator
 from cdpr_pipeline.sim.trajectories import SampledDesired
@@ -68,6 +74,10 @@ DEFAULT_SHAPES = ("3:250:sign", "4:500:tanh500", "4:500:sign", "4:500:stribeck",
                   "6ax:1000:stribeck", "1ax:1000:sign", "1ax:1000:tanh500")
 #: the Stribeck law's bump: F_s / F_c and the Stribeck velocity
 STRIBECK = {"static_ratio": 2.0, "stribeck_velocity": 0.1}
+#: what a diagnosis adds beside the Stribeck bump on the 3-cable tanh500 rigs of the
+#: diagnose matrix: a free-form bump on the first winch and lags on the first and last
+DIAGNOSED = ({"cable": 1, "expression": "gauss(omega, 0.4)", "coefficient": 0.05},
+             {"time_constant_s": [0.003, 0.003]})
 #: the axes of bench_axes_loop (inertia, viscous, Coulomb, offset per axis)
 AXES = WinchParams(inertia=[0.5, 1.0, 2.0, 5.0, 20.0, 95.0],
                    viscous=[2.0, 5.0, 8.0, 30.0, 60.0, 200.0],
@@ -142,10 +152,32 @@ def cable_shape(count: int, rate: float, law: str, tmp: Path, seed: int, duratio
     out["tracking"] = float(np.sqrt(np.mean((reference - desired_short) ** 2)))
     extended = model if law == "stribeck" else nominal.with_effects(
         [EFFECTS["stribeck_friction"](**STRIBECK)])
-    start = time.process_time()
-    compare_motion(nominal, extended, rig, data.trajectories,
-                   [data.trajectories[-1].name], True)
-    out["phase_s"] = (time.process_time() - start) / 2
+    def phase(extension: Plant) -> float:
+        start = time.process_time()
+        compare_motion(nominal, extension, rig, data.trajectories,
+                       [data.trajectories[-1].name], True)
+        return (time.process_time() - start) / 2
+
+    out["phase_s"] = phase(extended)
+    free_form, lag = DIAGNOSED
+    diagnosed = extended.with_effects([
+        EFFECTS["symbolic_winch_torque"]([free_form]),
+        EFFECTS["actuator_lag"](cables=[1, count], **lag)])
+    out["diagnosed_s"] = phase(diagnosed)
+    compiled_law = FrictionLaw.rows_law
+
+    def numpy_law(model: FrictionLaw, batch: int) -> tuple | None:
+        # a free-form term (on the batch's rows or not) left the law to numpy, and with
+        # it every compiled step
+        free = any(isinstance(getattr(e, "effect", e), SymbolicWinchTorque)
+                   for e in model.effects)
+        return None if free else compiled_law(model, batch)
+
+    FrictionLaw.rows_law = numpy_law
+    try:
+        out["diagnosed_numpy_s"] = phase(diagnosed)
+    finally:
+        FrictionLaw.rows_law = compiled_law
     return out
 
 
@@ -187,8 +219,9 @@ def axes_shape(count: int, rate: float, law: str, duration_s: float, accuracy_s:
 
 HEADER = ("| shape | rig | rate Hz | law | sub-steps | CPU s per model | error, % of tracking "
           "| before: sub-steps | before: CPU s | before: error % | tracking error (RMS) "
-          "| diagnose phase: CPU s per model |\n"
-          "|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| diagnose phase: CPU s per model | diagnosed extension: CPU s per model "
+          "| diagnosed extension, numpy law: CPU s per model |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def _row(r: dict) -> str:
@@ -196,7 +229,9 @@ def _row(r: dict) -> str:
               f"| {r['before_steps']} | {r['before_s']:.2f} | {100 * r['before_err']:.3f} ")
     return (f"| {r['shape']} | {r['kind']} | {r['rate']:g} | {r['law']} | {r['now_steps']} | "
             f"{r['now_s']:.2f} | {100 * r['now_err']:.3f} {before}| {r['tracking']:.3g} | "
-            f"{'' if 'phase_s' not in r else format(r['phase_s'], '.2f')} |")
+            f"{'' if 'phase_s' not in r else format(r['phase_s'], '.2f')} | "
+            f"{'' if 'diagnosed_s' not in r else format(r['diagnosed_s'], '.2f')} | "
+            f"{'' if 'diagnosed_s' not in r else format(r['diagnosed_numpy_s'], '.2f')} |")
 
 
 def main() -> None:
@@ -220,8 +255,9 @@ def main() -> None:
             before = "" if "before_s" not in r else (
                 f"; before {r['before_steps']} sub-steps {r['before_s']:.2f} s, "
                 f"{100 * r['before_err']:.2f} %")
-            phase = "" if "phase_s" not in r else \
-                f"; diagnose phase {r['phase_s']:.2f} s CPU per model"
+            phase = "" if "phase_s" not in r else (
+                f"; diagnose phase {r['phase_s']:.2f} s CPU per model, diagnosed extension "
+                f"{r['diagnosed_s']:.2f} s (numpy law {r['diagnosed_numpy_s']:.2f} s)")
             print(f"{shape}: now {r['now_steps']} sub-steps {r['now_s']:.2f} s CPU, "
                   f"error {100 * r['now_err']:.3f} % of the tracking error "
                   f"({1e6 * r['tracking']:.3g} um){before}{phase}", flush=True)
@@ -252,7 +288,14 @@ def main() -> None:
              f"loop on the full runs, the nominal model and the model with a Stribeck "
              f"bump (F_s = {STRIBECK['static_ratio']:g} F_c, w_s = "
              f"{STRIBECK['stribeck_velocity']:g}) in one batch, with the extended "
-             f"feedforward's held-out run, CPU seconds halved. Rows measured by separate "
+             f"feedforward's held-out run, CPU seconds halved; the diagnosed extension: "
+             f"that model plus a free-form {DIAGNOSED[0]['coefficient']:g} "
+             f"`{DIAGNOSED[0]['expression']}` on winch 1 and "
+             f"{1e3 * DIAGNOSED[1]['time_constant_s'][0]:g} ms actuator lags on the first "
+             f"and last winch (what diagnoses of the 3-cable tanh500 shapes add), and the "
+             f"same with the friction law read by numpy calls (the path it took before "
+             f"lagged plants and free-form bumps were compiled), in the same process. "
+             f"Rows measured by separate "
              f"invocations "
              f"(--shapes) keep their own load and commit; this run's are above."]
     record("closed-loop", "Closed-loop re-simulation across rig shapes and friction laws",

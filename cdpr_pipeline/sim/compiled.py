@@ -10,15 +10,17 @@ the kernels are compiled on first use and cached (``cache=True``) in the user's 
 folder (:mod:`cdpr_pipeline.jit`).
 
 The stepped plant's friction law is compiled where it is the Coulomb law with Gaussian
-(Stribeck) bumps (:func:`law_at`, the implementation of that law in the closed loop:
-no numpy twin, tested against the model's law to rounding and exact truths); being
-compiled, it runs inside the kernels of a rigid plant's rates, RK4 and ROS2 steps and
-steep-winch judgement (:func:`rigid_rates`, :func:`rk4_rigid`,
-:func:`ros2_rigid_steps`, :func:`steep_winches`), which compose the kernels above, and
-inside the drive axes' implicit step (:func:`implicit_axes`, its numpy reference
-:func:`~cdpr_pipeline.sim.axes_loop.implicit_step`). A
-model's other extra torques (an effect's callable) stay numpy calls of their own, on
-the integrators' numpy paths.
+bumps, odd (Stribeck's) or even (a free-form ``gauss(omega, c)`` term) (:func:`law_at`,
+the implementation of that law in the closed loop: no numpy twin, tested against the
+model's law to rounding and exact truths); being compiled, it runs inside the kernels
+of a rigid plant's rates, RK4 and ROS2 steps and steep-winch judgement
+(:func:`rigid_rates`, :func:`rk4_rigid`, :func:`ros2_rigid_steps`,
+:func:`steep_winches`), which compose the kernels above, and inside the drive axes'
+implicit step (:func:`implicit_axes`, its numpy reference
+:func:`~cdpr_pipeline.sim.axes_loop.implicit_step`). An actuator lag's state stays
+numpy's (its exact solution, a few calls a step): :func:`rk4_rigid` takes its drum
+torque at each stage. A model's other extra torques (an effect's callable) stay numpy
+calls of their own, on the integrators' numpy paths.
 """
 
 from __future__ import annotations
@@ -777,11 +779,13 @@ def path_friction(w: np.ndarray, g: np.ndarray, direction: np.ndarray, omega: np
 @_kernel
 def law_at(w: float, b: int, i: int, sharpness: float, viscous: np.ndarray,
            coulomb: np.ndarray, offset: np.ndarray, widths: np.ndarray, rows: np.ndarray,
-           sizes: np.ndarray) -> float:
+           sizes: np.ndarray, odd: np.ndarray) -> float:
     """The friction law of Gaussian bumps at speed ``w`` of winch ``i`` of run ``b``:
     ``F_v w + F_c s(w) + d`` plus each bump ``size exp(-(w / width)^2) s(w)`` where it
     acts (``rows[e, b]`` nonzero; ``rows`` (E, 1): on every run), ``s`` the smooth sign
-    ``tanh(k w)`` of ``sharpness`` ``k`` (infinite: the hard sign, 0 at 0). The law of
+    ``tanh(k w)`` of ``sharpness`` ``k`` (infinite: the hard sign, 0 at 0); a bump whose
+    ``odd[e]`` is zero is even, ``size exp(-(w / width)^2)`` (a free-form term
+    ``gauss(omega, width)``), the others odd (a Stribeck bump). The law of
     :func:`~cdpr_pipeline.sim.plant.resisting_torque`, its ``tanh`` and ``exp`` the C
     library's (numpy's own vectorised ones differ from them in the last bit on some
     CPUs)."""
@@ -797,14 +801,17 @@ def law_at(w: float, b: int, i: int, sharpness: float, viscous: np.ndarray,
     for e in range(sizes.shape[0]):
         if rows[e, b if spread else 0] != 0.0:
             x = w / widths[e, i]
-            total += sizes[e, i] * math.exp(-(x * x)) * s
+            if odd[e] != 0.0:
+                total += sizes[e, i] * math.exp(-(x * x)) * s
+            else:
+                total += sizes[e, i] * math.exp(-(x * x))
     return total
 
 
 @_kernel
 def friction_law(omega: np.ndarray, sharpness: float, viscous: np.ndarray,
                  coulomb: np.ndarray, offset: np.ndarray, widths: np.ndarray,
-                 rows: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+                 rows: np.ndarray, sizes: np.ndarray, odd: np.ndarray) -> np.ndarray:
     """:func:`law_at` at speeds ``omega`` (M, B, n) of every winch of every run:
     the stepped plant's law (:func:`~cdpr_pipeline.sim.plant.compiled_law_torque`)."""
     count, batch, n = omega.shape
@@ -813,21 +820,22 @@ def friction_law(omega: np.ndarray, sharpness: float, viscous: np.ndarray,
         for b in range(batch):
             for i in range(n):
                 out[q, b, i] = law_at(omega[q, b, i], b, i, sharpness, viscous, coulomb,
-                                      offset, widths, rows, sizes)
+                                      offset, widths, rows, sizes, odd)
     return out
 
 
 @_kernel
 def drive_law(w: np.ndarray, runs: np.ndarray, drives: np.ndarray, sharpness: float,
               viscous: np.ndarray, coulomb: np.ndarray, offset: np.ndarray,
-              widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+              widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray, odd: np.ndarray
+              ) -> np.ndarray:
     """:func:`law_at` at speeds ``w`` (Q, D) of D drives, drive ``d`` winch
     ``drives[d]`` of run ``runs[d]``: a steep winch's law along its own path alone."""
     out = np.empty(w.shape)
     for q in range(w.shape[0]):
         for d in range(w.shape[1]):
             out[q, d] = law_at(w[q, d], runs[d], drives[d], sharpness, viscous, coulomb,
-                               offset, widths, rows, sizes)
+                               offset, widths, rows, sizes, odd)
     return out
 
 
@@ -836,7 +844,8 @@ def implicit_axes(v: np.ndarray, force: np.ndarray, h: float, inertia: np.ndarra
                   first: np.ndarray, at: np.ndarray, dv: np.ndarray, rest_speed: float,
                   max_newton: int, tolerance: float, sharpness: float,
                   viscous: np.ndarray, coulomb: np.ndarray, offset: np.ndarray,
-                  widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+                  widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray,
+                  odd: np.ndarray) -> np.ndarray:
     """The speeds (B, n) after :func:`~cdpr_pipeline.sim.axes_loop.implicit_step` (its
     numpy reference, the arithmetic in its order) of axes whose law is :func:`law_at`'s,
     entry by entry: ``first`` (4, B, n) the law just above and below rest, at ``at``
@@ -875,9 +884,9 @@ def implicit_axes(v: np.ndarray, force: np.ndarray, h: float, inertia: np.ndarra
                     break
                 step = (1e-6 * abs(v1) + 1e-9) * side
                 r_v = law_at(v1, b, i, sharpness, viscous, coulomb, offset, widths, rows,
-                             sizes)
+                             sizes, odd)
                 r_dv = law_at(v1 + step, b, i, sharpness, viscous, coulomb, offset, widths,
-                              rows, sizes)
+                              rows, sizes, odd)
             out[b, i] = v1 * (0.0 if stuck else 1.0)
     return out
 
@@ -888,10 +897,12 @@ def rigid_rates(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarra
                 gravity_vector: np.ndarray, state: np.ndarray, torque: np.ndarray,
                 sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
                 offset: np.ndarray, widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray,
-                mask: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """The state's rates (B, 6) of the rigid plant without actuator lag whose friction
-    is :func:`law_at`'s (:meth:`~cdpr_pipeline.sim.plant.Plant.derivative`): its
-    geometry (:func:`rigid_motion`), the law at the winch speeds, replaced by ``values``
+                odd: np.ndarray, mask: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """The platform's rates (B, 6) of the rigid plant whose friction is :func:`law_at`'s
+    under the drum torques ``torque`` (B, n; a lagged drive's its lag state)
+    (:meth:`~cdpr_pipeline.sim.plant.Plant.derivative`; ``state``'s first six columns
+    are read): its geometry (:func:`rigid_motion`), the law at the winch speeds,
+    replaced by ``values``
     where ``mask`` is set (B, n; an empty mask replaces none), and the platform's
     acceleration (:func:`rigid_acceleration`), in one call."""
     batch, n = state.shape[0], anchors.shape[0]
@@ -905,7 +916,7 @@ def rigid_rates(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarra
                 resist[b, i] = values[b, i]
             else:
                 resist[b, i] = law_at(omega[b, i], b, i, sharpness, viscous, coulomb,
-                                      offset, widths, rows, sizes)
+                                      offset, widths, rows, sizes, odd)
     out = np.empty((batch, 6))
     out[:, 0:3] = state[:, 3:6]
     out[:, 3:6] = rigid_acceleration(units, torque, resist, curvature, radius, inertia,
@@ -919,10 +930,14 @@ def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.n
                      gravity_vector: np.ndarray, state: np.ndarray, torque: np.ndarray,
                      sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
                      offset: np.ndarray, widths: np.ndarray, rows: np.ndarray,
-                     sizes: np.ndarray, dt: float, gamma: float, steps: int) -> np.ndarray:
+                     sizes: np.ndarray, odd: np.ndarray, dt: float, gamma: float,
+                     steps: int) -> np.ndarray:
     """``steps`` ROS2 steps of ``dt`` (:func:`~cdpr_pipeline.sim.integrators.
-    rosenbrock_step`) of the rigid plant without actuator lag whose friction is
-    :func:`law_at`'s, under the held ``torque`` (B, n): per step the rates
+    rosenbrock_step`) of the rigid plant whose friction is :func:`law_at`'s, ``state``
+    (B, 6) the platform's position and velocity, under the drum torques ``torque``:
+    (1, 1, B, n) held over every step, or (steps, 2, B, n) each step's at its two
+    stages (an actuator lag's, which the caller advances by its exact solution); per
+    step the rates
     (:func:`rigid_rates`), the friction's secant slope (B, n) to the speeds an explicit
     step would reach (:func:`secant_slopes`, from the law at ``omega +- delta``, the
     step's end and ``omega``), ``W = M + gamma dt K^T diag(slope / R^2) K``
@@ -937,28 +952,30 @@ def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.n
     at_omega = np.empty((batch, n))
     omega_end = np.empty((batch, n))
     y = state.copy()
-    for _ in range(steps):
+    last_step, last_stage = torque.shape[0] - 1, torque.shape[1] - 1
+    for step in range(steps):
+        held = torque[min(step, last_step)]
         _, units, omega, curvature, _ = rigid_motion(anchors, home_lengths, radius,
                                                      y[:, 0:3], y[:, 3:6])
         for b in range(batch):
             for i in range(n):
                 at_omega[b, i] = law_at(omega[b, i], b, i, sharpness, viscous, coulomb,
-                                        offset, widths, rows, sizes)
+                                        offset, widths, rows, sizes, odd)
         f = np.empty((batch, 6))
         f[:, 0:3] = y[:, 3:6]
-        f[:, 3:6] = rigid_acceleration(units, torque, at_omega, curvature, radius, inertia,
-                                       reflected, mass, gravity_vector)
+        f[:, 3:6] = rigid_acceleration(units, held[0], at_omega, curvature, radius,
+                                       inertia, reflected, mass, gravity_vector)
         for b in range(batch):
             for i in range(n):
                 ka = (units[b, i, 0] * f[b, 3] + units[b, i, 1] * f[b, 4]
                       + units[b, i, 2] * f[b, 5])
                 omega_end[b, i] = omega[b, i] + dt * ka / radius[i]
                 phi[0, b, i] = law_at(omega[b, i] + delta, b, i, sharpness, viscous,
-                                      coulomb, offset, widths, rows, sizes)
+                                      coulomb, offset, widths, rows, sizes, odd)
                 phi[1, b, i] = law_at(omega[b, i] - delta, b, i, sharpness, viscous,
-                                      coulomb, offset, widths, rows, sizes)
+                                      coulomb, offset, widths, rows, sizes, odd)
                 phi[2, b, i] = law_at(omega_end[b, i], b, i, sharpness, viscous, coulomb,
-                                      offset, widths, rows, sizes)
+                                      offset, widths, rows, sizes, odd)
         slope = secant_slopes(phi, at_omega, omega, omega_end, delta)
         for b in range(batch):
             for i in range(n):
@@ -967,8 +984,9 @@ def ros2_rigid_steps(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.n
         k1 = implicit_solve(damped, masses, f)
         stage = y + dt * k1
         f2 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
-                         gravity_vector, stage, torque, sharpness, viscous, coulomb, offset,
-                         widths, rows, sizes, no_mask, no_values)
+                         gravity_vector, stage, held[last_stage], sharpness, viscous,
+                         coulomb, offset,
+                         widths, rows, sizes, odd, no_mask, no_values)
         k2 = implicit_solve(damped, masses, f2 - 2.0 * k1)
         y = y + dt * (1.5 * k1 + 0.5 * k2)
     return y
@@ -980,29 +998,33 @@ def rk4_rigid(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndarray,
               gravity_vector: np.ndarray, state: np.ndarray, torque: np.ndarray,
               sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
               offset: np.ndarray, widths: np.ndarray, rows: np.ndarray, sizes: np.ndarray,
-              dt: float, k1: np.ndarray, mask: np.ndarray, c0: np.ndarray, c1: np.ndarray
-              ) -> np.ndarray:
+              odd: np.ndarray, dt: float, k1: np.ndarray, mask: np.ndarray, c0: np.ndarray,
+              c1: np.ndarray) -> np.ndarray:
     """One RK4 step of ``dt`` (:func:`~cdpr_pipeline.sim.integrators.rk4_step`) of the
-    rigid plant without actuator lag whose friction is :func:`law_at`'s, its four
-    stages' rates by :func:`rigid_rates` in one call; ``k1`` the rates at ``state``
-    (an empty array: computed here); where ``mask`` (B, n; empty: nowhere) is set the
-    friction is ``c0 + c1 (t - dt / 2)`` over the step instead of the law."""
+    rigid plant whose friction is :func:`law_at`'s, its four stages' rates by
+    :func:`rigid_rates` in one call; ``state`` (B, 6) the platform's position and
+    velocity, ``torque`` the drum torques, (1, B, n) held over the step or (4, B, n)
+    one per stage (an actuator lag's, which the caller advances by its exact solution);
+    ``k1`` the rates at ``state`` (an empty array: computed here); where ``mask``
+    (B, n; empty: nowhere) is set the friction is ``c0 + c1 (t - dt / 2)`` over the
+    step instead of the law."""
     replaced = mask.shape[0] > 0
     start = c0 + c1 * -0.5 * dt if replaced else c0
     end = c0 + c1 * 0.5 * dt if replaced else c0
+    last = torque.shape[0] - 1
     if k1.shape[0] == 0 or replaced:
         k1 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
-                         gravity_vector, state, torque, sharpness, viscous, coulomb, offset,
-                         widths, rows, sizes, mask, start)
+                         gravity_vector, state, torque[0], sharpness, viscous, coulomb,
+                         offset, widths, rows, sizes, odd, mask, start)
     k2 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
-                     gravity_vector, state + 0.5 * dt * k1, torque, sharpness, viscous,
-                     coulomb, offset, widths, rows, sizes, mask, c0)
+                     gravity_vector, state + 0.5 * dt * k1, torque[min(1, last)], sharpness,
+                     viscous, coulomb, offset, widths, rows, sizes, odd, mask, c0)
     k3 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
-                     gravity_vector, state + 0.5 * dt * k2, torque, sharpness, viscous,
-                     coulomb, offset, widths, rows, sizes, mask, c0)
+                     gravity_vector, state + 0.5 * dt * k2, torque[min(2, last)], sharpness,
+                     viscous, coulomb, offset, widths, rows, sizes, odd, mask, c0)
     k4 = rigid_rates(anchors, home_lengths, radius, inertia, reflected, mass,
-                     gravity_vector, state + dt * k3, torque, sharpness, viscous, coulomb,
-                     offset, widths, rows, sizes, mask, end)
+                     gravity_vector, state + dt * k3, torque[last], sharpness, viscous,
+                     coulomb, offset, widths, rows, sizes, odd, mask, end)
     return state + (dt / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
@@ -1011,8 +1033,8 @@ def steep_winches(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndar
                   position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
                   sharpness: float, viscous: np.ndarray, coulomb: np.ndarray,
                   offset: np.ndarray, widths: np.ndarray, rows: np.ndarray,
-                  sizes: np.ndarray, inertia: np.ndarray, mass: float, dt: float,
-                  accuracy: float) -> tuple:
+                  sizes: np.ndarray, odd: np.ndarray, inertia: np.ndarray, mass: float,
+                  dt: float, accuracy: float) -> tuple:
     """:func:`~cdpr_pipeline.sim.integrators._steep_winches` of the rigid plant whose
     friction is :func:`law_at`'s, in one call: the winches' paths
     (:func:`winch_paths`), the law at :func:`steep_probes`' speeds and
@@ -1022,7 +1044,8 @@ def steep_winches(anchors: np.ndarray, home_lengths: np.ndarray, radius: np.ndar
     units, omega, rate, theta = winch_paths(anchors, home_lengths, radius, position,
                                             velocity, acceleration)
     probes = steep_probes(omega, rate, dt)
-    phi = friction_law(probes, sharpness, viscous, coulomb, offset, widths, rows, sizes)
+    phi = friction_law(probes, sharpness, viscous, coulomb, offset, widths, rows, sizes,
+                       odd)
     batch, n = omega.shape
     bound = np.empty((batch, n))
     for b in range(batch):

@@ -115,6 +115,32 @@ def evaluate(expression: str, variables: Mapping[str, np.ndarray]) -> np.ndarray
     return np.broadcast_to(value, np.shape(reference)).astype(float)
 
 
+def gauss_width(expression: str) -> float | None:
+    """The width ``c`` where ``expression`` is ``gauss(omega, c)`` alone, a Gaussian bump
+    of the speed ``exp(-(omega / c)^2)`` (``c`` a nonzero number), else None: what the
+    closed loop's compiled friction law evaluates
+    (:meth:`~cdpr_pipeline.sim.effects.symbolic.SymbolicWinchTorque.gaussian_bumps`).
+
+    Examples
+    --------
+    >>> gauss_width("gauss(omega, 0.4)"), gauss_width("gauss(theta, 0.4)")
+    (0.4, None)
+    """
+    node = _parse(expression)
+    if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+            and node.func.id == "gauss" and len(node.args) == 2 and not node.keywords
+            and isinstance(node.args[0], ast.Name) and node.args[0].id == "omega"):
+        return None
+    width = node.args[1]
+    negative = isinstance(width, ast.UnaryOp) and isinstance(width.op, ast.USub)
+    if negative:
+        width = width.operand
+    if not (isinstance(width, ast.Constant) and isinstance(width.value, (int, float))
+            and not isinstance(width.value, bool) and width.value != 0):
+        return None
+    return -float(width.value) if negative else float(width.value)
+
+
 def to_infix(expression: str, subscript: str = "",
              names: Mapping[str, str] | None = None) -> str:
     """``expression`` written for people; ``subscript`` is appended to variable names,

@@ -44,6 +44,18 @@ def _impulse_shift(plant: Plant, start: np.ndarray, u_cmd: np.ndarray,
     return np.where(lagged, mean - quadrature, 0.0)
 
 
+def _mechanics(state: np.ndarray, stepped: np.ndarray) -> np.ndarray:
+    """``state`` with the platform's position and velocity ``stepped`` (B, 6) by a
+    compiled step of a plant without lag: a batch's runs without lag taken apart from
+    runs with one (:func:`~cdpr_pipeline.sim.model_rows.runs_of`) keep their unused lag
+    state as it is."""
+    if state.shape[1] == 6:
+        return stepped
+    out = state.copy()
+    out[:, 0:6] = stepped
+    return out
+
+
 def rk4_step(
     plant: Plant, state: np.ndarray, u: np.ndarray, dt: float | np.ndarray,
     k1: np.ndarray | None = None,
@@ -55,9 +67,9 @@ def rk4_step(
     the step that replaces the law where ``mask`` (B, n) is set, each stage's values
     as :meth:`Plant.derivative` takes them).
 
-    A rigid plant without lag whose law is compiled (:meth:`Plant.rows_law`) takes the
-    step in one compiled call (:func:`~cdpr_pipeline.sim.compiled.rk4_rigid`: its four
-    stages' rates, each one call already, and their combinations).
+    A rigid plant whose law is compiled (:meth:`Plant.rows_law`) takes the step in one
+    compiled call (:func:`~cdpr_pipeline.sim.compiled.rk4_rigid`: its four stages'
+    rates, each one call already, and their combinations; a lag's stage torques given).
 
     An actuator lag's state is linear in the held command and is advanced by its exact
     solution (:func:`lag_response`), so a short lag sets no step size (it did: a 0.5 ms
@@ -65,18 +77,35 @@ def rk4_step(
     by one constant so that RK4's Simpson weights integrate the drum torque's exact
     impulse over the step: a lag far shorter than the step rises between the stages,
     where the stage values alone would miss part of it."""
-    if not plant.lagged and not plant.elastic and np.ndim(dt) == 0:
+    if not plant.elastic and np.ndim(dt) == 0:
         law = plant.rows_law(state.shape[0])
         if law is not None:
             mask, c0, c1 = (_NO_FRICTION if friction is None else friction)
-            return compiled.rk4_rigid(
+            if not plant.lagged:
+                return _mechanics(state, compiled.rk4_rigid(
+                    plant.anchors, plant.home_lengths, plant.drum_radius,
+                    plant.winch.inertia, plant._reflected_inertia, float(plant.mass),
+                    plant.gravity_vector, np.ascontiguousarray(state[:, 0:6], dtype=float),
+                    np.ascontiguousarray(np.broadcast_to(u, (1, state.shape[0], plant.n)),
+                                         dtype=float),
+                    *law, float(dt),
+                    _NO_RATES if k1 is None else np.ascontiguousarray(k1[:, 0:6]),
+                    mask, c0, c1))
+            # the lag's torque at the four stages (as below), the mechanics compiled
+            start = state[:, 6:]
+            half = lag_response(plant, start, u, 0.5 * dt)
+            full = lag_response(plant, start, u, dt)
+            shift = _impulse_shift(plant, start, u, dt, (start + 4.0 * half + full) / 6.0)
+            stages = np.stack([start, half, half, full]) + shift
+            out = np.empty_like(state)
+            out[:, 0:6] = compiled.rk4_rigid(
                 plant.anchors, plant.home_lengths, plant.drum_radius, plant.winch.inertia,
                 plant._reflected_inertia, float(plant.mass), plant.gravity_vector,
-                np.ascontiguousarray(state, dtype=float),
-                np.ascontiguousarray(np.broadcast_to(u, (state.shape[0], plant.n)),
-                                     dtype=float),
-                *law, float(dt), _NO_RATES if k1 is None else np.ascontiguousarray(k1),
-                mask, c0, c1)
+                np.ascontiguousarray(state[:, 0:6], dtype=float),
+                np.ascontiguousarray(plant.drum_input(stages, u), dtype=float),
+                *law, float(dt), _NO_RATES, mask, c0, c1)
+            out[:, 6:] = full
+            return out
     held = (None, None, None) if friction is None else tuple(
         (friction[0], friction[1] + friction[2] * (f - 0.5) * dt) for f in (0.0, 0.5, 1.0))
     if not plant.lagged:
@@ -166,21 +195,38 @@ def rosenbrock_step(plant: Plant, state: np.ndarray, u: np.ndarray, dt: float,
     as in :func:`rk4_step`.
 
     ``steps`` such steps of ``dt`` are taken (``k1``: the rates at ``state``, where the
-    caller has them). A plant without lag whose friction law is compiled
+    caller has them). A plant whose friction law is compiled
     (:attr:`~cdpr_pipeline.sim.plant.Plant.compiled_law`, Gaussian bumps at most) takes
     them in one compiled call (:func:`~cdpr_pipeline.sim.compiled.ros2_rigid_steps`:
-    a coupled run's steps were a dozen calls each, most of a steep law's closed loop).
+    a coupled run's steps were a dozen calls each, most of a steep law's closed loop),
+    a lag's torque at every step's stages given.
     """
     if plant.elastic:
         raise ValueError("rosenbrock_step integrates rigid plants only")
     law = plant.rows_law(state.shape[0])
-    if law is not None and not plant.lagged:
-        return compiled.ros2_rigid_steps(
+    if law is not None:
+        mechanics = np.ascontiguousarray(state[:, 0:6], dtype=float)
+        if not plant.lagged:
+            return _mechanics(state, compiled.ros2_rigid_steps(
+                plant.anchors, plant.home_lengths, plant.drum_radius, plant.winch.inertia,
+                plant._reflected_inertia, float(plant.mass), plant.gravity_vector,
+                mechanics, np.ascontiguousarray(np.broadcast_to(
+                    u, (1, 1, state.shape[0], plant.n)), dtype=float),
+                *law, float(dt), ROS2_GAMMA, int(steps)))
+        # the lag's torque at each step's two stages (its exact solution, as below:
+        # independent of the mechanics, so all of them at once), the mechanics compiled
+        ends = lag_response(plant, state[:, 6:], u, dt * np.arange(steps + 1.0)[:, None, None])
+        starts, fulls = ends[:-1], ends[1:]
+        shift = _impulse_shift(plant, starts, u, dt, (starts + fulls) / 2.0)
+        out = np.empty_like(state)
+        out[:, 0:6] = compiled.ros2_rigid_steps(
             plant.anchors, plant.home_lengths, plant.drum_radius, plant.winch.inertia,
-            plant._reflected_inertia, float(plant.mass), plant.gravity_vector,
-            np.ascontiguousarray(state, dtype=float),
-            np.ascontiguousarray(np.broadcast_to(u, (state.shape[0], plant.n)), dtype=float),
+            plant._reflected_inertia, float(plant.mass), plant.gravity_vector, mechanics,
+            np.ascontiguousarray(plant.drum_input(np.stack([starts + shift, fulls + shift],
+                                                           axis=1), u), dtype=float),
             *law, float(dt), ROS2_GAMMA, int(steps))
+        out[:, 6:] = fulls[-1]
+        return out
     for _ in range(steps - 1):
         state = rosenbrock_step(plant, state, u, dt, k1)
         k1 = None

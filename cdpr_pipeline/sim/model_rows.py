@@ -43,11 +43,12 @@ class OnRows:
         # where, not a product: the effect may overflow on the other rows' speeds
         return np.where(self.rows, extra, 0.0)
 
-    def gaussian_bump(self, plant: Plant) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """The effect's bump (:meth:`~cdpr_pipeline.sim.effects.base.Effect.
-        gaussian_bump`) and the runs it acts on, (B,) booleans."""
-        bump = self.effect.gaussian_bump(plant)
-        return None if bump is None else (bump[0], bump[1], self.rows[:, 0])
+    def gaussian_bumps(self, plant: Plant) -> list[tuple] | None:
+        """The effect's bumps (:meth:`~cdpr_pipeline.sim.effects.base.Effect.
+        gaussian_bumps`), each with the runs it acts on, (B,) booleans."""
+        bumps = self.effect.gaussian_bumps(plant)
+        return None if bumps is None else [(size, width, self.rows[:, 0], odd)
+                                           for size, width, _, odd in bumps]
 
     def take(self, runs: np.ndarray) -> OnRows:
         """The same effect on the batch of runs ``runs`` (indices into this batch)."""

@@ -170,7 +170,8 @@ class FrictionLaw:
     def _compiled_law(self) -> tuple | None:
         """The friction law as :func:`~cdpr_pipeline.sim.compiled.law_at` takes it (the
         Coulomb sign's sharpness, ``F_v``, ``F_c``, ``d`` and :attr:`_bumps`), where
-        :attr:`compiled_law` is set and every effect is a Gaussian bump; else None."""
+        :attr:`compiled_law` is set and every effect is made of Gaussian bumps; else
+        None."""
         if not self.compiled_law or self._bumps is None:
             return None
         w = self.winch
@@ -179,14 +180,18 @@ class FrictionLaw:
             w.viscous, w.coulomb, w.offset, *self._bumps)))
 
     @cached_property
-    def _bumps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    def _bumps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """The effects as Gaussian bumps (:meth:`~cdpr_pipeline.sim.effects.base.Effect.
-        gaussian_bump`): their widths (E, n), the runs each acts on (E, B; B is 1
-        where every bump acts on every run) and their sizes (E, n); None where an
-        effect is not one."""
-        bumps = [e.gaussian_bump(self) for e in self.effects]
-        if any(b is None for b in bumps):
-            return None
+        gaussian_bumps`), in their order: their widths (E, n), the runs each acts on
+        (E, B; B is 1 where every bump acts on every run), their sizes (E, n) and
+        whether each takes the Coulomb sign (E,: 1 odd, 0 even); None where an effect is
+        not made of them."""
+        bumps = []
+        for effect in self.effects:
+            parts = effect.gaussian_bumps(self)
+            if parts is None:
+                return None
+            bumps += parts
         batch = max([1, *(len(b[2]) for b in bumps if b[2] is not None)])
         rows = np.ones((len(bumps), batch))
         for k, bump in enumerate(bumps):
@@ -194,7 +199,8 @@ class FrictionLaw:
                 rows[k] = bump[2]
         sizes = np.array([np.broadcast_to(b[0], (self.n,)) for b in bumps], float)
         widths = np.array([np.broadcast_to(b[1], (self.n,)) for b in bumps], float)
-        return widths.reshape(-1, self.n), rows, sizes.reshape(-1, self.n)
+        odd = np.array([1.0 if b[3] else 0.0 for b in bumps])
+        return widths.reshape(-1, self.n), rows, sizes.reshape(-1, self.n), odd
 
 
 @dataclass(frozen=True)
@@ -481,20 +487,28 @@ class Plant(FrictionLaw):
         (B, n) that replace the friction law where the mask is set (the integrator's
         own account of a steep law over its step).
         """
+        law = None if self.elastic else self.rows_law(state.shape[0])
+        if law is not None:
+            # the closed loop's plant: a step takes five of these, each mostly overhead;
+            # geometry, friction and acceleration in one compiled call (the drums'
+            # torque a lagged drive's state), the lag's rates beside it
+            drum = u_cmd if not self.lagged else self.drum_input(state[:, 6:], u_cmd)
+            if np.shape(drum) != (state.shape[0], self.n):
+                drum = np.broadcast_to(drum, (state.shape[0], self.n))
+            mask, values = _NO_REPLACEMENT if friction is None else friction
+            rates = compiled.rigid_rates(
+                self.anchors, self.home_lengths, self.drum_radius, self.winch.inertia,
+                self._reflected_inertia, float(self.mass), self.gravity_vector, state,
+                np.ascontiguousarray(drum, dtype=float), *law,
+                np.ascontiguousarray(mask, dtype=np.bool_),
+                np.ascontiguousarray(values, dtype=float))
+            if not self.lagged:
+                return rates
+            out = np.empty_like(state)
+            out[:, 0:6] = rates
+            out[:, 6:] = self.lag_rates(state[:, 6:], u_cmd)
+            return out
         if not self.elastic and not self.lagged:
-            # the closed loop's plant: a step takes five of these, each mostly overhead
-            law = self.rows_law(state.shape[0])
-            if law is not None:
-                # geometry, friction and acceleration in one compiled call
-                if np.shape(u_cmd) != (state.shape[0], self.n):
-                    u_cmd = np.broadcast_to(u_cmd, (state.shape[0], self.n))
-                mask, values = _NO_REPLACEMENT if friction is None else friction
-                return compiled.rigid_rates(
-                    self.anchors, self.home_lengths, self.drum_radius, self.winch.inertia,
-                    self._reflected_inertia, float(self.mass), self.gravity_vector, state,
-                    np.ascontiguousarray(u_cmd, dtype=float), *law,
-                    np.ascontiguousarray(mask, dtype=np.bool_),
-                    np.ascontiguousarray(values, dtype=float))
             p, v = state[:, 0:3], state[:, 3:6]
             out = np.empty_like(state)
             out[:, 0:3] = v
@@ -518,11 +532,14 @@ class Plant(FrictionLaw):
         else:
             out[:, 3:6] = self.rigid_acceleration(p, v, u, friction)
         if self.lagged:
-            tau = self.lags
-            # a drive without lag keeps its (unused) state still instead of dividing by 0
-            out[:, -self.n:] = np.where(tau > 0.0, (u_cmd - s["u_drum"])
-                                        / np.where(tau > 0.0, tau, 1.0), 0.0)
+            out[:, -self.n:] = self.lag_rates(s["u_drum"], u_cmd)
         return out
+
+    def lag_rates(self, u_drum: np.ndarray, u_cmd: np.ndarray) -> np.ndarray:
+        """The lagged drum torques' rates ``(u_cmd - u) / tau`` (B, n); zero on a drive
+        without lag, which keeps its (unused) state still instead of dividing by 0."""
+        tau = self.lags
+        return np.where(tau > 0.0, (u_cmd - u_drum) / np.where(tau > 0.0, tau, 1.0), 0.0)
 
     def rigid_acceleration(self, p: np.ndarray, v: np.ndarray, u: np.ndarray,
                            friction: tuple | None = None) -> np.ndarray:

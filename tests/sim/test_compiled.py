@@ -10,10 +10,15 @@ import pytest
 
 from cdpr_pipeline.data.rig import WinchParams
 from cdpr_pipeline.sim import compiled
-from cdpr_pipeline.sim.effects import AsymmetricViscousFriction, StribeckFriction
+from cdpr_pipeline.sim.effects import (
+    ActuatorLag,
+    AsymmetricViscousFriction,
+    StribeckFriction,
+    SymbolicWinchTorque,
+)
 from cdpr_pipeline.sim.integrators import _steep_winches, rk4_step, rosenbrock_step
 from cdpr_pipeline.sim.kinematics import cable_geometry, tensions_for_force, winch_rates
-from cdpr_pipeline.sim.model_rows import plant_of_rows
+from cdpr_pipeline.sim.model_rows import plant_of_rows, runs_of
 from cdpr_pipeline.sim.plant import Plant, resisting_torque
 
 
@@ -252,3 +257,111 @@ def test_a_winchs_law_along_its_path_is_the_models_law_there(seed):
             assert np.array_equal(got, expected)
         else:
             np.testing.assert_allclose(got, expected, rtol=1e-14, atol=1e-15)
+
+
+def _free_form(terms):
+    return SymbolicWinchTorque([{"cable": c, "expression": e, "coefficient": k}
+                                for c, e, k in terms])
+
+
+@pytest.mark.parametrize("sharpness", [np.inf, 500.0])
+def test_free_form_gauss_terms_are_even_compiled_bumps(seed, sharpness):
+    """A free-form term ``c gauss(omega, s)`` (what a diagnosis leaves beside a Stribeck
+    bump) is an even bump of the compiled law, ``c exp(-(w/s)^2)`` without the Coulomb
+    sign: the batch of a nominal and an extended model (Stribeck on some winches, two
+    gauss terms on one winch, one on another, a negative width) reads the model's law to
+    rounding, and is even where the Stribeck bump is odd; a free form with any other
+    term (of the angle, a product) leaves the law to numpy."""
+    rng = np.random.default_rng(seed)
+    anchors, radius, _ = _rig(rng, 4, 1)
+    winch = WinchParams(rng.uniform(0.01, 0.1, 4), rng.uniform(0.0, 0.5, 4),
+                        rng.uniform(0.1, 1.0, 4), rng.normal(0.0, 0.05, 4))
+    nominal = Plant(anchors, radius, 5.0, winch, sign_sharpness=sharpness)
+    free = _free_form([(2, "gauss(omega, 0.4)", 0.05), (4, "gauss(omega, -0.3)", 0.07),
+                       (4, "gauss(omega, 2.0)", -0.02)])
+    extended = nominal.replace(effects=(
+        StribeckFriction(static_ratio=None, cables=[1, 2], extra_static=[0.3, 0.2],
+                         stribeck_velocity=[0.5, 1.5]), free))
+    batch = plant_of_rows(nominal, [nominal, extended, extended])
+    plant = batch.replace(compiled_law=True)
+    assert plant.rows_law(3) is not None
+    theta = rng.normal(size=(3, 4))
+    omega = rng.normal(0.0, 1.0, (2, 3, 4)) * 10.0 ** rng.uniform(-4.0, 0.5, (2, 3, 4))
+    got = plant.friction_torque(theta, omega)
+    expected = resisting_torque(batch, theta, omega)
+    scale = np.abs(winch.viscous * omega) + winch.coulomb + np.abs(winch.offset) + 0.4
+    np.testing.assert_array_less(np.abs(got - expected), 4 * np.finfo(float).eps * scale)
+    # the free form's winch 4 is even about zero speed beyond the Coulomb law's odd part
+    odd_law = winch.viscous * omega + winch.coulomb * np.tanh(
+        (sharpness if np.isfinite(sharpness) else 1e12) * omega)
+    mirrored = plant.friction_torque(theta, -omega)
+    even = (got + mirrored)[:, 1:, 3] / 2 - winch.offset[3]
+    np.testing.assert_allclose(even, 0.07 * np.exp(-(omega[:, 1:, 3] / 0.3) ** 2)
+                               - 0.02 * np.exp(-(omega[:, 1:, 3] / 2.0) ** 2),
+                               rtol=1e-12, atol=1e-15)
+    assert np.abs((got - mirrored)[..., 3] / 2 - odd_law[..., 3]).max() < 1e-12
+    for other in ("gauss(theta, 0.4)", "mul(abs_(omega), omega)", "gauss(omega, 0.0)"):
+        model = extended.replace(effects=(*extended.effects,
+                                          _free_form([(3, other, 0.1)])), compiled_law=True)
+        assert model.rows_law(1) is None
+
+
+def test_a_lagged_plants_compiled_rates_and_step_are_its_numpy_ones(seed):
+    """A rigid plant whose runs have their own actuator lags (the nominal model beside
+    one extended by a lag, a Stribeck bump and a gauss term) takes the compiled law:
+    its rates, an RK4 step (the lag advanced by its exact solution, with and without a
+    friction replaced over the step on some winches; the lag's state exactly) and four
+    ROS2 steps in one call are the numpy plant's to rounding. Its runs without lag
+    taken apart step as the nominal model does, their unused lag state kept."""
+    rng = np.random.default_rng(seed)
+    anchors, radius, position = _rig(rng, 3, 4)
+    winch = WinchParams(rng.uniform(0.01, 0.1, 3), rng.uniform(0.0, 0.5, 3),
+                        rng.uniform(0.1, 1.0, 3), rng.normal(0.0, 0.05, 3))
+    nominal = Plant(anchors, radius, 5.0, winch, sign_sharpness=500.0,
+                    home=np.array([1.5, 1.5, 1.2]))
+    extended = nominal.with_effects([
+        StribeckFriction(static_ratio=2.0, stribeck_velocity=0.5),
+        _free_form([(1, "gauss(omega, 0.4)", 0.05)]),
+        ActuatorLag(time_constant_s=[0.003, 0.001], cables=[1, 3])])
+    batch = plant_of_rows(nominal, [nominal, extended, extended, nominal], own_lags=True)
+    fast = batch.replace(compiled_law=True)
+    assert batch.lagged and fast.rows_law(4) is not None and batch.rows_law(4) is None
+    velocity = rng.normal(0.0, 0.05, (4, 3)) * np.array([1, 1e-4, 1, 1e-4])[:, None]
+    units = cable_geometry(anchors, position)[1]
+    torque = radius * tensions_for_force(units, -5.0 * nominal.gravity_vector) \
+        + rng.normal(0.0, 0.2, (4, 3))
+    drum = torque + rng.normal(0.0, 0.1, (4, 3))
+    state = np.concatenate([position, velocity, drum], axis=1)
+    np.testing.assert_allclose(fast.derivative(state, torque),
+                               batch.derivative(state, torque), rtol=1e-12, atol=1e-12)
+    mask = rng.random((4, 3)) < 0.4
+    c0, c1 = rng.normal(0.0, 0.3, (4, 3)), rng.normal(0.0, 100.0, (4, 3))
+    for friction in (None, (mask, c0, c1)):
+        got = rk4_step(fast, state, torque, 1e-3, friction=friction)
+        expected = rk4_step(batch, state, torque, 1e-3, friction=friction)
+        moved = np.abs(expected - state).max(axis=0)
+        assert (np.abs(got[:, :6] - expected[:, :6]) <= 1e-10 * moved[:6]).all()
+        assert np.array_equal(got[:, 6:], expected[:, 6:])
+        # the lagged drives' torque moved towards the command, the others' stayed
+        lagged = batch.lags > 0.0
+        assert np.array_equal(got[:, 6:][~lagged], drum[~lagged])
+        assert (np.abs(got[:, 6:] - torque)[lagged] < np.abs(drum - torque)[lagged]).all()
+    # a coupled run's ROS2 steps, the lag's torque at every step's stages
+    got = rosenbrock_step(fast, state, torque, 2.5e-4, steps=4)
+    expected = state
+    for _ in range(4):
+        expected = rosenbrock_step(batch, expected, torque, 2.5e-4)
+    moved = np.abs(expected - state).max(axis=0)[:6]
+    assert (moved > 0).all()
+    assert (np.abs(got[:, :6] - expected[:, :6]) <= 1e-9 * moved).all()
+    np.testing.assert_allclose(got[:, 6:], expected[:, 6:], rtol=1e-13, atol=1e-14)
+    # the nominal runs taken apart (a step's coupled runs) carry the batch's unused lag
+    # columns: their compiled steps are the nominal model's, those columns kept
+    part = runs_of(fast, np.array([0, 3]))
+    alone = nominal.replace(compiled_law=True)
+    assert not part.lagged and part.rows_law(2) is not None
+    for step in (lambda p, y: rosenbrock_step(p, y, torque[[0, 3]], 2.5e-4, steps=4),
+                 lambda p, y: rk4_step(p, y, torque[[0, 3]], 1e-3)):
+        got = step(part, state[[0, 3]])
+        assert np.array_equal(got[:, :6], step(alone, state[[0, 3], :6]))
+        assert np.array_equal(got[:, 6:], drum[[0, 3]])

@@ -5,6 +5,8 @@ with a fine-step reference to within 1 % of the tracking error, for a hard sign,
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -15,9 +17,10 @@ from cdpr_pipeline.sim.axes_loop import AxesLoop, AxesReferences
 from cdpr_pipeline.sim.axis_references import AxisReferenceSet
 from cdpr_pipeline.sim.effects import EFFECTS
 from cdpr_pipeline.sim.friction_path import friction_over_step, friction_over_step_numpy
-from cdpr_pipeline.sim.plant import Drives, Plant
+from cdpr_pipeline.sim.model_rows import plant_of_rows
+from cdpr_pipeline.sim.plant import Drives, FrictionLaw, Plant
 from cdpr_pipeline.sim.sensors import Sensors
-from cdpr_pipeline.sim.simulator import BatchSimulator
+from cdpr_pipeline.sim.simulator import BatchSimulator, _coulomb_rate, integration_plant
 from cdpr_pipeline.sim.trajectories import draw_trajectories
 
 EXACT = Sensors(0.0, 0, 0.0)
@@ -87,6 +90,47 @@ def test_cable_robot_closed_loop_within_one_percent_of_tracking(paper_rig, law):
     # steps of at most 1 ms (a smooth law) or 2 ms (a hard sign) at 300 Hz
     assert now.substeps == (4 if law == "tanh500" else 2)
     assert gap < 0.01 * tracking
+
+
+def test_a_diagnosed_extension_steps_compiled_at_the_mechanics_step(paper_rig, monkeypatch):
+    """What a diagnosis adds on a 3-cable rig with a steep ``tanh(500 w)``: a Stribeck
+    bump, a free-form ``gauss(omega, c)`` term and actuator lags, batched beside the
+    nominal model (as the closed-loop comparison does). Its steps are 1 ms (4 a tick at
+    300 Hz: the steep law's longest step, not the 19 its slope would ask of RK4), the
+    stepped plant reads the compiled law (the lagged plant's steps compiled), the
+    positions agree with the numpy law's steps to rounding and with a fine-step
+    reference to within 1 % of the tracking error."""
+    rig, nominal, _, desired = _cable_runs(paper_rig, "tanh500")
+    extended = nominal.with_effects([
+        EFFECTS["stribeck_friction"](**STRIBECK),
+        EFFECTS["symbolic_winch_torque"]([{"cable": 2, "expression": "gauss(omega, 0.3)",
+                                           "coefficient": 0.05}]),
+        EFFECTS["actuator_lag"](time_constant_s=[0.003, 0.001], cables=[1, 3])])
+    plant = plant_of_rows(nominal, [nominal, nominal, extended, extended], own_lags=True)
+    runs = desired.take([0, 1, 0, 1])
+
+    def run(substeps=None):
+        sim = BatchSimulator(plant, nominal, rig.controller, EXACT, rig.sample_rate_hz,
+                             substeps=substeps, settle_s=0.2)
+        return sim.run(runs, np.random.default_rng(0), truth_keys=("position", "u_cmd"))
+
+    dt = 1.0 / rig.controller.rate_hz
+    stepped = integration_plant(plant, dt).replace(compiled_law=True)
+    assert stepped.lagged and stepped.rows_law(4) is not None
+    now = run()
+    assert now.substeps == 4 < math.ceil(_coulomb_rate(plant, 500.0) * dt / 0.5)
+    fine = run(16 * now.substeps)
+    with monkeypatch.context() as patch:
+        patch.setattr(FrictionLaw, "rows_law", lambda self, batch: None)
+        numpy_law = run()
+    position = now.truth["position"]
+    tracking = np.sqrt(np.mean((fine.truth["position"] - fine.measured["desired"]) ** 2))
+    gap = np.sqrt(np.mean((position - fine.truth["position"]) ** 2))
+    print(f"{now.substeps} sub-steps, {100 * gap / tracking:.3f} % of tracking")
+    assert gap < 0.01 * tracking
+    assert np.abs(position - numpy_law.truth["position"]).max() < 1e-9 * tracking
+    # the extension moves the platform: the batch's extended runs are not the nominal's
+    assert np.abs(position[2:] - position[:2]).max() > 0.1 * tracking
 
 
 def test_sub_steps_only_where_a_winch_meets_the_steep_law(paper_rig, monkeypatch):

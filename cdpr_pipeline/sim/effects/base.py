@@ -299,11 +299,12 @@ class Effect:
         """Extra torque resisting the winch, (B, n), or None."""
         return None
 
-    def gaussian_bump(self, plant: Plant) -> tuple[np.ndarray, np.ndarray, None] | None:
-        """``(size, width, None)``, each size and width (n,), where :meth:`winch_torque`
-        is ``size exp(-(w / width)^2) s(w)`` with ``s`` the plant's Coulomb sign (a
-        Stribeck law), written so that the closed loop's compiled friction law
-        (:meth:`~cdpr_pipeline.sim.plant.Plant.friction_torque`) evaluates it; None
+    def gaussian_bumps(self, plant: Plant) -> list[tuple] | None:
+        """``[(size, width, None, odd), ...]``, each size and width (n,), where
+        :meth:`winch_torque` is the sum of the bumps ``size exp(-(w / width)^2)``, times
+        the plant's Coulomb sign ``s(w)`` where ``odd`` (a Stribeck law; not a free-form
+        term ``gauss(omega, width)``), written so that the closed loop's compiled friction
+        law (:meth:`~cdpr_pipeline.sim.plant.Plant.friction_torque`) evaluates it; None
         (the default): the torque is :meth:`winch_torque`'s alone."""
         return None
 

@@ -77,10 +77,10 @@ class StribeckFriction(Effect):
         return self.extra(plant) * np.exp(-(omega / speed) ** 2) * smooth_sign(
             omega, plant.sign_sharpness)
 
-    def gaussian_bump(self, plant):
+    def gaussian_bumps(self, plant):
         # winch_torque's law, its arithmetic in its order (Plant.friction_torque)
-        return (self.extra(plant), per_winch(self.stribeck_velocity, self.cables, plant.n,
-                                             fill=1.0), None)
+        return [(self.extra(plant), per_winch(self.stribeck_velocity, self.cables, plant.n,
+                                              fill=1.0), None, True)]
 
     def scaled(self, s):
         if self.extra_static is not None:

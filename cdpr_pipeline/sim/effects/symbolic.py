@@ -13,7 +13,13 @@ from cdpr_pipeline.sim.effects.base import (
     drive,
     unit,
 )
-from cdpr_pipeline.sim.expressions import CACHED_SIZE, content_key, evaluate_cached, to_infix
+from cdpr_pipeline.sim.expressions import (
+    CACHED_SIZE,
+    content_key,
+    evaluate_cached,
+    gauss_width,
+    to_infix,
+)
 
 
 @dataclass
@@ -45,6 +51,22 @@ class SymbolicWinchTorque(Effect):
                 term["expression"], omega[..., i], theta[..., i],
                 None if state is None else (state, i))
         return out
+
+    def gaussian_bumps(self, plant):
+        """One even bump per term where every term is ``gauss(omega, c)`` (what a
+        Stribeck-like shadow leaves to the free form), the term's coefficient its size on
+        its winch (zero elsewhere, width 1 there): :meth:`winch_torque`'s sum, read by
+        the closed loop's compiled law; else None."""
+        bumps = []
+        for term in self.terms:
+            i = int(term["cable"]) - 1
+            width = gauss_width(term["expression"])
+            if width is None or not 0 <= i < plant.n:
+                return None
+            size, widths = np.zeros(plant.n), np.ones(plant.n)
+            size[i], widths[i] = float(term["coefficient"]), width
+            bumps.append((size, widths, None, False))
+        return bumps
 
     @classmethod
     def draw(cls, rng, n_cables):
