@@ -249,13 +249,17 @@ class CauseSearch:
         parameters (:meth:`adds_beyond`: significant on the training runs for its extra
         parameters, a held-out gain of ``min_gain`` whose interval excludes zero), which
         then stands in its place and is asked the same of the ones with fewer still.
-        Parameters are counted as the data need them (:meth:`parsimonious`).
+        A sparse candidate counts the fewest of its parameters that suffice
+        (:meth:`parsimonious` with ``n_tests``: the same rule asked of its own subsets).
 
         The footing of free-form terms against named causes, between named candidates:
         a prismatic load ``a q + b`` holds a wrong offset in ``b``, and a slope the
         training rows called significant (3-4.5 standard errors, 3 draws in 100 of
         ``test_a_wrong_offset_is_not_taken_for_a_load``) out-scored the one-parameter
-        re-identification by BIC while adding nothing on the held-out runs."""
+        re-identification by BIC while adding nothing on the held-out runs. Counted by
+        its BIC subset, the re-identification lost the same way where that subset held
+        re-fits the training rows call significant and the held-out runs do not need
+        (:meth:`sufficient`)."""
         best = passed[0]
         if best.candidate is None:
             return best             # a free-form part: weighed in selection.settle
