@@ -154,7 +154,8 @@ class Candidate:
         The first start is the nominal model and each parameter may stay there (a
         winch re-identification keeps what the data sheet got right): where the cause
         is weighed against descriptions with fewer parameters, it counts only the
-        parameters the data need (best BIC subset, see ``_Search.parsimonious``).
+        parameters the data need (the best BIC subset, and of that the fewest that
+        suffice where it is weighed: ``CauseSearch.parsimonious``).
     blocks : tuple of int
         For a sparse candidate made of several (a re-identification of several
         winches): the sizes of its parameter groups, in order. The best subset is then

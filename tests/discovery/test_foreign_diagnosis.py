@@ -413,8 +413,11 @@ def test_a_wrong_offset_is_not_taken_for_a_load(tmp_path, seed):
     the held-out runs) the load still won by BIC, until the best by BIC had to add
     beyond a passing candidate with fewer parameters (``fewest_that_suffice``). Seed
     647781694 had first come out ``unnamed`` as ``sign(q1') sign(q1')``, a constant
-    wherever the axis moves (``ShapeFilter`` compares shapes there). Named
-    ``winch_parameter_error`` on that axis with the offset's size, and no load."""
+    wherever the axis moves (``ShapeFilter`` compares shapes there). Seed 1876198476
+    kept F_v and F_c re-fits beside the offset by BIC (three parameters against the
+    load's two); a re-identification now counts the fewest of its parameters that
+    suffice (``CauseSearch.sufficient``). Named ``winch_parameter_error`` on that axis
+    with the offset's size, and no load."""
 
     rng = rng_for(seed)
     n = int(rng.integers(1, 5))
