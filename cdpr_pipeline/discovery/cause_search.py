@@ -170,13 +170,13 @@ class CauseSearch:
                            if j.pvalue < self.settings.alpha / n_tests] \
                 if any(j.passed for j in winch_fits) else []
             together = _winches_together(significant)
-            composites: dict[str, set[str]] = {}
+            made_of: dict[str, set[str]] = {}
             if together is not None:
                 step.append(_screen(together, ctx, judge, kept, n_tests))
                 templates.append(together)
                 # what it is made of: weighed against one of them beside another cause
                 # (:meth:`fewest_that_suffice`)
-                composites[together.label] = {c.label for c in significant}
+                made_of[together.label] = {c.label for c in significant}
             # the exit points the training runs call moved, also as one cause: each
             # one-cable fit takes up what the other moved anchors do to its cable's
             # torque and tension, and can fail on the held-out runs where together they
@@ -204,6 +204,8 @@ class CauseSearch:
                             key=lambda j: -j.bic_drop)
             if not passed:
                 break
+            composites = {label: [j for j in step if j.label in parts]
+                          for label, parts in made_of.items()}
             best = self.fewest_that_suffice(
                 passed, fixed, current, n_tests, composites,
                 partial(_screen, ctx=ctx, judge=judge, kept=kept, n_tests=n_tests))
@@ -221,7 +223,7 @@ class CauseSearch:
 
     def fewest_that_suffice(self, passed: list[Judgement], fixed: list[Effect],
                             current: list[Effect], n_tests: int,
-                            composites: dict[str, set[str]] | None = None,
+                            composites: dict[str, list[Judgement]] | None = None,
                             fit_pair: Callable[[Candidate], Judgement] | None = None
                             ) -> Judgement:
         """The named candidate of a step to join: the best by BIC of ``passed`` (sorted
@@ -232,14 +234,15 @@ class CauseSearch:
         Parameters are counted as the data need them (:meth:`parsimonious`).
 
         A candidate made of several of the step's candidates (``composites``: its label
-        to its parts' labels; the winches re-identified together) takes several causes
-        in one step, so it is also asked the same of two causes: one of its passing
-        parts beside another passing candidate, fitted together (``fit_pair``: on the
-        model being extended, jointly with the kept causes as a screen is), with fewer
-        parameters than it (each part counted as the step counts it). Where it adds
-        nothing beyond such a pair (the fewest parameters first), the pair's parts win
-        over it: the one with the better BIC stands in its place and is asked the same
-        of the candidates with fewer parameters; the next step judges the other.
+        to its parts' judgements; the winches re-identified together) takes several
+        causes in one step, so it is also asked the same of two: one of its parts beside
+        another passing candidate, fitted together (``fit_pair``: on the model being
+        extended, jointly with the kept causes as a screen is), with fewer parameters
+        than it (each counted as the data need them). Where it adds nothing beyond such
+        a pair (the fewest parameters first), the pair wins: of its parts that passed
+        (the other candidate always), the one with the better BIC stands in the
+        composite's place and is asked the same of the candidates with fewer parameters;
+        the next step judges the other part on top of it.
 
         The footing of free-form terms against named causes, between named candidates:
         a prismatic load ``a q + b`` holds a wrong offset in ``b``, and a slope the
@@ -283,42 +286,43 @@ class CauseSearch:
 
         best, best_effects, best_size = fewer_alone(best, *described(best))
         parts = (composites or {}).get(best.label)
-        if parts is None or fit_pair is None:
+        if not parts or fit_pair is None:
             return best
-        pair = self._pair_that_suffices(best, best_effects, best_size, parts, passed,
-                                        described, fit_pair, fixed, n_tests)
+        others = [(o, described(o)[1]) for o in passed if o.candidate is not None
+                  and o is not best and o.label not in {w.label for w in parts}]
+        pair = self._pair_that_suffices(best, best_effects, best_size, parts, others,
+                                        current, fixed, fit_pair, n_tests)
         if pair is None:
             return best
-        best = max(pair, key=lambda j: j.bic_drop)
+        best = max((j for j in pair if any(j is p for p in passed)),
+                   key=lambda j: j.bic_drop)
         return fewer_alone(best, *described(best))[0]
 
     def _pair_that_suffices(self, composite: Judgement, effects: list[Effect], size: int,
-                            parts: set[str], passed: list[Judgement],
-                            described: Callable[[Judgement], tuple[list[Effect], int]],
-                            fit_pair: Callable[[Candidate], Judgement],
-                            fixed: list[Effect], n_tests: int
+                            parts: list[Judgement], others: list[tuple[Judgement, int]],
+                            current: list[Effect], fixed: list[Effect],
+                            fit_pair: Callable[[Candidate], Judgement], n_tests: int
                             ) -> tuple[Judgement, Judgement] | None:
-        """The first pair (fewest parameters, then best summed BIC) of a passing part of
-        ``composite`` and a passing named candidate outside it that ``composite``
-        (``effects``, ``size`` parameters) adds nothing beyond (:meth:`adds_beyond`),
-        the pair on top of ``fixed``; None where it adds beyond every pair with fewer
-        parameters. A candidate that re-identifies every winch beside its own parameters
-        is no partner: it holds the part already."""
-        own = [j for j in passed if j.label in parts and j.candidate is not None]
-        others = [j for j in passed if j.label not in parts and j is not composite
-                  and j.candidate is not None and not j.candidate.refit_winches]
-        sizes = {id(j): described(j)[1] for j in own + others}
-        pairs = sorted(((w, o) for w in own for o in others
-                        if sizes[id(w)] + sizes[id(o)] < size),
-                       key=lambda p: (sizes[id(p[0])] + sizes[id(p[1])],
-                                      -(p[0].bic_drop + p[1].bic_drop)))
-        for w, o in pairs:
+        """The first pair (fewest parameters, then best summed BIC) of one of the
+        ``parts`` of ``composite`` and one of the passing ``others`` (each with the
+        parameters it is counted with) that ``composite`` (``effects`` on ``current``,
+        ``size`` parameters) adds nothing beyond (:meth:`adds_beyond`), the pair fitted
+        by ``fit_pair`` on top of ``fixed``; None where it adds beyond every pair with
+        fewer parameters. A part counts the parameters the data need on ``current``
+        (:meth:`parsimonious`), whether or not it passed alone. A candidate that
+        re-identifies every winch beside its own parameters is no partner: it holds the
+        part already."""
+        sized = [(w, self.parsimonious(w, current)[1]) for w in parts
+                 if w.candidate is not None]
+        pairs = sorted(((w, o, m + k) for w, m in sized for o, k in others
+                        if m + k < size and not o.candidate.refit_winches),
+                       key=lambda p: (p[2], -(p[0].bic_drop + p[1].bic_drop)))
+        for w, o, n_pair in pairs:
             cand = _joint([(w.candidate, np.asarray(w.candidate.starts[0], float))],
                           o.candidate)
             fit = fit_pair(replace(cand, label=f"{w.label} + {o.label}"))
             if fit.reason == "fit failed":
                 continue
-            n_pair = sizes[id(w)] + sizes[id(o)]
             # the pair's effects as a joint fit's: the kept causes re-fitted beside it
             beyond = self.adds_beyond(effects, size - n_pair, fixed + list(fit.effects),
                                       n_tests, composite.label)
