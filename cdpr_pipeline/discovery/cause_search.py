@@ -259,11 +259,16 @@ class CauseSearch:
         if best.candidate is None:
             return best             # a free-form part: weighed in selection.settle
 
+        seen: dict[int, tuple[list[Effect], int]] = {}   # a leanest form costs fits: once
+
         def described(j: Judgement) -> tuple[list[Effect], int]:
-            if self.sparse(j):
-                own, size = self.parsimonious(j, current)
-                return current + own, size
-            return fixed + list(j.effects), j.n_params
+            if id(j) not in seen:
+                if self.sparse(j):
+                    own, size = self.parsimonious(j, current)
+                    seen[id(j)] = current + own, size
+                else:
+                    seen[id(j)] = fixed + list(j.effects), j.n_params
+            return seen[id(j)]
 
         def fewer_alone(best: Judgement, best_effects: list[Effect], best_size: int
                         ) -> tuple[Judgement, list[Effect], int]:
@@ -312,10 +317,13 @@ class CauseSearch:
         (:meth:`parsimonious`), whether or not it passed alone. A candidate that
         re-identifies every winch beside its own parameters is no partner: it holds the
         part already."""
+        others = [(o, k) for o, k in others if not o.candidate.refit_winches]
+        if not others or min(k for _, k in others) + 1 >= size:
+            return None             # no pair with fewer parameters: nothing to fit
         sized = [(w, self.parsimonious(w, current)[1]) for w in parts
                  if w.candidate is not None]
         pairs = sorted(((w, o, m + k) for w, m in sized for o, k in others
-                        if m + k < size and not o.candidate.refit_winches),
+                        if m + k < size),
                        key=lambda p: (p[2], -(p[0].bic_drop + p[1].bic_drop)))
         for w, o, n_pair in pairs:
             cand = _joint([(w.candidate, np.asarray(w.candidate.starts[0], float))],
