@@ -26,7 +26,7 @@ from cdpr_pipeline.discovery.cause_search import (
 )
 from cdpr_pipeline.discovery.diagnosis import diagnosis_split
 from cdpr_pipeline.discovery.fitting import fit_candidate
-from cdpr_pipeline.sim.effects import make_effect
+from cdpr_pipeline.sim.effects import PayloadMassError, WinchParameterError, make_effect
 from cdpr_pipeline.testing.foreign_cases import FAST, foreign_case, foreign_settings
 from cdpr_pipeline.testing.independent_sim import Effect, draw_effect
 from cdpr_pipeline.testing.lab_cases import (
@@ -112,6 +112,43 @@ def test_few_joint_fits_per_step_and_a_payload_beside_a_winch_error_is_named(
         # those passed their full joint fit
         assert len(passed) <= limit or not any(passed[:-1]), case
         assert len(passed) < len(cands), case
+
+
+@pytest.mark.parametrize("wrong, data_seed", [
+    (WinchParameterError(1, coulomb_scale=1.36), 1),
+    (WinchParameterError(2, inertia_scale=0.72), 4),
+])
+def test_a_joint_re_identification_gives_way_to_one_winch_and_a_payload(paper_rig, wrong,
+                                                                        data_seed):
+    """A payload error beside one winch's wrong parameters (lab seeds 769217572 and
+    1690387520 of the test above, sizes rounded): the payload adds to every winch's
+    torque, so every one-winch re-identification is significant and their joint
+    re-identification (12 parameters, 7 needed) is the step's best by BIC, taking the
+    payload up. It must add beyond the wrong winch and the payload fitted together (4
+    and 2 parameters needed; ``CauseSearch.fewest_that_suffice``), and adds nothing:
+    both are named, one at a time, with their sizes. On the second draw the wrong
+    winch alone misses ``min_gain`` (9.5 %), a part of the joint candidate only
+    significant. Before, the joint one joined on both draws."""
+    payload = PayloadMassError(0.166 if wrong.cable == 1 else 0.10)
+    search, cands = _search(paper_rig, [payload, wrong], data_seed)
+    causes = search.forward([], cands, False, search.settings.max_causes)
+    first = search.steps[0]
+    joint = max(first, key=lambda j: j.bic_drop)
+    case = (f"data seed {data_seed}: hidden {payload.describe()}, {wrong.describe()}; "
+            f"found {[(c.label, c.part[1].round(3).tolist()) for c in causes]}")
+    # the case in point: the joint re-identification is the first step's best by BIC,
+    # and the rule without the pair would let it join
+    assert joint.label.startswith("winch_parameter_error[winches"), case
+    passed = sorted((j for j in first if j.passed), key=lambda j: -j.bic_drop)
+    alone = search.fewest_that_suffice(passed, [], [], len(cands))
+    assert alone.label == joint.label, case
+    assert sorted(c.label for c in causes) == sorted(
+        ["payload_mass_error", f"winch_parameter_error[winch {wrong.cable}]"]), case
+    found = {c.effect: c.part[1] for c in causes}
+    # measured: within 0.001 of the truth on both draws
+    assert found["payload_mass_error"][0] == pytest.approx(payload.relative, abs=0.01), case
+    scales = [wrong.inertia_scale, wrong.viscous_scale, wrong.coulomb_scale]
+    assert found["winch_parameter_error"][:3] == pytest.approx(scales, abs=0.02), case
 
 
 def test_a_force_above_the_band_is_not_taken_for_a_re_identification_with_a_lag(tmp_path):
