@@ -348,13 +348,14 @@ class CauseSearch:
         ``size`` parameters) adds nothing beyond (:meth:`adds_beyond`), the pair fitted
         by ``fit_pair`` on top of ``fixed``; None where it adds beyond every pair with
         fewer parameters. A part counts the parameters the data need on ``current``
-        (:meth:`parsimonious`), whether or not it passed alone. A candidate that
+        (:meth:`parsimonious` with ``n_tests``: the fewest that suffice, as the composite
+        and the others are counted), whether or not it passed alone. A candidate that
         re-identifies every winch beside its own parameters is no partner: it holds the
         part already."""
         others = [(o, k) for o, k in others if not o.candidate.refit_winches]
         if not others or min(k for _, k in others) + 1 >= size:
             return None             # no pair with fewer parameters: nothing to fit
-        sized = [(w, self.parsimonious(w, current)[1]) for w in parts
+        sized = [(w, self.parsimonious(w, current, n_tests)[1]) for w in parts
                  if w.candidate is not None]
         pairs = sorted(((w, o, m + k) for w, m in sized for o, k in others
                         if m + k < size),
