@@ -149,7 +149,10 @@ def settle(pending: PendingSelection) -> Selection:
        only together, each fitted around the others). In both comparisons a winch
        re-identification counts only the parameters the data need changed
        (:meth:`~cdpr_pipeline.discovery.cause_search.CauseSearch.parsimonious`): a wrong
-       F_c alone is one parameter.
+       F_c alone is one parameter. In place of the torque-side causes the free-form
+       terms count the fewest of their parameters that suffice too
+       (:func:`_fewest_freeform`: a constant the search chose must add beyond the terms
+       without it, as a candidate must).
     2. The free-form terms, re-selected on top of the named causes kept, are the
        ``unnamed`` cause if they pass the tests every candidate passes (they add
        significantly, and on held-out runs, beyond the named causes).
