@@ -143,11 +143,23 @@ class FreeFormSearch:
     min_channel_gain: float = 0.10
     min_term_gain: float = 0.01
     extra_terms: list[str] = field(default_factory=list)
+    #: the most parameters a term may cost (:func:`term_cost`; None: any): 1 keeps the
+    #: terms with no constant the search chose (:meth:`without_chosen_constants`)
+    max_term_cost: int | None = None
 
     def with_terms(self, result: FreeFormResult) -> FreeFormSearch:
         """This search with the terms another search generated added to its library."""
         extra = [e for e, _ in result.gp_terms] + [t.expression for t in result.terms]
         return replace(self, extra_terms=list(dict.fromkeys(self.extra_terms + extra)))
+
+    def without_chosen_constants(self, result: FreeFormResult) -> FreeFormSearch:
+        """This search with the terms another search generated (:meth:`with_terms`),
+        keeping only terms that cost one parameter, their coefficient: none with a
+        constant the search chose (a width, a harmonic). Re-fitted without the GP it
+        gives the leanest free-form description of the same residual, against which the
+        constants must earn their parameters (:func:`~cdpr_pipeline.discovery.
+        selection.settle`)."""
+        return replace(self.with_terms(result), max_term_cost=1)
 
     def fit(self, signals: Sequence[RunSignals], residual: np.ndarray, speed_rms: float,
             periodicity: Periodicity | None, use_gp: bool = True,
@@ -174,7 +186,8 @@ class FreeFormSearch:
             found = [(e, v) for e, v in found if _nodes(e) <= self.max_nodes]
             library += [e for e, _ in found if e not in library]
         vocabulary = ShapeFilter(exclude, row_state(signals))
-        library = [e for e in library if readable(e) and not vocabulary.matches(e)]
+        library = [e for e in library if readable(e) and not vocabulary.matches(e)
+                   and (self.max_term_cost is None or term_cost(e) <= self.max_term_cost)]
         cost = np.array([term_cost(e) for e in library], float)
         max_terms = min(self.regression.max_terms, MAX_TERMS_PER_CHANNEL)
         if any(s.mixes for s in signals):
