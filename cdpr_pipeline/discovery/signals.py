@@ -53,6 +53,7 @@ from cdpr_pipeline.data.reading import (
     RegressionSettings,
     clear_of_reach,
     held_torque,
+    second_difference,
     sliding,
 )
 from cdpr_pipeline.data.rig import Rig
@@ -176,6 +177,11 @@ class RunSignals:
     #: the platform has degrees of freedom, the internal-force direction projected out
     #: (:func:`internal_force_projection`); None: the weights alone
     torque_projection: np.ndarray | None = None
+    #: the compact second differences of the *recorded* winch angles (N, n) and
+    #: platform position (N, 3), unfiltered; None where the rows decimate
+    #: (:attr:`torque_alpha`)
+    recorded_alpha: np.ndarray | None = None
+    recorded_acceleration: np.ndarray | None = None
     cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @cached_property
@@ -202,6 +208,34 @@ class RunSignals:
             return zero_phase_decimate(x[trim:len(x) - trim], int(self.settings.decimate))
         # copied out of the full-rate result, which would otherwise live as long as them
         return zero_phase_lowpass(x, filt, self.fs)[trim:len(x) - trim:self.thin].copy()
+
+    @property
+    def torque_alpha(self) -> np.ndarray:
+        """The winch acceleration a predicted torque is built from (its inertia term).
+
+        A torque residual compares the recorded torque with a prediction and goes
+        through the rows' filter (:meth:`rows`); a linear-in-parameters fit on it stays
+        exact only if every term passes the same filter. The filtered :attr:`alpha` has
+        been through the derivative filter once already; without decimation the rows'
+        own filter *is* the derivative filter, so the inertia term would pass it twice
+        and the recorded torque once. A torque that shakes the winch (a fast cogging
+        the controller does not take up) then stays in the residual at the filter's
+        gain squared while its own column passes it once: the residual holds of it
+        only the gain at its frequency (0.58 at 13-16 Hz for a 15 Hz cut-off), and a
+        speed-dependent term fits the shortfall. The compact second difference of
+        the recorded angle passes the rows' filter once, as the torque does (the
+        identification's regression, whose rows are filtered once too, reads the
+        filtered acceleration with a torque filtered once). With decimation the rows
+        stay where the derivative filter passes all: :attr:`alpha` as it is."""
+        return self.alpha if self.recorded_alpha is None else self.recorded_alpha
+
+    @property
+    def torque_acceleration(self) -> np.ndarray | None:
+        """The platform acceleration the predicted tensions are built from (see
+        :attr:`torque_alpha`); None on a rig without a platform."""
+        if self.recorded_acceleration is None:
+            return self.acceleration
+        return self.recorded_acceleration
 
     @property
     def mixes(self) -> bool:
@@ -362,12 +396,26 @@ def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
             cable_geometry(nominal.anchors, pos)[1], nominal.drum_radius, known)
         return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque,
                           settings, pos, vel, acc, np.asarray(traj.lengths, float),
-                          slow_acc, known, projection)
+                          slow_acc, known, projection,
+                          *_recorded_accelerations(settings, traj.t, theta_raw,
+                                                   np.asarray(traj.position, float)))
     position = np.asarray(traj.position, float)
     theta, omega, alpha = filt.compact_derivatives(position, traj.t)
     return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque, settings,
                       friction_known=friction_known(position, omega, settings,
-                                                     _rate(traj.t)))
+                                                     _rate(traj.t)),
+                      recorded_alpha=_recorded_accelerations(settings, traj.t, position)[0])
+
+
+def _recorded_accelerations(settings: RegressionSettings, t: np.ndarray,
+                            *recorded: np.ndarray) -> tuple[np.ndarray | None, ...]:
+    """The compact second differences of the ``recorded`` signals, unfiltered, where the
+    rows' own filter is the derivative filter (no decimation:
+    :attr:`RunSignals.torque_alpha`); Nones otherwise."""
+    if settings.decimate > 1:
+        return (None,) * len(recorded)
+    step = float(np.median(np.diff(t)))
+    return tuple(second_difference(x, step) for x in recorded)
 
 
 def dataset_signals(trajectories: Sequence[Trajectory], rig: Rig,
