@@ -7,9 +7,11 @@ is exactly the acceleration averaged over the triangle of half-width ``T`` aroun
 sample, the window a torque held over each sample (``zero_order_hold``) is averaged
 with. A model predicts the raw measured channels (motor torque, encoder length) from
 these smooth signals; the residual, measured minus predicted, then goes through the
-*same* parallel low-pass and is sampled on the *statistics rows*: trimmed at both ends
-and thinned to twice the cut-off, so neighbouring rows carry nearly independent noise
-and likelihood-ratio tests count honest degrees of freedom.
+*same* parallel low-pass (without decimation the derivative filter twice, the inertia
+and tension terms read from unfiltered second differences, so that every term passes it
+equally: :attr:`RunSignals.torque_alpha`) and is sampled on the *statistics rows*:
+trimmed at both ends and thinned to twice the cut-off, so neighbouring rows carry nearly
+independent noise and likelihood-ratio tests count honest degrees of freedom.
 
 With the hard sign (set-valued Coulomb friction, the spec's default law) the friction is
 ``+-F_c`` only while a winch slides one way. Where the encoder shows it sticking,
@@ -66,6 +68,9 @@ from cdpr_pipeline.sim.plant import Drives, Plant, nominal_plant
 #: statistics rows per cut-off period: rows are thinned to ``2 * cutoff_hz`` (the
 #: low-pass band sampled at its Nyquist rate: band-limited white noise stays white)
 ROWS_PER_CUTOFF = 2.0
+#: times the statistics rows of a reading without decimation go through the derivative
+#: filter (:meth:`RunSignals.rows`, :attr:`RunSignals.torque_alpha`)
+ROW_FILTER_PASSES = 2
 #: low-pass of the platform acceleration behind the *static* cable-stretch model. The
 #: length residual carries the motion-capture noise of the position; an acceleration
 #: differentiated from the same noisy position within the same band would correlate
@@ -81,11 +86,13 @@ def _power_response(n: int, order: int, cutoff_hz: float, fs: float) -> np.ndarr
     return np.abs(h) ** 2
 
 
-def zero_phase_lowpass(x: np.ndarray, filt: DerivativeFilter, fs: float) -> np.ndarray:
+def zero_phase_lowpass(x: np.ndarray, filt: DerivativeFilter, fs: float,
+                       passes: int = 1) -> np.ndarray:
     """The forward-backward Butterworth of ``filt.smooth`` (gain ``|H|^2``, zero phase),
-    applied in the frequency domain with filtfilt's odd extension at both ends: the
-    same filter within the untrimmed part, several times faster, which matters because
-    every model evaluation of a fit filters its residual."""
+    ``passes`` times over (gain ``|H|^(2 passes)``), applied in the frequency domain
+    with filtfilt's odd extension at both ends: the same filter within the untrimmed
+    part, several times faster, which matters because every model evaluation of a fit
+    filters its residual."""
     x = np.asarray(x, float)
     pad = min(len(x) - 1, 3 * int(fs / filt.cutoff_hz))
     head = 2 * x[:1] - x[pad:0:-1]
@@ -93,6 +100,8 @@ def zero_phase_lowpass(x: np.ndarray, filt: DerivativeFilter, fs: float) -> np.n
     ext = np.concatenate([head, x, tail])
     n = next_fast_len(len(ext), real=True)
     gain = _power_response(n, filt.order, float(filt.cutoff_hz), float(fs))
+    if passes != 1:
+        gain = gain ** passes
     spec = np.fft.rfft(ext, n, axis=0) * gain.reshape((-1,) + (1,) * (x.ndim - 1))
     return np.fft.irfft(spec, n, axis=0)[pad:pad + len(x)]
 
@@ -207,7 +216,10 @@ class RunSignals:
             # the protocol's own anti-alias filter and decimation, after trimming
             return zero_phase_decimate(x[trim:len(x) - trim], int(self.settings.decimate))
         # copied out of the full-rate result, which would otherwise live as long as them
-        return zero_phase_lowpass(x, filt, self.fs)[trim:len(x) - trim:self.thin].copy()
+        # the derivative filter twice (RunSignals.torque_alpha): what the filtered
+        # speed and angle in the predictions have been through once already
+        rows = zero_phase_lowpass(x, filt, self.fs, passes=ROW_FILTER_PASSES)
+        return rows[trim:len(x) - trim:self.thin].copy()
 
     @property
     def torque_alpha(self) -> np.ndarray:
@@ -216,17 +228,22 @@ class RunSignals:
         A torque residual compares the recorded torque with a prediction and goes
         through the rows' filter (:meth:`rows`); a linear-in-parameters fit on it stays
         exact only if every term passes the same filter. The filtered :attr:`alpha` has
-        been through the derivative filter once already; without decimation the rows'
-        own filter *is* the derivative filter, so the inertia term would pass it twice
-        and the recorded torque once. A torque that shakes the winch (a fast cogging
-        the controller does not take up) then stays in the residual at the filter's
-        gain squared while its own column passes it once: the residual holds of it
-        only the gain at its frequency (0.58 at 13-16 Hz for a 15 Hz cut-off), and a
-        speed-dependent term fits the shortfall. The compact second difference of
-        the recorded angle passes the rows' filter once, as the torque does (the
-        identification's regression, whose rows are filtered once too, reads the
-        filtered acceleration with a torque filtered once). With decimation the rows
-        stay where the derivative filter passes all: :attr:`alpha` as it is."""
+        been through the derivative filter once already. Without decimation the rows'
+        filter is the derivative filter: read with :attr:`alpha`, the inertia term
+        passed it twice and the recorded torque (and every column computed from the
+        angle and speed, a cogging's ``cos(p theta)``) once, so a torque that shakes
+        the winch (a fast cogging the controller does not take up) stayed in the
+        residual at the filter's gain squared while its column passed it once: the
+        fit read it short by the gain at its frequency (0.58 at 13-16 Hz for a 15 Hz
+        cut-off), and a speed-dependent term fitted the shortfall. Now the rows go
+        through the derivative filter twice (:data:`ROW_FILTER_PASSES`) and the
+        inertia term comes from the compact second difference of the recorded angle,
+        unfiltered: every term passes the filter twice, the acceleration's noise as
+        before. (Once for every term, the rows through the filter once, let the second
+        difference's noise, which grows with frequency squared, through up to the
+        cut-off: effect-free data then failed the calibrated validity test.) With
+        decimation the rows' anti-alias filter stays below 0.4 times the cut-off,
+        where the derivative filter passes all: :attr:`alpha` as it is."""
         return self.alpha if self.recorded_alpha is None else self.recorded_alpha
 
     @property
@@ -410,7 +427,7 @@ def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
 def _recorded_accelerations(settings: RegressionSettings, t: np.ndarray,
                             *recorded: np.ndarray) -> tuple[np.ndarray | None, ...]:
     """The compact second differences of the ``recorded`` signals, unfiltered, where the
-    rows' own filter is the derivative filter (no decimation:
+    rows' own filter is the derivative filter (twice; no decimation:
     :attr:`RunSignals.torque_alpha`); Nones otherwise."""
     if settings.decimate > 1:
         return (None,) * len(recorded)

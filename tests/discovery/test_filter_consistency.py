@@ -3,9 +3,8 @@
 A linear-in-parameters fit on filtered rows, ``filt(u) = filt(Phi) theta``, stays exact
 only if the recorded torque and every column see the same filter. Without decimation
 the rows' own filter is the derivative filter, which the filtered acceleration has been
-through once already: the inertia torque must come from the unfiltered second
-difference there, or a torque that shakes the axis (a fast cogging the controller does
-not take up) is read short by the filter's gain at its frequency.
+through once already: read with it, a torque that shakes the axis (a fast cogging the
+controller does not take up) was read short by the filter's gain at its frequency.
 """
 
 from __future__ import annotations
