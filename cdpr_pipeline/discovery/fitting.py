@@ -40,7 +40,7 @@ def winch_columns(sig: RunSignals, nominal: Model) -> np.ndarray:
     projection mixes winches (:attr:`RunSignals.mixes`): ``[r, i, j]`` is winch ``j``'s
     parameters' share in winch ``i``'s residual."""
     w = nominal.winch
-    cols = np.stack([w.inertia * sig.alpha, w.viscous * sig.omega,
+    cols = np.stack([w.inertia * sig.torque_alpha, w.viscous * sig.omega,
                      w.coulomb * smooth_sign(sig.omega, nominal.sign_sharpness),
                      np.ones_like(sig.omega)], axis=-1)
     if sig.mixes:

@@ -102,7 +102,7 @@ def _library_rows(signals: Sequence[RunSignals], terms) -> tuple[np.ndarray, np.
     """Per axis the design rows (rows, n, 1 + len(terms)) and the measured rows."""
     phi, target = [], []
     for s in signals:
-        cols = [s.alpha] + [f(s.omega) for _, f in terms]
+        cols = [s.torque_alpha] + [f(s.omega) for _, f in terms]
         x = np.stack(cols, axis=-1)
         phi.append(s.rows(s.torque_weighted(x)))
         target.append(s.rows(s.torque_weighted(s.torque)))

@@ -56,13 +56,19 @@ def channel_names(channel: str, n: int) -> list[str]:
 
 
 def predict(model: Model, nominal: Model, sig: RunSignals,
-            channels: frozenset[str] | None = None) -> dict[str, np.ndarray]:
+            channels: frozenset[str] | None = None, for_rows: bool = True
+            ) -> dict[str, np.ndarray]:
     """Full-rate predictions (N, n) of every channel (or of ``channels``) for the
-    measured motion ``sig``."""
+    measured motion ``sig``. ``for_rows``: from the accelerations the rows' filter
+    passes once, as it does the recorded torque (:attr:`RunSignals.torque_alpha`;
+    unfiltered without decimation); False: from the filtered ones (a full-rate view of
+    the residual, without the unfiltered second differences' noise)."""
+    alpha = sig.torque_alpha if for_rows else sig.alpha
     if model.cables:
-        load = _load(model, sig, sig.acceleration)
-        out = model.inverse_dynamics(sig.position, sig.acceleration, sig.theta, sig.omega,
-                                     sig.alpha, sig.t, load=load)
+        acceleration = sig.torque_acceleration if for_rows else sig.acceleration
+        load = _load(model, sig, acceleration)
+        out = model.inverse_dynamics(sig.position, acceleration, sig.theta, sig.omega,
+                                     alpha, sig.t, load=load)
         if channels is not None and "length" not in channels:
             return {"torque": out["torque"]}
         tension = out["tension"]
@@ -72,7 +78,7 @@ def predict(model: Model, nominal: Model, sig: RunSignals,
         theta = model.winch_angle_from_length(reeled)
         return {"torque": out["torque"],
                 "length": _EXACT_ENCODERS.encoder_lengths(theta, nominal)}
-    return {"torque": model.inverse_dynamics(sig.theta, sig.omega, sig.alpha, sig.t)["torque"]}
+    return {"torque": model.inverse_dynamics(sig.theta, sig.omega, alpha, sig.t)["torque"]}
 
 
 def _memo(sig: RunSignals, group: str, key, make, size: int = 16):
@@ -389,7 +395,7 @@ def _tension_key(model: Plant, radius: bool) -> tuple:
 def _unit_tension_values(model: Plant, sig: RunSignals, radius: bool) -> np.ndarray:
     """The tensions per unit mass (N, n), times the drums' radii when ``radius``."""
     return (model.drum_radius if radius else 1.0) * _unit_load(
-        model, sig, sig.acceleration)[0]
+        model, sig, sig.torque_acceleration)[0]
 
 
 def _unit_tension(model: Plant, sig: RunSignals, radius: bool) -> _Filtered:
@@ -447,7 +453,7 @@ def _stated_torque_rows(model: Model, sig: RunSignals, reference: Model | None
     plant = model.cables
     k = model.sign_sharpness
     winch = _memo(sig, "winch", None if k is None else float(k), lambda: [
-        _Filtered(sig, c) for c in (lambda: sig.alpha, lambda: sig.omega,
+        _Filtered(sig, c) for c in (lambda: sig.torque_alpha, lambda: sig.omega,
                                     lambda: smooth_sign(sig.omega, k),
                                     lambda: np.ones_like(sig.omega))])
     tau = model.actuator_time_constant       # a number, or one per drive
@@ -493,7 +499,8 @@ def _length_rows(model: Plant, nominal: Plant, sig: RunSignals) -> np.ndarray:
     nominal lengths: the decimation's sections round relative to what they filter
     (~2e-12 of it by 100), and a moved anchor's length change of 5 cm, filtered whole,
     strayed 1e-13 m from the direct rows on a 4e-5 m residual (8 cables, 1 kHz)."""
-    g = _unit_load(model, sig, sig.acceleration)[1]
+    # (the memo's key: the torque side's tensions, which come with these lengths)
+    g = _unit_load(model, sig, sig.torque_acceleration)[1]
     ref_key = nominal.anchors.tobytes()
     g0 = _memo(sig, "nominal geometric", ref_key,
                lambda: cable_geometry(nominal.anchors, sig.position)[0], size=1)

@@ -7,9 +7,11 @@ is exactly the acceleration averaged over the triangle of half-width ``T`` aroun
 sample, the window a torque held over each sample (``zero_order_hold``) is averaged
 with. A model predicts the raw measured channels (motor torque, encoder length) from
 these smooth signals; the residual, measured minus predicted, then goes through the
-*same* parallel low-pass and is sampled on the *statistics rows*: trimmed at both ends
-and thinned to twice the cut-off, so neighbouring rows carry nearly independent noise
-and likelihood-ratio tests count honest degrees of freedom.
+*same* parallel low-pass (without decimation the derivative filter twice, the inertia
+and tension terms read from unfiltered second differences, so that every term passes it
+equally: :attr:`RunSignals.torque_alpha`) and is sampled on the *statistics rows*:
+trimmed at both ends and thinned to twice the cut-off, so neighbouring rows carry nearly
+independent noise and likelihood-ratio tests count honest degrees of freedom.
 
 With the hard sign (set-valued Coulomb friction, the spec's default law) the friction is
 ``+-F_c`` only while a winch slides one way. Where the encoder shows it sticking,
@@ -53,6 +55,7 @@ from cdpr_pipeline.data.reading import (
     RegressionSettings,
     clear_of_reach,
     held_torque,
+    second_difference,
     sliding,
 )
 from cdpr_pipeline.data.rig import Rig
@@ -65,6 +68,9 @@ from cdpr_pipeline.sim.plant import Drives, Plant, nominal_plant
 #: statistics rows per cut-off period: rows are thinned to ``2 * cutoff_hz`` (the
 #: low-pass band sampled at its Nyquist rate: band-limited white noise stays white)
 ROWS_PER_CUTOFF = 2.0
+#: times the statistics rows of a reading without decimation go through the derivative
+#: filter (:meth:`RunSignals.rows`, :attr:`RunSignals.torque_alpha`)
+ROW_FILTER_PASSES = 2
 #: low-pass of the platform acceleration behind the *static* cable-stretch model. The
 #: length residual carries the motion-capture noise of the position; an acceleration
 #: differentiated from the same noisy position within the same band would correlate
@@ -80,11 +86,13 @@ def _power_response(n: int, order: int, cutoff_hz: float, fs: float) -> np.ndarr
     return np.abs(h) ** 2
 
 
-def zero_phase_lowpass(x: np.ndarray, filt: DerivativeFilter, fs: float) -> np.ndarray:
+def zero_phase_lowpass(x: np.ndarray, filt: DerivativeFilter, fs: float,
+                       passes: int = 1) -> np.ndarray:
     """The forward-backward Butterworth of ``filt.smooth`` (gain ``|H|^2``, zero phase),
-    applied in the frequency domain with filtfilt's odd extension at both ends: the
-    same filter within the untrimmed part, several times faster, which matters because
-    every model evaluation of a fit filters its residual."""
+    ``passes`` times over (gain ``|H|^(2 passes)``), applied in the frequency domain
+    with filtfilt's odd extension at both ends: the same filter within the untrimmed
+    part, several times faster, which matters because every model evaluation of a fit
+    filters its residual."""
     x = np.asarray(x, float)
     pad = min(len(x) - 1, 3 * int(fs / filt.cutoff_hz))
     head = 2 * x[:1] - x[pad:0:-1]
@@ -92,6 +100,8 @@ def zero_phase_lowpass(x: np.ndarray, filt: DerivativeFilter, fs: float) -> np.n
     ext = np.concatenate([head, x, tail])
     n = next_fast_len(len(ext), real=True)
     gain = _power_response(n, filt.order, float(filt.cutoff_hz), float(fs))
+    if passes != 1:
+        gain = gain ** passes
     spec = np.fft.rfft(ext, n, axis=0) * gain.reshape((-1,) + (1,) * (x.ndim - 1))
     return np.fft.irfft(spec, n, axis=0)[pad:pad + len(x)]
 
@@ -176,6 +186,11 @@ class RunSignals:
     #: the platform has degrees of freedom, the internal-force direction projected out
     #: (:func:`internal_force_projection`); None: the weights alone
     torque_projection: np.ndarray | None = None
+    #: the compact second differences of the *recorded* winch angles (N, n) and
+    #: platform position (N, 3), unfiltered; None where the rows decimate
+    #: (:attr:`torque_alpha`)
+    recorded_alpha: np.ndarray | None = None
+    recorded_acceleration: np.ndarray | None = None
     cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @cached_property
@@ -201,7 +216,43 @@ class RunSignals:
             # the protocol's own anti-alias filter and decimation, after trimming
             return zero_phase_decimate(x[trim:len(x) - trim], int(self.settings.decimate))
         # copied out of the full-rate result, which would otherwise live as long as them
-        return zero_phase_lowpass(x, filt, self.fs)[trim:len(x) - trim:self.thin].copy()
+        # the derivative filter twice (RunSignals.torque_alpha): what the filtered
+        # speed and angle in the predictions have been through once already
+        rows = zero_phase_lowpass(x, filt, self.fs, passes=ROW_FILTER_PASSES)
+        return rows[trim:len(x) - trim:self.thin].copy()
+
+    @property
+    def torque_alpha(self) -> np.ndarray:
+        """The winch acceleration a predicted torque is built from (its inertia term).
+
+        A torque residual compares the recorded torque with a prediction and goes
+        through the rows' filter (:meth:`rows`); a linear-in-parameters fit on it stays
+        exact only if every term passes the same filter. The filtered :attr:`alpha` has
+        been through the derivative filter once already. Without decimation the rows'
+        filter is the derivative filter: read with :attr:`alpha`, the inertia term
+        passed it twice and the recorded torque (and every column computed from the
+        angle and speed, a cogging's ``cos(p theta)``) once, so a torque that shakes
+        the winch (a fast cogging the controller does not take up) stayed in the
+        residual at the filter's gain squared while its column passed it once: the
+        fit read it short by the gain at its frequency (0.58 at 13-16 Hz for a 15 Hz
+        cut-off), and a speed-dependent term fitted the shortfall. Now the rows go
+        through the derivative filter twice (:data:`ROW_FILTER_PASSES`) and the
+        inertia term comes from the compact second difference of the recorded angle,
+        unfiltered: every term passes the filter twice, the acceleration's noise as
+        before. (Once for every term, the rows through the filter once, let the second
+        difference's noise, which grows with frequency squared, through up to the
+        cut-off: effect-free data then failed the calibrated validity test.) With
+        decimation the rows' anti-alias filter stays below 0.4 times the cut-off,
+        where the derivative filter passes all: :attr:`alpha` as it is."""
+        return self.alpha if self.recorded_alpha is None else self.recorded_alpha
+
+    @property
+    def torque_acceleration(self) -> np.ndarray | None:
+        """The platform acceleration the predicted tensions are built from (see
+        :attr:`torque_alpha`); None on a rig without a platform."""
+        if self.recorded_acceleration is None:
+            return self.acceleration
+        return self.recorded_acceleration
 
     @property
     def mixes(self) -> bool:
@@ -362,12 +413,26 @@ def run_signals(traj: Trajectory, rig: Rig, settings: RegressionSettings,
             cable_geometry(nominal.anchors, pos)[1], nominal.drum_radius, known)
         return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque,
                           settings, pos, vel, acc, np.asarray(traj.lengths, float),
-                          slow_acc, known, projection)
+                          slow_acc, known, projection,
+                          *_recorded_accelerations(settings, traj.t, theta_raw,
+                                                   np.asarray(traj.position, float)))
     position = np.asarray(traj.position, float)
     theta, omega, alpha = filt.compact_derivatives(position, traj.t)
     return RunSignals(traj.name, traj.family, traj.t, theta, omega, alpha, torque, settings,
                       friction_known=friction_known(position, omega, settings,
-                                                     _rate(traj.t)))
+                                                     _rate(traj.t)),
+                      recorded_alpha=_recorded_accelerations(settings, traj.t, position)[0])
+
+
+def _recorded_accelerations(settings: RegressionSettings, t: np.ndarray,
+                            *recorded: np.ndarray) -> tuple[np.ndarray | None, ...]:
+    """The compact second differences of the ``recorded`` signals, unfiltered, where the
+    rows' own filter is the derivative filter (twice; no decimation:
+    :attr:`RunSignals.torque_alpha`); Nones otherwise."""
+    if settings.decimate > 1:
+        return (None,) * len(recorded)
+    step = float(np.median(np.diff(t)))
+    return tuple(second_difference(x, step) for x in recorded)
 
 
 def dataset_signals(trajectories: Sequence[Trajectory], rig: Rig,

@@ -585,8 +585,8 @@ def torque_contributions(case: ForeignCase, effects: list[Any] | None = None
         held, nominal = heldout_signals(case.dataset, settings)
         fitted = torque_rows(held, added_torque(nominal.with_effects(effects), nominal))
     truth, stated = case.truth.model, true_model(case.rig, [])
-    true = torque_rows(held, lambda s: _true_torque(truth, s.omega, s.theta, s.alpha)
-                       - _true_torque(stated, s.omega, s.theta, s.alpha))
+    true = torque_rows(held, lambda s: _true_torque(truth, s.omega, s.theta, s.torque_alpha)
+                       - _true_torque(stated, s.omega, s.theta, s.torque_alpha))
     return fitted, true
 
 

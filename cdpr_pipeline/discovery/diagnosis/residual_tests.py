@@ -148,7 +148,7 @@ def discrepancies(nominal: Model, extended: Model, signals: list[RunSignals],
 
 
 def _full_rate_residual(model: Model, sig: RunSignals, channel: str) -> np.ndarray:
-    pred = predict(model, model, sig)[channel]
+    pred = predict(model, model, sig, for_rows=False)[channel]
     measured = sig.torque if channel == "torque" else sig.lengths
     r = measured - pred
     return r - r.mean(axis=0) if channel == "length" else r
