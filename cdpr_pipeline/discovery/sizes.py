@@ -182,8 +182,14 @@ class _Parameters:
                                                                  strict=True) if k))
 
 
+#: the smallest forward-difference step: a parameter at or next to zero (a viscous
+#: friction re-fitted onto its bound at 1e-17) steps as one at zero does; a step relative
+#: to such a value moves nothing, and the size read as undetermined (no standard error)
+MIN_STEP = 1e-9
+
+
 def _steps(x: np.ndarray) -> np.ndarray:
-    return np.where(x != 0, REL_STEP * np.abs(x), 1e-9)
+    return np.maximum(REL_STEP * np.abs(x), MIN_STEP)
 
 
 # ------------------------------------------------------------------ the sizes

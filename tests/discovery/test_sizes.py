@@ -12,7 +12,7 @@ from cdpr_pipeline.discovery.diagnosis import diagnose, fit_noise
 from cdpr_pipeline.discovery.residuals import nominal_model
 from cdpr_pipeline.discovery.selection import Judgement
 from cdpr_pipeline.discovery.signals import dataset_signals
-from cdpr_pipeline.discovery.sizes import cause_sizes
+from cdpr_pipeline.discovery.sizes import MIN_STEP, REL_STEP, _steps, cause_sizes
 from cdpr_pipeline.discovery.summary import cause_record, summary_sentence
 from cdpr_pipeline.sim.effects import PositionDependentLoad
 from cdpr_pipeline.testing.foreign_cases import foreign_case
@@ -85,3 +85,12 @@ def test_a_part_below_the_noise_leaves_the_sentence_and_stays_in_the_record(kind
     record = cause_record(cause, nominal, [cause], parts)
     assert [p["below_noise"] for p in record["sizes"]] == [False, True]
     assert record["sizes"][1]["values"][0]["value"] == pytest.approx(tiny)
+
+
+def test_a_parameter_next_to_zero_steps_as_one_at_zero():
+    """A viscous friction re-fitted onto its bound (1.3e-17: seed 2028238176 of
+    ``test_report_terms``' axes case) stepped by 1e-6 of itself moved no residual, and
+    its size was printed without a standard error; it steps as a zero does now."""
+    x = np.array([0.0, 1.3e-17, -1e-12, 2.0, -5e-3])
+    assert _steps(x) == pytest.approx([MIN_STEP, MIN_STEP, MIN_STEP, 2.0 * REL_STEP,
+                                       5e-3 * REL_STEP], rel=1e-12)
